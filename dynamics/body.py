@@ -1,0 +1,36 @@
+"""Rigid-body terms of the wheel-space dynamics M q'' + C(q, q') + G(q) = tau (eq. 4).
+
+q = (theta_l, theta_r) are the wheel angles [rad]; torques are per side at the wheel [N m].
+Compiled with numba; scalar arguments.
+"""
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+
+@njit(cache=True)
+def mass_matrix(mass, inertia, r, width, alpha):
+    """Eq. 5: the symmetric mass matrix M [kg m^2], returned as (M11, M12) with M22 = M11,
+    M21 = M12: M11 = m r^2 / 4 + r^2 I / (alpha B^2), M12 = m r^2 / 4 - r^2 I / (alpha B^2)."""
+    a = mass * r * r / 4.0
+    c = r * r * inertia / (alpha * width * width)
+    return a + c, a - c
+
+
+@njit(cache=True)
+def gravity_torque(mass, g, r, pitch):
+    """Eq. 24: gravity torque of each side, G = m g r sin(beta) / 2 [N m], for the pitch
+    beta [rad] of the vehicle's heading (positive nose up: climbing costs torque)."""
+    return mass * g * r * math.sin(pitch) / 2.0
+
+
+@njit(cache=True)
+def wheel_accelerations(m11, m12, tau_l, tau_r, res_l, res_r, grav):
+    """Eqs. 23 (planar, grav = 0) and 25 (linear 3-D): solve M q'' = tau - C - G for the
+    wheel accelerations (q''_l, q''_r) [rad/s^2]."""
+    bl = tau_l - res_l - grav
+    br = tau_r - res_r - grav
+    det = m11 * m11 - m12 * m12
+    return (m11 * bl - m12 * br) / det, (m11 * br - m12 * bl) / det

@@ -1,0 +1,59 @@
+"""The drive of one side: modified PID (Fig. 4), current-controlled motor controller
+(eq. 27), DC motor (eq. 26), electrical power. Lumped at the wheel: k is the torque
+constant and back-EMF constant at the wheel [N m/A = V s/rad]. Compiled with numba.
+"""
+from __future__ import annotations
+
+from numba import njit
+
+
+@njit(cache=True)
+def pid_current(error, integral, ref_rate, kp, ki, kd):
+    """Fig. 4, the modified PID: current command [A] = kp e + ki integral(e) + kd d(ref)/dt.
+
+    The derivative acts on the reference (ref_rate [rad/s^2]), not on the error, so a
+    step in the measured speed does not kick the output. e [rad/s], integral [rad].
+    """
+    return kp * error + ki * integral + kd * ref_rate
+
+
+@njit(cache=True)
+def motor_torque(voltage, omega, k, r_a):
+    """Eq. 26, the DC motor torque-speed line tau/tau_s + w/w_s = 1 with tau_s = V k / R_a and
+    w_s = V / k: tau = k (V - k w) / R_a [N m] for voltage V [V] and speed w [rad/s]."""
+    return k * (voltage - k * omega) / r_a
+
+
+@njit(cache=True)
+def max_motor_voltage(v_max, r_a, current):
+    """Eq. 27: largest back-EMF voltage the controller leaves the motor [V],
+    V_m,max = PWM (VCC - U_loss) - (dn/dtau) K_T I / K_n = V_max - R_a |I|
+    (the speed-torque gradient term is the armature drop R_a I)."""
+    return v_max - r_a * abs(current)
+
+
+@njit(cache=True)
+def current_window(omega, v_max, k, r_a, i_max):
+    """The currents [A] the drive can deliver at wheel speed omega [rad/s]: the continuous
+    limit |I| <= I_max intersected with the voltage limit of eq. 27, |k w + R_a I| <= V_max.
+    When the back-EMF alone exceeds V_max (over-speed) the window is the single current at
+    the nearest voltage bound."""
+    lo = (-v_max - k * omega) / r_a
+    hi = (v_max - k * omega) / r_a
+    if lo < -i_max:
+        lo = -i_max
+    if hi > i_max:
+        hi = i_max
+    if lo > hi:                       # back-EMF beyond the supply: voltage bound wins
+        if omega > 0.0:
+            lo = hi = (v_max - k * omega) / r_a
+        else:
+            lo = hi = (-v_max - k * omega) / r_a
+    return lo, hi
+
+
+@njit(cache=True)
+def electrical_power(current, omega, k, r_a):
+    """Electrical power drawn by one side [W]: P = R_a I^2 + k w I (copper loss plus
+    mechanical power; negative when the side regenerates)."""
+    return r_a * current * current + k * omega * current

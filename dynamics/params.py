@@ -1,0 +1,252 @@
+"""Vehicle and terrain parameters: validated, immutable values loaded from YAML.
+
+A parameter file maps names to numbers, each either plain (``mass: 31.0``) or with its
+source note (``mass: {value: 31.0, unit: kg, source: "..."}``). Units are SI. The package
+ships the Pioneer 3-AT of the paper as ``p3at`` and the terrains of
+``PARAMETERS.md``; :func:`load_vehicle` and :func:`load_terrain` take either a shipped
+name or a path to a user's file. Every problem is reported as a :class:`ParameterError`
+naming the file, the key, what was expected and what was found.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+G = 9.81  # m/s^2, gravitational acceleration
+
+
+class ParameterError(ValueError):
+    """A parameter file or value is wrong; the message names file, key, expected, found."""
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A skid-steered vehicle with one lumped drive per side, expressed at the wheel.
+
+    Geometry follows the paper's Fig. 1: ``width`` is B, the contact patches of a side span
+    y in [-L/2, -C/2] and [C/2, L/2] with ``patch_outer`` = L and ``patch_inner`` = C, and
+    are ``patch_width`` = b wide. The drive is a current-controlled DC motor per side
+    (eqs. 26, 27) under a modified PID (Fig. 4).
+
+    The ``*_scale``, ``viscous``, ``delay``, ``lag`` and ``sag`` fields are model extensions
+    found by ``sbmpc diagnose``; their defaults leave the paper's model unchanged.
+    """
+
+    name: str = "p3at"
+    mass: float = 31.0                 # kg
+    inertia: float = 0.67              # kg m^2, yaw
+    wheel_radius: float = 0.11         # m
+    width: float = 0.40                # m, B
+    patch_outer: float = 0.31          # m, L
+    patch_inner: float = 0.24          # m, C
+    patch_width: float = 0.05          # m, b
+    v_max: float = 12.0                # V, largest motor voltage (eq. 27)
+    torque_constant: float = 1.3825    # N m/A = V s/rad, at the wheel
+    armature_resistance: float = 0.706  # ohm
+    current_limit: float = 3.62        # A, continuous
+    controller_rate: float = 1000.0    # Hz
+    kp: float = 2.0                    # A s/rad
+    ki: float = 20.0                   # A/rad
+    kd: float = 0.09                   # A s^2/rad, on the reference
+    ref_accel: float = 1.0             # m/s^2, rate limit of the wheel-speed reference (0: none)
+    regen: bool = False                # allow negative battery power
+    # --- model extensions (defaults: the paper's model) ---
+    radius_scale_left: float = 1.0     # effective / nominal rolling radius, left side
+    radius_scale_right: float = 1.0    # effective / nominal rolling radius, right side
+    viscous: float = 0.0               # N m s/rad, extra resistance torque per wheel speed
+    delay: float = 0.0                 # s, commands reach the drive late
+    lag: float = 0.0                   # s, first-order lag of delivered current
+    sag: float = 0.0                   # V/J, fall of available voltage per energy drawn
+    shear_lag: float = 0.0             # s, lag with which turning friction builds up
+    description: str = ""
+    sources: Mapping[str, str] = field(default_factory=dict, compare=False, hash=False)
+
+    # Derived quantities -------------------------------------------------------------
+    @property
+    def ref_wheel_accel(self) -> float:
+        """Rate limit of the wheel-speed reference in rad/s^2 (0 = none)."""
+        return self.ref_accel / self.wheel_radius
+
+    @property
+    def no_load_speed(self) -> float:
+        """Wheel speed at zero torque and full voltage, rad/s (eq. 26: V_max / k)."""
+        return self.v_max / self.torque_constant
+
+    @property
+    def stall_torque(self) -> float:
+        """Torque at zero speed and full voltage, N m (eq. 26: k V_max / R_a)."""
+        return self.torque_constant * self.v_max / self.armature_resistance
+
+    @property
+    def continuous_torque(self) -> float:
+        """Torque at the continuous current limit, N m (k I_max)."""
+        return self.torque_constant * self.current_limit
+
+    @property
+    def max_power(self) -> float:
+        """Largest mechanical power of one side, W (V_max^2 / (4 R_a))."""
+        return self.v_max ** 2 / (4.0 * self.armature_resistance)
+
+    def replace(self, **changes: Any) -> "Vehicle":
+        """A copy with some fields changed, validated."""
+        return _validated(dataclasses.replace(self, **changes), "<replace>")
+
+
+@dataclass(frozen=True)
+class Terrain:
+    """Terrain parameters of the model: alpha (eq. 1), mu_roll, mu_sa, mu_op, K (eq. 7)."""
+
+    name: str = "vinyl"
+    alpha: float = 1.5            # kinematic ICR factor, >= 1
+    mu_roll: float = 0.0371       # rolling resistance coefficient
+    mu_sa: float = 0.4437         # friction when the side's motor drives
+    mu_op: float = 0.3093         # friction when the side's motor brakes
+    shear_modulus: float = 0.00054  # m, K
+    sources: Mapping[str, str] = field(default_factory=dict, compare=False, hash=False)
+
+    def replace(self, **changes: Any) -> "Terrain":
+        """A copy with some fields changed, validated."""
+        return _validated(dataclasses.replace(self, **changes), "<replace>")
+
+
+# Bounds: (low, high, low inclusive). Values outside are rejected with a clear message.
+_BOUNDS: dict[str, tuple[float, float, bool]] = {
+    "mass": (0.0, 1e5, False), "inertia": (0.0, 1e6, False), "wheel_radius": (0.0, 5.0, False),
+    "width": (0.0, 10.0, False), "patch_outer": (0.0, 10.0, False),
+    "patch_inner": (0.0, 10.0, True), "patch_width": (0.0, 2.0, False),
+    "v_max": (0.0, 1e4, False), "torque_constant": (0.0, 1e4, False),
+    "armature_resistance": (0.0, 1e4, False), "current_limit": (0.0, 1e5, False),
+    "controller_rate": (0.0, 1e6, False), "kp": (0.0, 1e6, True), "ki": (0.0, 1e6, True),
+    "kd": (0.0, 1e6, True), "ref_accel": (0.0, 1e3, True),
+    "radius_scale_left": (0.0, 2.0, False), "radius_scale_right": (0.0, 2.0, False),
+    "viscous": (-1e3, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),
+    "sag": (0.0, 1e3, True), "shear_lag": (0.0, 10.0, True),
+    "alpha": (1.0, 20.0, True), "mu_roll": (0.0, 2.0, True), "mu_sa": (0.0, 5.0, True),
+    "mu_op": (0.0, 5.0, True), "shear_modulus": (0.0, 1.0, False),
+}
+
+
+def _check_number(src: str, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f"{src}: key '{key}': expected a number, found {value!r}")
+    value = float(value)
+    lo, hi, lo_incl = _BOUNDS[key]
+    ok = (value >= lo if lo_incl else value > lo) and value <= hi and math.isfinite(value)
+    if not ok:
+        lo_txt = f">= {lo:g}" if lo_incl else f"> {lo:g}"
+        raise ParameterError(f"{src}: key '{key}': expected a number {lo_txt} and <= {hi:g}, found {value!r}")
+    return value
+
+
+def _validated(obj, src: str):
+    for f in dataclasses.fields(obj):
+        if f.name in _BOUNDS:
+            _check_number(src, f.name, getattr(obj, f.name))
+    if isinstance(obj, Vehicle) and not obj.patch_inner < obj.patch_outer:
+        raise ParameterError(
+            f"{src}: key 'patch_inner': expected C < L = {obj.patch_outer:g}, found {obj.patch_inner:g}")
+    return obj
+
+
+def _from_mapping(cls, data: Any, src: str):
+    if not isinstance(data, dict):
+        raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {type(data).__name__}")
+    known = {f.name: f for f in dataclasses.fields(cls)}
+    values: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    for key, raw in data.items():
+        if key not in known or key == "sources":
+            allowed = ", ".join(k for k in known if k != "sources")
+            raise ParameterError(f"{src}: unknown key '{key}': expected one of {allowed}")
+        if isinstance(raw, dict):
+            if "value" not in raw:
+                raise ParameterError(f"{src}: key '{key}': expected a number or a mapping with 'value', found {raw!r}")
+            if "source" in raw:
+                sources[key] = str(raw["source"])
+            raw = raw["value"]
+        if key in ("name", "description"):
+            values[key] = str(raw)
+        elif key == "regen":
+            if not isinstance(raw, bool):
+                raise ParameterError(f"{src}: key 'regen': expected true or false, found {raw!r}")
+            values[key] = raw
+        else:
+            values[key] = _check_number(src, key, raw)
+    return _validated(cls(**values, sources=sources), src)
+
+
+def _read_yaml(path: Path) -> Any:
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ParameterError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise ParameterError(f"{path}: cannot read: {exc.strerror}") from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise ParameterError(f"{path}:{where}: malformed YAML: {getattr(exc, 'problem', exc)}") from None
+
+
+def _shipped(kind: str) -> dict[str, Path]:
+    folder = resources.files("dynamics") / "data" / kind
+    return {Path(p.name).stem: Path(str(p)) for p in folder.iterdir() if p.name.endswith(".yaml")}
+
+
+def shipped_vehicles() -> list[str]:
+    """Names of the vehicles shipped with the package."""
+    return sorted(_shipped("vehicles"))
+
+
+def shipped_terrains() -> list[str]:
+    """Names of the terrains shipped with the package."""
+    return sorted(_shipped("terrains"))
+
+
+def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: Path | None):
+    if isinstance(spec, cls):
+        return spec
+    if isinstance(spec, dict):
+        return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>")
+    spec_s = str(spec)
+    shipped = _shipped(kind)
+    if spec_s in shipped:
+        return _from_mapping(cls, _read_yaml(shipped[spec_s]), str(shipped[spec_s]))
+    path = Path(spec_s)
+    if base is not None and not path.is_absolute():
+        path = base / path
+    if path.suffix in (".yaml", ".yml") or path.exists():
+        return _from_mapping(cls, _read_yaml(path), str(path))
+    raise ParameterError(
+        f"{kind[:-1]} '{spec_s}': expected a shipped name ({', '.join(sorted(shipped))}) or a path to a YAML file, found neither")
+
+
+def load_vehicle(spec: "str | Path | dict | Vehicle" = "p3at", base: Path | None = None) -> Vehicle:
+    """A vehicle by shipped name (``p3at``), path to a YAML file, or mapping."""
+    return _load(Vehicle, "vehicles", spec, base)
+
+
+def load_terrain(spec: "str | Path | dict | Terrain" = "vinyl", base: Path | None = None) -> Terrain:
+    """A terrain by shipped name (``vinyl``, ``asphalt``, ...), path to a YAML file, or mapping."""
+    return _load(Terrain, "terrains", spec, base)
+
+
+def vehicle_to_yaml(vehicle: Vehicle, note: str = "") -> str:
+    """YAML text of a vehicle that :func:`load_vehicle` reads back to an equal value."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(vehicle):
+        if f.name == "sources":
+            continue
+        value = getattr(vehicle, f.name)
+        src = vehicle.sources.get(f.name)
+        out[f.name] = {"value": value, "source": src} if src else value
+    head = f"# {note}\n" if note else ""
+    return head + yaml.safe_dump(out, sort_keys=False)

@@ -1,0 +1,282 @@
+"""Wheel-ground resistance C(q, q-dot): shear-displacement friction (eqs. 7-22) and rolling.
+
+Two forms of the same physics:
+
+* the **exact** form integrates the shear stress of eq. 7 over the four contact patches
+  with tensor Gauss-Legendre quadrature (reference and tests; NumPy, vectorised);
+* the **fast** form, for the compiled hot path, rests on a property of eqs. 8-17: every
+  sliding velocity and contact time scales with the wheel speeds, so the shear
+  displacements, the sliding directions and hence the friction forces depend only on the
+  *direction* psi = atan2(wr, wl) of the wheel-speed vector, not on its magnitude. The
+  friction per unit (pressure x friction coefficient) of the right side is one periodic
+  function of psi, tabulated once per (vehicle geometry, alpha, K) and interpolated
+  linearly; the left side is its mirror image, F_l(wl, wr) = F_r(wr, wl).
+
+Sign convention: a *resistance torque* is the torque the motor must supply to hold the
+wheel speed (eqs. 18, 21); it is positive when the ground pushes the tyre forward (the
+side drives the vehicle) and negative when it pushes it back (the side brakes).
+
+Singular cases (PARAMETERS.md) and the choices made:
+
+* a wheel at rest (w = 0) while the vehicle turns: the contact time of eq. 8 is
+  infinite, the tread particle is fully sheared, 1 - exp(-j/K) -> 1;
+* rotation inside one patch: the closed forms of eqs. 12-16 hold for a small rotation
+  angle theta = yaw_rate * t; theta is capped at ``THETA_CAP`` = 0.2 rad (11.5 deg), where
+  the shear displacement is already at least 0.12 m x 0.2 = 24 mm >> K (full shear);
+* a wheel reversing (point turns, radii below alpha B / 2): the tread enters the patch
+  from its other edge, the contact time counts from there;
+* the vehicle at rest: the friction depends on the direction alone, a Coulomb-like
+  discontinuity at the origin of the wheel-speed plane. Below a wheel-speed magnitude
+  of ``OMEGA_EPS`` the friction and the rolling resistance are scaled down linearly
+  (a standard regularisation; 0.02 rad/s is 2 mm/s at the rim).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from .params import G, Terrain, Vehicle
+
+THETA_CAP = 0.2     # rad, largest rotation inside one contact patch (see module doc)
+OMEGA_EPS = 0.02    # rad/s, regularisation of friction and rolling resistance at rest
+TABLE_SIZE = 8192   # nodes of the fast table over psi in [-pi, pi)
+
+
+# ----------------------------------------------------------------------------------
+# The paper's equations, one function each (NumPy arrays broadcast)
+# ----------------------------------------------------------------------------------
+def shear_stress(p, mu, j, K):
+    """Eq. 7: shear stress tau_ss = p mu (1 - exp(-j / K)) [Pa] for pressure p [Pa],
+    friction coefficient mu, shear displacement j [m] and shear modulus K [m]."""
+    return p * mu * (1.0 - np.exp(-j / K))
+
+
+def contact_time(y0, y, r_omega, yaw_rate):
+    """Eq. 8: time [s] a tread particle at longitudinal position y [m] has been in contact
+    since it entered the patch at y0 [m], t = (y0 - y) / (r w) for rim speed r w [m/s].
+
+    Infinite for a wheel at rest; capped so that the rotation yaw_rate * t stays within
+    ``THETA_CAP`` (module doc).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(r_omega != 0.0, (y0 - y) / r_omega, np.inf)
+        cap = np.where(yaw_rate != 0.0, THETA_CAP / np.abs(yaw_rate), np.inf)
+    return np.minimum(t, cap)
+
+
+def sliding_velocity(xw, y, v, yaw_rate, r_omega):
+    """Eqs. 9, 10: sliding velocity (v_x, v_y) [m/s] of the tread particle at body-frame
+    lateral position xw (from the centre of gravity) and longitudinal position y [m].
+
+    v_x = -y yaw_rate, v_y = (R + xw) yaw_rate - r w, written with v = R yaw_rate so that
+    straight motion (R infinite) needs no special case. Its angle is gamma of eq. 10.
+    """
+    return -y * yaw_rate, v + xw * yaw_rate - r_omega
+
+
+def shear_displacement(xw, y, y0, v, t, yaw_rate):
+    """Eqs. 12, 13 (front patch, y0 = L/2) and 15, 16 (rear patch, y0 = -C/2): shear
+    displacement (j_X, j_Y) [m] of a tread particle after contact time t [s].
+
+    j_X = (R + xw)(cos th - 1) - y sin th,  j_Y = (R + xw) sin th + y cos th - y0,
+    th = yaw_rate t. Evaluated in the form R th = v t, with sin th = th S(th) and
+    1 - cos th = th^2 S(th/2)^2 / 2 (S = sin x / x), finite for straight motion.
+    """
+    th = yaw_rate * t
+    s1 = np.sinc(th / np.pi)
+    s2 = np.sinc(th / (2.0 * np.pi))
+    jx = -(v * t * th / 2.0 + xw * th * th / 2.0) * s2 * s2 - y * th * s1
+    jy = v * t * s1 + xw * th * s1 + y * np.cos(th) - y0
+    return jx, jy
+
+
+def resistance_torque(r, friction, rolling):
+    """Eqs. 18, 21: resistance torque of one side [N m], tau_Res = r (F_f + f_r)."""
+    return r * (friction + rolling)
+
+
+def rolling_resistance(mu_roll, mass, pitch, omega):
+    """Rolling resistance of one side [N]: f_r = mu_roll m g cos(pitch) / 2 sign(w)
+    (PARAMETERS.md; regularised below ``OMEGA_EPS``)."""
+    return mu_roll * mass * G * np.cos(pitch) / 2.0 * np.clip(omega / OMEGA_EPS, -1.0, 1.0)
+
+
+def patch_pressure(vehicle: Vehicle, pitch=0.0):
+    """Normal pressure [Pa] of each of the four equal patches: m g cos(pitch) / (2 b (L - C))."""
+    v = vehicle
+    return v.mass * G * np.cos(pitch) / (2.0 * v.patch_width * (v.patch_outer - v.patch_inner))
+
+
+@lru_cache(maxsize=8)
+def _gauss(n_long: int, n_lat: int):
+    return np.polynomial.legendre.leggauss(n_long), np.polynomial.legendre.leggauss(n_lat)
+
+
+def unit_friction_right(wl, wr, vehicle: Vehicle, terrain: Terrain, n_long=96, n_lat=12):
+    """Eq. 17 per unit p mu: longitudinal friction of the right wheels divided by p mu [m^2].
+
+    Integrates (1 - exp(-j/K)) times the longitudinal component of the unit friction
+    direction (opposite to the sliding velocity, eq. 10) over the front and rear patches
+    with Gauss-Legendre quadrature of ``n_long`` x ``n_lat`` points per patch.
+    ``wl``, ``wr`` [rad/s] broadcast. Positive: the ground pushes the tyre forward.
+    """
+    veh = vehicle
+    r, B, L, C, b = veh.wheel_radius, veh.width, veh.patch_outer, veh.patch_inner, veh.patch_width
+    wl = np.asarray(wl, float)[..., None, None]
+    wr = np.asarray(wr, float)[..., None, None]
+    v = r * (wl + wr) / 2.0
+    yaw_rate = r * (wr - wl) / (terrain.alpha * B)
+    r_omega = r * wr
+    (gy, wy), (gx, wx) = _gauss(n_long, n_lat)
+    xw = (B / 2.0 + gx * b / 2.0)[None, :]
+    wxs = wx * b / 2.0
+    total = 0.0
+    for lo, hi in ((C / 2.0, L / 2.0), (-L / 2.0, -C / 2.0)):
+        y = ((lo + hi) / 2.0 + gy * (hi - lo) / 2.0)[:, None]
+        wys = wy * (hi - lo) / 2.0
+        y0 = np.where(r_omega > 0.0, hi, lo)            # entry edge of the patch
+        t = contact_time(y0, y, r_omega, yaw_rate)
+        jx, jy = shear_displacement(xw, y, y0, v, t, yaw_rate)
+        vx, vy = sliding_velocity(xw, y, v, yaw_rate, r_omega)
+        speed = np.hypot(vx, vy)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            direction = np.where(speed > 0.0, -vy / speed, 0.0)
+        f = (1.0 - np.exp(-np.hypot(jx, jy) / terrain.shear_modulus)) * direction
+        total = total + np.einsum("...ij,i,j->...", f, wys, wxs)
+    return total
+
+
+def friction_forces(wl, wr, vehicle: Vehicle, terrain: Terrain, mu_left, mu_right, pitch=0.0, **quad):
+    """Eqs. 17 and 20: longitudinal sliding friction (F_lf, F_rf) [N] of both sides, exact.
+
+    The left side is the mirror image of the right: F_lf(wl, wr) = F_rf(wr, wl).
+    """
+    p = patch_pressure(vehicle, pitch)
+    scale = np.clip(np.hypot(wl, wr) / OMEGA_EPS, 0.0, 1.0)
+    fr = unit_friction_right(wl, wr, vehicle, terrain, **quad)
+    fl = unit_friction_right(wr, wl, vehicle, terrain, **quad)
+    return p * mu_left * fl * scale, p * mu_right * fr * scale
+
+
+def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **quad):
+    """Eq. 22: C(q, q-dot) = (tau_lRes, tau_rRes) [N m] at constant wheel speeds, exact form.
+
+    The friction coefficient of each side is mu_sa where its motor drives (torque and
+    speed of one sign) and mu_op where it brakes; the choice is made self-consistent
+    (the sign of the torque does not depend on which positive mu is used, except at the
+    boundary, where mu_sa is taken).
+    """
+    wl = np.asarray(wl, float)
+    wr = np.asarray(wr, float)
+    r = vehicle.wheel_radius
+    p = patch_pressure(vehicle, pitch)
+    scale = np.clip(np.hypot(wl, wr) / OMEGA_EPS, 0.0, 1.0)
+    out = []
+    for unit, w in ((unit_friction_right(wr, wl, vehicle, terrain, **quad), wl),
+                    (unit_friction_right(wl, wr, vehicle, terrain, **quad), wr)):
+        roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
+        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit * scale, roll)
+        tau_op = resistance_torque(r, p * terrain.mu_op * unit * scale, roll)
+        out.append(np.where(tau_sa * w >= 0.0, tau_sa, tau_op))
+    return out[0], out[1]
+
+
+# ----------------------------------------------------------------------------------
+# The fast form
+# ----------------------------------------------------------------------------------
+@lru_cache(maxsize=64)
+def _table_cached(r, B, L, C, b, alpha, K, size):
+    veh = Vehicle(wheel_radius=r, width=B, patch_outer=L, patch_inner=C, patch_width=b)
+    ter = Terrain(alpha=alpha, shear_modulus=K)
+    half = size // 2
+    psi = -np.pi + 2.0 * np.pi * np.arange(half) / size
+    values = np.empty(size + 1)
+    for s in range(0, half, 1024):
+        p = psi[s:s + 1024]
+        values[s:s + len(p)] = unit_friction_right(np.cos(p), np.sin(p), veh, ter)
+    values[half:size] = -values[:half]    # reversing every wheel reverses every force
+    values[size] = values[0]              # periodic closure for the interpolation
+    values.setflags(write=False)
+    return values
+
+
+def friction_table(vehicle: Vehicle, terrain: Terrain, size: int = TABLE_SIZE) -> np.ndarray:
+    """The fast form: unit friction of the right side [m^2] at psi_k = -pi + 2 pi k / size,
+    k = 0..size (the last node closes the period). Cached per geometry, alpha and K.
+
+    Only half the circle is integrated; the other half follows exactly from reversing
+    every wheel (all sliding velocities change sign, the patches swap their entry edges).
+    """
+    v = vehicle
+    return _table_cached(v.wheel_radius, v.width, v.patch_outer, v.patch_inner, v.patch_width,
+                         terrain.alpha, terrain.shear_modulus, int(size))
+
+
+@njit(cache=True)
+def table_lookup(table, psi):
+    """Linear interpolation of a friction table at angle psi [rad]; returns (value, slope
+    d value / d psi)."""
+    n = table.shape[0] - 1
+    h = 2.0 * np.pi / n
+    u = (psi + np.pi) / h
+    i = int(np.floor(u))
+    if i < 0:
+        i = 0
+    elif i >= n:
+        i = n - 1
+    frac = u - i
+    slope = (table[i + 1] - table[i]) / h
+    return table[i] + frac * (table[i + 1] - table[i]), slope
+
+
+@njit(cache=True)
+def unit_friction_fast(table, wl, wr):
+    """Fast form of eqs. 17 and 20 per unit p mu [m^2], including the rest regularisation:
+    returns (fl, fr, dfl_dwl, dfl_dwr, dfr_dwl, dfr_dwr), the last four the Jacobian
+    [m^2 s/rad] used by the linearly implicit integrator."""
+    rho2 = wl * wl + wr * wr
+    if rho2 == 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    rho = np.sqrt(rho2)
+    fr, sr = table_lookup(table, np.arctan2(wr, wl))
+    fl, sl = table_lookup(table, np.arctan2(wl, wr))   # mirror image
+    # d psi / d(wl, wr) for psi = atan2(wr, wl) and for the mirror angle atan2(wl, wr)
+    dfr_dwl = -sr * wr / rho2
+    dfr_dwr = sr * wl / rho2
+    dfl_dwl = sl * wr / rho2
+    dfl_dwr = -sl * wl / rho2
+    if rho < OMEGA_EPS:
+        s = rho / OMEGA_EPS
+        ds_dwl = wl / (rho * OMEGA_EPS)
+        ds_dwr = wr / (rho * OMEGA_EPS)
+        dfr_dwl = dfr_dwl * s + fr * ds_dwl
+        dfr_dwr = dfr_dwr * s + fr * ds_dwr
+        dfl_dwl = dfl_dwl * s + fl * ds_dwl
+        dfl_dwr = dfl_dwr * s + fl * ds_dwr
+        fr *= s
+        fl *= s
+    return fl, fr, dfl_dwl, dfl_dwr, dfr_dwl, dfr_dwr
+
+
+def steady_resistance_fast(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0):
+    """Eq. 22 with the fast form (same conventions as :func:`steady_resistance`)."""
+    table = friction_table(vehicle, terrain)
+    wl = np.asarray(wl, float)
+    wr = np.asarray(wr, float)
+    flat_l, flat_r = np.broadcast_arrays(wl, wr)
+    fl = np.empty(flat_l.shape)
+    fr = np.empty(flat_l.shape)
+    for idx in np.ndindex(flat_l.shape):
+        res = unit_friction_fast(table, float(flat_l[idx]), float(flat_r[idx]))
+        fl[idx], fr[idx] = res[0], res[1]
+    r = vehicle.wheel_radius
+    p = patch_pressure(vehicle, pitch)
+    out = []
+    for unit, w in ((fl, flat_l), (fr, flat_r)):
+        roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
+        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit, roll)
+        tau_op = resistance_torque(r, p * terrain.mu_op * unit, roll)
+        out.append(np.where(tau_sa * w >= 0.0, tau_sa, tau_op))
+    return out[0], out[1]
