@@ -169,8 +169,8 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
         S[S_FL] = fl
         S[S_FR] = fr
     press = P[P_PRESS] * cp
-    mu_l = P[P_MUSA] if il * wl >= 0.0 else P[P_MUOP]
-    mu_r = P[P_MUSA] if ir * wr >= 0.0 else P[P_MUOP]
+    mu_l = P[P_MUSA] if il * wl > 0.0 else P[P_MUOP]
+    mu_r = P[P_MUSA] if ir * wr > 0.0 else P[P_MUOP]
     roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
     droll_l = roll / OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
     droll_r = roll / OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0

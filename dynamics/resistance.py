@@ -179,7 +179,7 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
         tau_sa = resistance_torque(r, p * terrain.mu_sa * unit * scale, roll)
         tau_op = resistance_torque(r, p * terrain.mu_op * unit * scale, roll)
-        out.append(np.where(tau_sa * w >= 0.0, tau_sa, tau_op))
+        out.append(np.where(tau_sa * w > 0.0, tau_sa, tau_op))
     return out[0], out[1]
 
 
@@ -278,5 +278,5 @@ def steady_resistance_fast(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
         tau_sa = resistance_torque(r, p * terrain.mu_sa * unit, roll)
         tau_op = resistance_torque(r, p * terrain.mu_op * unit, roll)
-        out.append(np.where(tau_sa * w >= 0.0, tau_sa, tau_op))
+        out.append(np.where(tau_sa * w > 0.0, tau_sa, tau_op))
     return out[0], out[1]

@@ -1,0 +1,45 @@
+"""What the drive can do, from the model's equations: grades and speeds.
+
+Straight motion at constant speed needs, per side (eqs. 24, 25 with q'' = 0 and no
+sliding friction), tau = r m g (sin beta + mu_roll cos beta) / 2 + c_visc w, while the
+drive delivers at most min(k I_max, k (V_max - k w) / R_a) (eqs. 26, 27).
+"""
+from __future__ import annotations
+
+import math
+
+from scipy.optimize import brentq
+
+from .params import G, Terrain, Vehicle
+
+
+def available_torque(vehicle: Vehicle, omega: float) -> float:
+    """Largest torque [N m] of one side at wheel speed omega >= 0 [rad/s] (eqs. 26, 27 and
+    the continuous current limit)."""
+    v = vehicle
+    return min(v.continuous_torque, v.torque_constant * (v.v_max - v.torque_constant * omega) / v.armature_resistance)
+
+
+def required_torque(vehicle: Vehicle, terrain: Terrain, grade: float, omega: float) -> float:
+    """Torque [N m] of one side that holds wheel speed omega [rad/s] straight up a grade [rad]."""
+    v = vehicle
+    return v.wheel_radius * v.mass * G * (math.sin(grade) + terrain.mu_roll * math.cos(grade)) / 2.0 + v.viscous * omega
+
+
+def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> float:
+    """Steepest grade [rad] on which ``speed`` [m/s] can be held straight uphill (at speed 0:
+    the steepest grade climbable at any constant speed). Negative if none."""
+    omega = speed / vehicle.wheel_radius
+    tau = available_torque(vehicle, omega)
+    if tau <= required_torque(vehicle, terrain, 0.0, omega):
+        return -1.0
+    return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, math.pi / 2)
+
+
+def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
+    """Highest constant straight speed [m/s] on a grade [rad]; 0 if the grade cannot be held."""
+    f = lambda w: available_torque(vehicle, w) - required_torque(vehicle, terrain, grade, w)
+    w_hi = vehicle.no_load_speed
+    if f(0.0) <= 0.0:
+        return 0.0
+    return brentq(f, 0.0, w_hi) * vehicle.wheel_radius

@@ -1,0 +1,58 @@
+"""The ``sbmpc`` command line. Exit codes: 0 success, 1 negative answer, 2 bad input."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .errors import InputError, NoResult
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as one line and exit code 2."""
+
+    def error(self, message):  # noqa: D401
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
+                "closed-loop dynamic model of Yu et al. (2010).")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    from . import simulate_cmd
+    simulate_cmd.add_parser(sub)
+    for mod in _optional_commands():
+        mod.add_parser(sub)
+    return p
+
+
+def _optional_commands():
+    """Subcommands beyond ``simulate`` register here as they land."""
+    import importlib
+    mods = []
+    for name in ("plan_cmd", "diagnose_cmd", "run_cmd"):
+        try:
+            mods.append(importlib.import_module(f"sbmpc.{name}"))
+        except ModuleNotFoundError as exc:
+            if exc.name != f"sbmpc.{name}":
+                raise
+    return mods
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"sbmpc {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except NoResult as exc:
+        print(f"sbmpc {args.command}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"sbmpc {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

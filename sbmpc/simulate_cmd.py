@@ -1,0 +1,129 @@
+"""``sbmpc simulate``: run one manoeuvre through the closed-loop (or open-loop) model."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+
+def add_parser(sub):
+    p = sub.add_parser("simulate", help="simulate a manoeuvre: straight, circle, ramp, lemniscate",
+                       description="Simulate a manoeuvre with the closed-loop model: straight at --v; a "
+                       "circle with --radius (commanded radius, positive = left); a ramp with --slope-deg "
+                       "--v0 --length; or --lemniscate (paper eqs. 29, 30).")
+    p.add_argument("--vehicle", default="p3at", help="shipped vehicle name or YAML path (default p3at)")
+    p.add_argument("--terrain", default="vinyl", help="shipped terrain name or YAML path (default vinyl)")
+    p.add_argument("--v", type=float, help="desired speed [m/s]")
+    p.add_argument("--radius", type=float, help="commanded turning radius [m], positive turns left")
+    p.add_argument("--slope-deg", type=float, help="ramp grade [deg]")
+    p.add_argument("--v0", type=float, help="speed entering the ramp [m/s]")
+    p.add_argument("--length", type=float, help="ramp length along the slope [m]")
+    p.add_argument("--lemniscate", action="store_true", help="follow the paper's lemniscate (eqs. 29, 30)")
+    p.add_argument("--duration", type=float, help="simulated time [s] (default 10; ramp 20; lemniscate 18 + 3 s run-up)")
+    p.add_argument("--dt", type=float, help="integration step [s] (default: the controller period, 1 ms)")
+    p.add_argument("--open-loop", action="store_true",
+                   help="drive the open-loop model (no PID) with the constant current that holds --v in steady state")
+    p.add_argument("--json", type=Path, help="write the trajectory JSON here")
+    p.add_argument("--plot", type=Path, help="write a PNG of speeds, torques, power and path here")
+    p.set_defaults(func=run)
+    return p
+
+
+def _need(value, flag, what):
+    if value is None:
+        raise InputError(f"{flag}: expected {what}, found nothing")
+    if not math.isfinite(value):
+        raise InputError(f"{flag}: expected {what}, found {value}")
+    return value
+
+
+def _check_out(path: Path | None, flag: str):
+    if path is not None and path.parent and not path.parent.exists():
+        raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{path.parent}')")
+
+
+def run(args) -> int:
+    from dynamics import ParameterError
+    from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
+    from dynamics.simulate import Model, simulate
+
+    _check_out(args.json, "--json")
+    _check_out(args.plot, "--plot")
+    try:
+        model = Model.load(args.vehicle, args.terrain, args.dt)
+    except ParameterError as exc:
+        raise InputError(str(exc)) from None
+    if args.dt is not None and not (1e-5 <= args.dt <= 0.05):
+        raise InputError(f"--dt: expected a step between 1e-05 and 0.05 s, found {args.dt}")
+    ramp = any(x is not None for x in (args.slope_deg, args.v0, args.length))
+    if sum([ramp, args.radius is not None, args.lemniscate]) > 1:
+        raise InputError("expected one manoeuvre (--radius, the ramp options, or --lemniscate), found several")
+    if args.duration is not None and not (0 < args.duration <= 3600):
+        raise InputError(f"--duration: expected seconds in (0, 3600], found {args.duration}")
+    if args.v is not None and abs(args.v) > 20:
+        raise InputError(f"--v: expected a speed of at most 20 m/s in magnitude, found {args.v}")
+    info: dict = {}
+    dt = model.step_s
+    if args.lemniscate:
+        dur = args.duration or 18.0
+        cl, cr = lemniscate(model, duration=dur, dt=dt)
+        manoeuvre = "lemniscate"
+    elif ramp:
+        v = _need(args.v, "--v", "a desired speed in m/s")
+        slope = _need(args.slope_deg, "--slope-deg", "a grade in degrees")
+        v0 = _need(args.v0, "--v0", "an entry speed in m/s")
+        length = _need(args.length, "--length", "a ramp length in metres")
+        if not -60 < slope < 60:
+            raise InputError(f"--slope-deg: expected a grade between -60 and 60 degrees, found {slope}")
+        if length <= 0:
+            raise InputError(f"--length: expected a positive length in metres, found {length}")
+        if abs(v0) > 20:
+            raise InputError(f"--v0: expected a speed of at most 20 m/s in magnitude, found {v0}")
+        traj, crossed, t_top = ramp_run(model, v, v0, slope, length, args.duration or 20.0, dt)
+        manoeuvre = "ramp"
+        info = {"slope_deg": slope, "length_m": length, "v0": v0, "crossed": crossed, "time_to_top_s": t_top}
+    else:
+        v = _need(args.v, "--v", "a desired speed in m/s")
+        dur = args.duration or 10.0
+        if args.radius is not None:
+            if args.radius == 0 or not math.isfinite(args.radius):
+                raise InputError(f"--radius: expected a non-zero radius in metres, found {args.radius}")
+            cl, cr = circle(model, v, args.radius, dur, dt)
+            manoeuvre = "circle"
+            info = {"radius_m": args.radius}
+        else:
+            cl, cr = straight(model, v, dur, dt)
+            manoeuvre = "straight"
+    if not ramp:
+        if args.open_loop:
+            from dynamics.resistance import steady_resistance_fast
+            tl, tr = steady_resistance_fast(cl[-1], cr[-1], model.vehicle, model.terrain)
+            k = model.vehicle.torque_constant
+            cl, cr = np.full_like(cl, float(tl) / k), np.full_like(cr, float(tr) / k)
+            info["open_loop_current_A"] = [float(tl) / k, float(tr) / k]
+        traj = simulate(model, cl, cr, open_loop=args.open_loop, record_dt=max(dt, 0.01))
+    elif args.open_loop:
+        raise InputError("--open-loop: expected a straight or circle manoeuvre, found a ramp")
+    summary = {
+        "final_speed_mps": float(traj.v[-1]), "mean_speed_mps": float(np.mean(traj.v)),
+        "final_yaw_rate": float(traj.yaw_rate[-1]), "final_tau_l": float(traj.tau_l[-1]),
+        "final_tau_r": float(traj.tau_r[-1]), "energy_J": float(traj.energy_J[-1]),
+        "distance_m": float(np.sum(np.hypot(np.diff(traj.x), np.diff(traj.y)))), "stalled": traj.stalled,
+    }
+    print(f"{manoeuvre} on {model.terrain.name} with {model.vehicle.name}"
+          f"{' (open loop)' if args.open_loop else ''}: {traj.t[-1]:.2f} s simulated")
+    for key, value in {**info, **summary}.items():
+        print(f"  {key:22s} {value:.4g}" if isinstance(value, float) else f"  {key:22s} {value}")
+    if args.json:
+        doc = {"schema": "sbmpc.simulate/1", "manoeuvre": manoeuvre, "vehicle": model.vehicle.name,
+               "terrain": model.terrain.name, "open_loop": bool(args.open_loop), "dt_s": dt,
+               "stalled": traj.stalled, **info, "summary": summary, "trajectory": traj.to_json()}
+        args.json.write_text(json.dumps(doc, indent=1))
+    if args.plot:
+        from .figures import plot_trajectory
+        plot_trajectory(traj, args.plot, f"{manoeuvre} on {model.terrain.name}")
+    return 0

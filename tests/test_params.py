@@ -1,0 +1,67 @@
+import math
+
+import pytest
+
+from dynamics.params import (ParameterError, load_terrain, load_vehicle, shipped_terrains,
+                             vehicle_to_yaml)
+
+
+def test_shipped_p3at_values_and_sources():
+    v = load_vehicle("p3at")
+    assert (v.mass, v.wheel_radius, v.width, v.patch_outer, v.patch_inner, v.patch_width) == (31.0, 0.11, 0.40, 0.31, 0.24, 0.05)
+    assert "2nd-hand" in v.sources["mass"] and "calibrated" in v.sources["inertia"]
+    # PARAMETERS.md consequences of the drive constants
+    assert v.no_load_speed == pytest.approx(8.68, abs=0.01)
+    assert v.stall_torque == pytest.approx(23.5, abs=0.05)
+    assert v.max_power == pytest.approx(51.0, abs=0.1)
+    assert v.continuous_torque == pytest.approx(5.0, abs=0.01)
+
+
+def test_shipped_terrains_table():
+    assert set(shipped_terrains()) >= {"vinyl", "vinyl_lemniscate", "concrete", "asphalt", "packed_dirt", "grass"}
+    t = load_terrain("vinyl_lemniscate")
+    assert (t.alpha, t.mu_sa, t.mu_op, t.shear_modulus) == (1.5, 0.6488, 0.4601, 0.0009)
+    assert "Section V-C" in t.sources["mu_sa"]
+
+
+def test_values_are_immutable(p3at):
+    with pytest.raises(Exception):
+        p3at.mass = 3.0
+
+
+def test_user_file_and_roundtrip(tmp_path, p3at):
+    path = tmp_path / "heavy.yaml"
+    path.write_text(vehicle_to_yaml(p3at.replace(mass=40.0, name="heavy")))
+    v = load_vehicle(str(path))
+    assert v == p3at.replace(mass=40.0, name="heavy")
+    assert v.sources["mass"] == p3at.sources["mass"]
+
+
+@pytest.mark.parametrize("text, words", [
+    ("mass: -3\n", ["key 'mass'", "> 0", "-3"]),
+    ("mass: heavy\n", ["key 'mass'", "expected a number", "'heavy'"]),
+    ("masss: 3\n", ["unknown key 'masss'", "expected one of"]),
+    ("mass: [1, 2\n", ["malformed YAML", "line"]),
+    ("patch_inner: 0.5\n", ["patch_inner", "C < L"]),
+    ("- 1\n", ["expected a mapping"]),
+])
+def test_bad_files_name_file_key_expected_found(tmp_path, text, words):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ParameterError) as err:
+        load_vehicle(str(path))
+    msg = str(err.value)
+    assert str(path) in msg
+    for w in words:
+        assert w in msg
+    assert path.read_text() == text  # never modified
+
+
+def test_missing_file_and_unknown_name(tmp_path):
+    with pytest.raises(ParameterError, match="file not found"):
+        load_terrain(str(tmp_path / "nope.yaml"))
+    with pytest.raises(ParameterError, match="shipped name"):
+        load_terrain("lava")
+    with pytest.raises(ParameterError, match="alpha"):
+        load_terrain({"alpha": 0.5})
+    assert math.isfinite(load_terrain({"alpha": 1.0}).alpha)

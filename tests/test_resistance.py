@@ -1,0 +1,129 @@
+import numpy as np
+import pytest
+from scipy.integrate import dblquad
+
+from dynamics import load_terrain, load_vehicle
+from dynamics.kinematics import wheel_speeds
+from dynamics.resistance import (contact_time, friction_table, shear_displacement,
+                                 sliding_velocity, steady_resistance, steady_resistance_fast,
+                                 unit_friction_fast, unit_friction_right)
+
+V = load_vehicle("p3at")
+VINYL = load_terrain("vinyl")
+
+
+def commanded(R, v=0.2):
+    return wheel_speeds(v, 1.0 / np.asarray(R, float), V.wheel_radius, V.width, 1.0)
+
+
+def test_quadrature_matches_adaptive_integration_of_eq17():
+    """The tensor Gauss-Legendre form equals scipy's adaptive dblquad of the same integrand."""
+    wl, wr = commanded(1.0)
+    r, B, L, C, b = V.wheel_radius, V.width, V.patch_outer, V.patch_inner, V.patch_width
+    v = r * (wl + wr) / 2
+    yaw_rate = r * (wr - wl) / (VINYL.alpha * B)
+
+    def integrand(y, x, y0):
+        xw = B / 2 + x
+        t = contact_time(y0, y, r * wr, yaw_rate)
+        jx, jy = shear_displacement(xw, y, y0, v, t, yaw_rate)
+        vx, vy = sliding_velocity(xw, y, v, yaw_rate, r * wr)
+        return float((1 - np.exp(-np.hypot(jx, jy) / VINYL.shear_modulus)) * -vy / np.hypot(vx, vy))
+
+    front = dblquad(integrand, -b / 2, b / 2, C / 2, L / 2, args=(L / 2,), epsabs=1e-12)[0]
+    rear = dblquad(integrand, -b / 2, b / 2, -L / 2, -C / 2, args=(-C / 2,), epsabs=1e-12)[0]
+    assert float(unit_friction_right(wl, wr, V, VINYL)) == pytest.approx(front + rear, rel=1e-5)
+
+
+def test_outer_wheel_torque_of_the_tightest_vinyl_circle():
+    """PARAMETERS.md: about 4.7 N m on the outer wheels at 0.2 m commanded radius, inside the
+    5.0 N m continuous limit."""
+    tl, tr = steady_resistance(*commanded(0.2), V, VINYL)
+    assert float(tr) == pytest.approx(4.7, abs=0.05)
+    assert float(tr) < V.continuous_torque
+    assert float(tl) < 0  # the inner side brakes
+
+
+def test_fig9_torques_fall_with_radius_and_tend_to_rolling():
+    radii = np.array([0.2, 0.3, 0.5, 1, 2, 4, 10, 30, 100, 1000, 1e4])
+    tl, tr = steady_resistance(*commanded(radii), V, VINYL)
+    rolling = VINYL.mu_roll * V.mass * 9.81 / 2 * V.wheel_radius
+    fric_r = tr - rolling
+    assert np.all(np.diff(fric_r) < 0)                  # right (outer) friction torque falls
+    assert np.all(np.diff(tl[1:]) > 0)                  # left torque rises towards rolling
+    assert tr[-1] == pytest.approx(rolling, abs=5e-3)
+    assert tl[-1] == pytest.approx(rolling, abs=5e-3)
+
+
+def test_no_slip_terrain_has_no_sliding_friction():
+    """With alpha = 1 the kinematics are those of pure rolling: sliding friction vanishes."""
+    ter = VINYL.replace(alpha=1.0)
+    for R in (0.5, 2.0, 20.0):
+        tl, tr = steady_resistance(*commanded(R), V, ter)
+        # only the lateral scrub of the patches remains; its longitudinal share is tiny
+        rolling = ter.mu_roll * V.mass * 9.81 / 2 * V.wheel_radius
+        assert abs(float(tr) - rolling) < 0.02 * abs(float(steady_resistance(*commanded(R), V, VINYL)[1]) - rolling) + 1e-3
+
+
+def test_straight_motion_has_zero_friction():
+    assert float(unit_friction_right(3.0, 3.0, V, VINYL)) == 0.0
+    assert float(unit_friction_right(-3.0, -3.0, V, VINYL)) == 0.0
+
+
+@pytest.mark.parametrize("wl, wr, case", [
+    (0.0, 3.0, "inner wheel at rest"), (3.0, 0.0, "outer wheel at rest"),
+    (-2.0, 2.0, "point turn"), (-0.5, 3.0, "inner wheel reversing"),
+    (2.0, 2.0 + 1e-9, "almost straight"), (1e-7, 2e-7, "almost at rest"),
+])
+def test_singular_cases_are_finite_and_bounded(wl, wr, case):
+    fmax = V.patch_width * (V.patch_outer - V.patch_inner)   # unit friction cannot exceed the area
+    for f in (unit_friction_right(wl, wr, V, VINYL), unit_friction_right(wr, wl, V, VINYL)):
+        assert np.isfinite(f) and abs(float(f)) <= fmax * (1 + 1e-9), case
+    tl, tr = steady_resistance_fast(wl, wr, V, VINYL)
+    assert np.isfinite(tl) and np.isfinite(tr)
+
+
+def test_point_turn_sides_oppose_each_other():
+    tl, tr = steady_resistance(-2.0, 2.0, V, VINYL)
+    assert float(tl) == pytest.approx(-float(tr), rel=1e-9)
+    assert float(tr) > 0
+
+
+def test_wheel_at_rest_is_the_fully_sheared_limit():
+    """w -> 0 approaches the fully sheared value continuously."""
+    f0 = float(unit_friction_right(3.0, 0.0, V, VINYL))
+    f_small = float(unit_friction_right(3.0, 1e-6, V, VINYL))
+    assert f_small == pytest.approx(f0, rel=1e-3)
+
+
+def test_mirror_and_reversal_symmetry():
+    for wl, wr in [(1.0, 2.0), (-0.3, 2.5), (0.0, 1.0)]:
+        tl, tr = steady_resistance(wl, wr, V, VINYL)
+        ml, mr = steady_resistance(wr, wl, V, VINYL)
+        assert float(ml) == pytest.approx(float(tr), rel=1e-12)
+        assert float(mr) == pytest.approx(float(tl), rel=1e-12)
+        assert float(unit_friction_right(-wl, -wr, V, VINYL)) == pytest.approx(-float(unit_friction_right(wl, wr, V, VINYL)), rel=1e-9)
+
+
+@pytest.mark.parametrize("terrain", ["vinyl", "grass", "vinyl_lemniscate"])
+def test_fast_form_within_one_percent_of_exact_over_the_whole_range(terrain):
+    """Every direction of the wheel-speed plane (all radii, point turns, reversing)."""
+    ter = load_terrain(terrain)
+    psi = np.linspace(-np.pi, np.pi, 361)
+    wl, wr = 2.0 * np.cos(psi), 2.0 * np.sin(psi)
+    el, er = steady_resistance(wl, wr, V, ter, n_long=200, n_lat=16)
+    fl, fr = steady_resistance_fast(wl, wr, V, ter)
+    full_scale = V.wheel_radius * V.mass * 9.81 / 2 * ter.mu_sa
+    assert np.max(np.abs(fl - el)) < 0.01 * full_scale / 10   # 0.1 % of full scale
+    big = np.abs(er) > 0.3
+    assert np.max(np.abs(fr - er)[big] / np.abs(er[big])) < 0.01
+
+
+def test_fast_form_scale_free_and_jacobian_consistent():
+    table = friction_table(V, VINYL)
+    a = unit_friction_fast(table, 1.0, 1.3)
+    b = unit_friction_fast(table, 5.0, 6.5)
+    assert a[0] == pytest.approx(b[0]) and a[1] == pytest.approx(b[1])
+    h = 1e-6
+    num = (unit_friction_fast(table, 1.0 + h, 1.3)[1] - unit_friction_fast(table, 1.0 - h, 1.3)[1]) / (2 * h)
+    assert a[4] == pytest.approx(num, rel=1e-3)
