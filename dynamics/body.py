@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import math
 
-from numba import njit
+from ._jit import jit
 
 
-@njit(cache=True)
+@jit
 def mass_matrix(mass, inertia, r, width, alpha):
     """Eq. 5: the symmetric mass matrix M [kg m^2], returned as (M11, M12) with M22 = M11,
     M21 = M12: M11 = m r^2 / 4 + r^2 I / (alpha B^2), M12 = m r^2 / 4 - r^2 I / (alpha B^2)."""
@@ -19,14 +19,14 @@ def mass_matrix(mass, inertia, r, width, alpha):
     return a + c, a - c
 
 
-@njit(cache=True)
+@jit
 def gravity_torque(mass, g, r, pitch):
     """Eq. 24: gravity torque of each side, G = m g r sin(beta) / 2 [N m], for the pitch
     beta [rad] of the vehicle's heading (positive nose up: climbing costs torque)."""
     return mass * g * r * math.sin(pitch) / 2.0
 
 
-@njit(cache=True)
+@jit
 def wheel_accelerations(m11, m12, tau_l, tau_r, res_l, res_r, grav):
     """Eqs. 23 (planar, grav = 0) and 25 (linear 3-D): solve M q'' = tau - C - G for the
     wheel accelerations (q''_l, q''_r) [rad/s^2]."""

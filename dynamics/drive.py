@@ -4,10 +4,10 @@ constant and back-EMF constant at the wheel [N m/A = V s/rad]. Compiled with num
 """
 from __future__ import annotations
 
-from numba import njit
+from ._jit import jit
 
 
-@njit(cache=True)
+@jit
 def pid_current(error, integral, ref_rate, kp, ki, kd):
     """Fig. 4, the modified PID: current command [A] = kp e + ki integral(e) + kd d(ref)/dt.
 
@@ -17,14 +17,14 @@ def pid_current(error, integral, ref_rate, kp, ki, kd):
     return kp * error + ki * integral + kd * ref_rate
 
 
-@njit(cache=True)
+@jit
 def motor_torque(voltage, omega, k, r_a):
     """Eq. 26, the DC motor torque-speed line tau/tau_s + w/w_s = 1 with tau_s = V k / R_a and
     w_s = V / k: tau = k (V - k w) / R_a [N m] for voltage V [V] and speed w [rad/s]."""
     return k * (voltage - k * omega) / r_a
 
 
-@njit(cache=True)
+@jit
 def max_motor_voltage(v_max, r_a, current):
     """Eq. 27: largest back-EMF voltage the controller leaves the motor [V],
     V_m,max = PWM (VCC - U_loss) - (dn/dtau) K_T I / K_n = V_max - R_a |I|
@@ -32,7 +32,7 @@ def max_motor_voltage(v_max, r_a, current):
     return v_max - r_a * abs(current)
 
 
-@njit(cache=True)
+@jit
 def current_window(omega, v_max, k, r_a, i_max):
     """The currents [A] the drive can deliver at wheel speed omega [rad/s]: the continuous
     limit |I| <= I_max intersected with the voltage limit of eq. 27, |k w + R_a I| <= V_max.
@@ -52,7 +52,7 @@ def current_window(omega, v_max, k, r_a, i_max):
     return lo, hi
 
 
-@njit(cache=True)
+@jit
 def electrical_power(current, omega, k, r_a):
     """Electrical power drawn by one side [W]: P = R_a I^2 + k w I (copper loss plus
     mechanical power; negative when the side regenerates)."""

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from ._jit import jit
 
 from .body import gravity_torque, mass_matrix
 from .drive import current_window, electrical_power, pid_current
@@ -81,12 +81,12 @@ def pack(vehicle: Vehicle, terrain: Terrain) -> np.ndarray:
     return P
 
 
-@njit(cache=True)
+@jit
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
 
 
-@njit(cache=True)
+@jit
 def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     """Advance state S by dt [s] under commands (cmd_l, cmd_r) and pitch [rad]; outputs in O.
 
@@ -153,6 +153,7 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     scr = P[P_SCR]
     r = P[P_R]
     cp = math.cos(pitch)
+    sp = math.sin(pitch)
     fl, fr, dll, dlr, drl, drr = unit_friction_fast(table, scl * wl, scr * wr)
     tl = P[P_SHEARLAG]
     if tl > 0.0:
@@ -177,8 +178,9 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     visc = P[P_VISC]
     res_l = r * scl * (press * mu_l * fl + roll * _clip(wl / OMEGA_EPS, -1.0, 1.0)) + visc * wl
     res_r = r * scr * (press * mu_r * fr + roll * _clip(wr / OMEGA_EPS, -1.0, 1.0)) + visc * wr
-    g_l = gravity_torque(P[P_M], G, r * scl, pitch)
-    g_r = gravity_torque(P[P_M], G, r * scr, pitch)
+    grav = gravity_torque(P[P_M], G, r, pitch)
+    g_l = grav * scl
+    g_r = grav * scr
     j_ll = r * scl * (press * mu_l * dll * scl + droll_l) + visc + dvl
     j_lr = r * scl * press * mu_l * dlr * scr
     j_rl = r * scr * press * mu_r * drl * scl
@@ -200,7 +202,7 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     head = S[S_YAW] + 0.5 * yaw_rate * dt
     S[S_X] += v * cp * math.cos(head) * dt
     S[S_Y] += v * cp * math.sin(head) * dt
-    S[S_Z] += v * math.sin(pitch) * dt
+    S[S_Z] += v * sp * dt
     S[S_YAW] += yaw_rate * dt
     S[S_DIST] += abs(v) * dt
     S[S_S] += v * dt
@@ -233,7 +235,7 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     O[O_SAT] = 1.0 if (sat_l or sat_r) else 0.0
 
 
-@njit(cache=True)
+@jit
 def profile_pitch(profile, s0, ds, s):
     """Pitch [rad] at signed path distance s [m] of a profile sampled every ds from s0;
     flat (0) outside the profile."""
@@ -245,7 +247,7 @@ def profile_pitch(profile, s0, ds, s):
     return profile[i]
 
 
-@njit(cache=True)
+@jit
 def _record(S, O, pitch, row):
     row[R_T] = S[S_T]
     row[R_X] = S[S_X]
@@ -268,7 +270,7 @@ def _record(S, O, pitch, row):
     row[R_S] = S[S_S]
 
 
-@njit(cache=True)
+@jit
 def rollout(P, table, S, cmd_l, cmd_r, pitch_t, profile, s0, ds, dt, open_loop, every, out):
     """Simulate len(cmd_l) steps from state S (modified in place), recording every
     ``every`` steps into ``out`` (row 0 is the initial state).
@@ -299,7 +301,7 @@ def rollout(P, table, S, cmd_l, cmd_r, pitch_t, profile, s0, ds, dt, open_loop, 
     return rows
 
 
-@njit(cache=True)
+@jit
 def rollout_batch(P, table, S0, cmds, n_steps, pitch, dt):
     """Final states of many closed-loop rollouts with constant commands: S0 is (n, NS),
     cmds is (n, 2) desired wheel speeds [rad/s]; constant pitch [rad]."""

@@ -7,10 +7,10 @@ called from Python).
 """
 from __future__ import annotations
 
-from numba import njit
+from ._jit import jit
 
 
-@njit(cache=True)
+@jit
 def alpha_model(wl, wr, r, width, alpha):
     """Eq. 1, the ICR ("alpha") kinematic model: wheel speeds -> body velocities.
 
@@ -21,7 +21,7 @@ def alpha_model(wl, wr, r, width, alpha):
     return r * (wl + wr) / 2.0, r * (wr - wl) / (alpha * width)
 
 
-@njit(cache=True)
+@jit
 def slip_model(wl, wr, il, ir, r, width):
     """Eq. 2, the slip-ratio kinematic model: wheel speeds and slip ratios -> (v, yaw_rate).
 
@@ -33,7 +33,7 @@ def slip_model(wl, wr, il, ir, r, width):
     return (vl + vr) / 2.0, (vr - vl) / width
 
 
-@njit(cache=True)
+@jit
 def slip_ratios_for_alpha(wl, wr, alpha):
     """Eq. 3: slip ratios (il, ir) under which eq. 2 equals eq. 1 for the given alpha.
 
@@ -45,13 +45,13 @@ def slip_ratios_for_alpha(wl, wr, alpha):
     return -wr * c, wl * c
 
 
-@njit(cache=True)
+@jit
 def alpha_from_slip_ratios(il, ir):
     """Eq. 3, right-hand part: alpha = 1 / (1 - 2 il ir / (il + ir)) (unitless)."""
     return 1.0 / (1.0 - 2.0 * il * ir / (il + ir))
 
 
-@njit(cache=True)
+@jit
 def wheel_speeds(v, curvature, r, width, alpha):
     """Inverse of eq. 1 (paper Fig. 8): desired v [m/s] and path curvature 1/rho [1/m]
     -> desired wheel speeds (wl, wr) [rad/s].
@@ -65,7 +65,7 @@ def wheel_speeds(v, curvature, r, width, alpha):
     return v / r * (1.0 - half), v / r * (1.0 + half)
 
 
-@njit(cache=True)
+@jit
 def commanded_curvature(wl, wr, width):
     """Curvature [1/m] of the commanded radius (Section V): the no-slip model of wheel
     speeds, 1/R = 2 (wr - wl) / (B (wr + wl)). Infinite for a point turn."""

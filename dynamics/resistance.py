@@ -7,10 +7,11 @@ Two forms of the same physics:
 * the **fast** form, for the compiled hot path, rests on a property of eqs. 8-17: every
   sliding velocity and contact time scales with the wheel speeds, so the shear
   displacements, the sliding directions and hence the friction forces depend only on the
-  *direction* psi = atan2(wr, wl) of the wheel-speed vector, not on its magnitude. The
-  friction per unit (pressure x friction coefficient) of the right side is one periodic
-  function of psi, tabulated once per (vehicle geometry, alpha, K) and interpolated
-  linearly; the left side is its mirror image, F_l(wl, wr) = F_r(wr, wl).
+  *direction* of the wheel-speed vector (wl, wr), not on its magnitude. The friction per
+  unit (pressure x friction coefficient) of the right side is one periodic function of
+  that direction, tabulated once per (vehicle geometry, alpha, K) over the diamond angle
+  (:func:`diamond_angle`, no transcendental function) and interpolated linearly; the left
+  side is its mirror image, F_l(wl, wr) = F_r(wr, wl).
 
 Sign convention: a *resistance torque* is the torque the motor must supply to hold the
 wheel speed (eqs. 18, 21); it is positive when the ground pushes the tyre forward (the
@@ -27,7 +28,8 @@ Singular cases (PARAMETERS.md) and the choices made:
   from its other edge, the contact time counts from there;
 * the vehicle at rest: the friction depends on the direction alone, a Coulomb-like
   discontinuity at the origin of the wheel-speed plane. Below a wheel-speed magnitude
-  of ``OMEGA_EPS`` the friction and the rolling resistance are scaled down linearly
+  (|wl| + |wr| for the friction, |w| for rolling) of ``OMEGA_EPS`` the friction and the
+  rolling resistance are scaled down linearly
   (a standard regularisation; 0.02 rad/s is 2 mm/s at the rim).
 """
 from __future__ import annotations
@@ -35,13 +37,13 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from numba import njit
+from ._jit import jit
 
 from .params import G, Terrain, Vehicle
 
 THETA_CAP = 0.2     # rad, largest rotation inside one contact patch (see module doc)
 OMEGA_EPS = 0.02    # rad/s, regularisation of friction and rolling resistance at rest
-TABLE_SIZE = 8192   # nodes of the fast table over psi in [-pi, pi)
+TABLE_SIZE = 16384  # nodes of the fast table over the diamond angle t in [0, 4)
 
 
 # ----------------------------------------------------------------------------------
@@ -154,7 +156,7 @@ def friction_forces(wl, wr, vehicle: Vehicle, terrain: Terrain, mu_left, mu_righ
     The left side is the mirror image of the right: F_lf(wl, wr) = F_rf(wr, wl).
     """
     p = patch_pressure(vehicle, pitch)
-    scale = np.clip(np.hypot(wl, wr) / OMEGA_EPS, 0.0, 1.0)
+    scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
     fr = unit_friction_right(wl, wr, vehicle, terrain, **quad)
     fl = unit_friction_right(wr, wl, vehicle, terrain, **quad)
     return p * mu_left * fl * scale, p * mu_right * fr * scale
@@ -172,7 +174,7 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
     wr = np.asarray(wr, float)
     r = vehicle.wheel_radius
     p = patch_pressure(vehicle, pitch)
-    scale = np.clip(np.hypot(wl, wr) / OMEGA_EPS, 0.0, 1.0)
+    scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
     out = []
     for unit, w in ((unit_friction_right(wr, wl, vehicle, terrain, **quad), wl),
                     (unit_friction_right(wl, wr, vehicle, terrain, **quad), wr)):
@@ -186,16 +188,57 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
 # ----------------------------------------------------------------------------------
 # The fast form
 # ----------------------------------------------------------------------------------
+@jit
+def diamond_angle(wl, wr):
+    """Direction coordinate of the wheel-speed vector, t in [0, 4): the position on the
+    diamond |a| + |b| = 1 of (a, b) = (wl, wr) / (|wl| + |wr|), counter-clockwise from
+    (1, 0). Monotone in atan2(wr, wl) and free of transcendental functions; straight ahead
+    is t = 0.5, point turns 1.5 and 3.5, straight back 2.5. Returns (t, dt/dwl, dt/dwr);
+    (0, 0, 0) within 1e-9 rad/s of the origin."""
+    awl = abs(wl)
+    awr = abs(wr)
+    d = awl + awr
+    if d < 1e-9:                     # at rest (the friction is regularised to 0 there)
+        return 0.0, 0.0, 0.0
+    sl = 1.0 if wl >= 0.0 else -1.0
+    sr = 1.0 if wr >= 0.0 else -1.0
+    if wl >= 0.0 and wr >= 0.0:      # t = wr / d
+        c, sig, k = 0.0, 1.0, 1
+    elif wl < 0.0 and wr >= 0.0:     # t = 1 - wl / d
+        c, sig, k = 1.0, -1.0, 0
+    elif wl < 0.0:                   # t = 2 - wr / d
+        c, sig, k = 2.0, -1.0, 1
+    else:                            # t = 3 + wl / d
+        c, sig, k = 3.0, 1.0, 0
+    wk = wr if k == 1 else wl
+    t = c + sig * wk / d
+    d2 = d * d
+    # d(wk/d)/dwj = delta_kj / d - wk sign(wj) / d^2
+    dl = sig * ((1.0 / d if k == 0 else 0.0) - wk * sl / d2)
+    dr = sig * ((1.0 / d if k == 1 else 0.0) - wk * sr / d2)
+    return t, dl, dr
+
+
+def diamond_point(t):
+    """Inverse of :func:`diamond_angle`: the point (wl, wr) of the unit diamond at t."""
+    t = np.mod(np.asarray(t, float), 4.0)
+    q = np.floor(t)
+    f = t - q
+    wl = np.select([q == 0, q == 1, q == 2, q == 3], [1 - f, -f, -(1 - f), f])
+    wr = np.select([q == 0, q == 1, q == 2, q == 3], [f, 1 - f, -f, -(1 - f)])
+    return wl, wr
+
+
 @lru_cache(maxsize=64)
 def _table_cached(r, B, L, C, b, alpha, K, size):
     veh = Vehicle(wheel_radius=r, width=B, patch_outer=L, patch_inner=C, patch_width=b)
     ter = Terrain(alpha=alpha, shear_modulus=K)
     half = size // 2
-    psi = -np.pi + 2.0 * np.pi * np.arange(half) / size
+    t = 4.0 * np.arange(half) / size
     values = np.empty(size + 1)
     for s in range(0, half, 1024):
-        p = psi[s:s + 1024]
-        values[s:s + len(p)] = unit_friction_right(np.cos(p), np.sin(p), veh, ter)
+        wl, wr = diamond_point(t[s:s + 1024])
+        values[s:s + len(wl)] = unit_friction_right(wl, wr, veh, ter)
     values[half:size] = -values[:half]    # reversing every wheel reverses every force
     values[size] = values[0]              # periodic closure for the interpolation
     values.setflags(write=False)
@@ -203,8 +246,9 @@ def _table_cached(r, B, L, C, b, alpha, K, size):
 
 
 def friction_table(vehicle: Vehicle, terrain: Terrain, size: int = TABLE_SIZE) -> np.ndarray:
-    """The fast form: unit friction of the right side [m^2] at psi_k = -pi + 2 pi k / size,
-    k = 0..size (the last node closes the period). Cached per geometry, alpha and K.
+    """The fast form: unit friction of the right side [m^2] at diamond angles
+    t_k = 4 k / size, k = 0..size (the last node closes the period; see
+    :func:`diamond_angle`). Cached per geometry, alpha and K.
 
     Only half the circle is integrated; the other half follows exactly from reversing
     every wheel (all sliding velocities change sign, the patches swap their entry edges).
@@ -214,43 +258,42 @@ def friction_table(vehicle: Vehicle, terrain: Terrain, size: int = TABLE_SIZE) -
                          terrain.alpha, terrain.shear_modulus, int(size))
 
 
-@njit(cache=True)
-def table_lookup(table, psi):
-    """Linear interpolation of a friction table at angle psi [rad]; returns (value, slope
-    d value / d psi)."""
+@jit
+def table_lookup(table, t):
+    """Linear interpolation of a friction table at diamond angle t in [0, 4]; returns
+    (value, slope d value / d t)."""
     n = table.shape[0] - 1
-    h = 2.0 * np.pi / n
-    u = (psi + np.pi) / h
-    i = int(np.floor(u))
+    u = t * (n / 4.0)
+    i = int(u)
     if i < 0:
         i = 0
     elif i >= n:
         i = n - 1
     frac = u - i
-    slope = (table[i + 1] - table[i]) / h
+    slope = (table[i + 1] - table[i]) * (n / 4.0)
     return table[i] + frac * (table[i + 1] - table[i]), slope
 
 
-@njit(cache=True)
+@jit
 def unit_friction_fast(table, wl, wr):
     """Fast form of eqs. 17 and 20 per unit p mu [m^2], including the rest regularisation:
     returns (fl, fr, dfl_dwl, dfl_dwr, dfr_dwl, dfr_dwr), the last four the Jacobian
     [m^2 s/rad] used by the linearly implicit integrator."""
-    rho2 = wl * wl + wr * wr
-    if rho2 == 0.0:
+    if abs(wl) + abs(wr) < 1e-9:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    rho = np.sqrt(rho2)
-    fr, sr = table_lookup(table, np.arctan2(wr, wl))
-    fl, sl = table_lookup(table, np.arctan2(wl, wr))   # mirror image
-    # d psi / d(wl, wr) for psi = atan2(wr, wl) and for the mirror angle atan2(wl, wr)
-    dfr_dwl = -sr * wr / rho2
-    dfr_dwr = sr * wl / rho2
-    dfl_dwl = sl * wr / rho2
-    dfl_dwr = -sl * wl / rho2
-    if rho < OMEGA_EPS:
-        s = rho / OMEGA_EPS
-        ds_dwl = wl / (rho * OMEGA_EPS)
-        ds_dwr = wr / (rho * OMEGA_EPS)
+    t, tl, tr = diamond_angle(wl, wr)
+    fr, sr = table_lookup(table, t)
+    m, ml, mr = diamond_angle(wr, wl)          # mirror image: swap the wheels
+    fl, sl = table_lookup(table, m)
+    dfr_dwl = sr * tl
+    dfr_dwr = sr * tr
+    dfl_dwl = sl * mr                           # d m / d wl = (d/d second argument)
+    dfl_dwr = sl * ml
+    rho1 = abs(wl) + abs(wr)
+    if rho1 < OMEGA_EPS:
+        s = rho1 / OMEGA_EPS
+        ds_dwl = (1.0 if wl >= 0.0 else -1.0) / OMEGA_EPS
+        ds_dwr = (1.0 if wr >= 0.0 else -1.0) / OMEGA_EPS
         dfr_dwl = dfr_dwl * s + fr * ds_dwl
         dfr_dwr = dfr_dwr * s + fr * ds_dwr
         dfl_dwl = dfl_dwl * s + fl * ds_dwl

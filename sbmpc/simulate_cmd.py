@@ -26,7 +26,7 @@ def add_parser(sub):
     p.add_argument("--duration", type=float, help="simulated time [s] (default 10; ramp 20; lemniscate 18 + 3 s run-up)")
     p.add_argument("--dt", type=float, help="integration step [s] (default: the controller period, 1 ms)")
     p.add_argument("--open-loop", action="store_true",
-                   help="drive the open-loop model (no PID) with the constant current that holds --v in steady state")
+                   help="drive the open-loop model (no PID, paper Fig. 16) with the current profile the closed loop applies")
     p.add_argument("--json", type=Path, help="write the trajectory JSON here")
     p.add_argument("--plot", type=Path, help="write a PNG of speeds, torques, power and path here")
     p.set_defaults(func=run)
@@ -100,11 +100,11 @@ def run(args) -> int:
             manoeuvre = "straight"
     if not ramp:
         if args.open_loop:
-            from dynamics.resistance import steady_resistance_fast
-            tl, tr = steady_resistance_fast(cl[-1], cr[-1], model.vehicle, model.terrain)
-            k = model.vehicle.torque_constant
-            cl, cr = np.full_like(cl, float(tl) / k), np.full_like(cr, float(tr) / k)
-            info["open_loop_current_A"] = [float(tl) / k, float(tr) / k]
+            # Fig. 16: the open-loop model driven by the current (tau = K_tau V) that the
+            # closed loop applies for the same manoeuvre.
+            closed = simulate(model, cl, cr, record_dt=dt)
+            cl, cr = closed.i_l[1:].copy(), closed.i_r[1:].copy()
+            info["open_loop_input"] = "closed-loop current profile"
         traj = simulate(model, cl, cr, open_loop=args.open_loop, record_dt=max(dt, 0.01))
     elif args.open_loop:
         raise InputError("--open-loop: expected a straight or circle manoeuvre, found a ramp")

@@ -1,0 +1,8 @@
+"""The one numba decorator of the project: compiled, cached on disk, NumPy error model
+(float division by zero gives inf/nan instead of raising, and no zero checks slow the
+hot path)."""
+from numba import njit
+
+
+def jit(fn):
+    return njit(cache=True, error_model="numpy")(fn)

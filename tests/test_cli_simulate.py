@@ -1,0 +1,69 @@
+import json
+import subprocess
+import sys
+
+import pytest
+
+from sbmpc.cli import main
+
+KEYS = ["t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"]
+
+
+def test_circle_json_and_plot(tmp_path, capsys):
+    out, png = tmp_path / "c.json", tmp_path / "c.png"
+    assert main(["simulate", "--v", "0.3", "--radius", "-1.0", "--duration", "4", "--json", str(out), "--plot", str(png)]) == 0
+    doc = json.loads(out.read_text())
+    traj = doc["trajectory"]
+    assert set(KEYS) <= set(traj)
+    assert max(b - a for a, b in zip(traj["t"], traj["t"][1:])) <= 0.05 + 1e-9
+    assert len({len(traj[k]) for k in KEYS}) == 1
+    assert doc["stalled"] is False
+    assert traj["yaw_rate"][-1] < 0           # negative radius turns right
+    assert png.stat().st_size > 10_000
+    assert "circle on vinyl" in capsys.readouterr().out
+
+
+def test_ramp_reports_crossing_and_stall(tmp_path):
+    out = tmp_path / "r.json"
+    assert main(["simulate", "--terrain", "vinyl", "--v", "1.2", "--slope-deg", "17", "--v0", "0.3", "--length", "1",
+                 "--duration", "4", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["crossed"] is False and doc["stalled"] is True
+
+
+def test_open_loop_straight(tmp_path):
+    out = tmp_path / "o.json"
+    assert main(["simulate", "--v", "0.5", "--open-loop", "--duration", "5", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["open_loop"] is True
+    assert doc["summary"]["final_speed_mps"] == pytest.approx(0.5, abs=0.005)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "--v", "0.2", "--radius", "0"], "--radius"),
+    (["simulate", "--terrain", "lava", "--v", "1"], "terrain 'lava'"),
+    (["simulate", "--radius", "2"], "--v"),
+    (["simulate", "--v", "1", "--slope-deg", "10", "--v0", "0.5"], "--length"),
+    (["simulate", "--v", "1", "--slope-deg", "80", "--v0", "0.5", "--length", "2"], "--slope-deg"),
+    (["simulate", "--v", "1", "--duration", "-1"], "--duration"),
+    (["simulate", "--v", "1", "--json", "/no/such/dir/x.json"], "--json"),
+])
+def test_bad_options_exit_2_with_one_line(argv, words, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err and "Traceback" not in err
+
+
+def test_unknown_option_and_module_entry():
+    res = subprocess.run([sys.executable, "-m", "sbmpc", "simulate", "--vx", "1"], capture_output=True, text=True)
+    assert res.returncode == 2
+    assert res.stderr.count("\n") == 1 and "unrecognized arguments: --vx" in res.stderr
+
+
+def test_bad_vehicle_file_names_file_and_key(tmp_path, capsys):
+    bad = tmp_path / "v.yaml"
+    bad.write_text("mass: -1\n")
+    assert main(["simulate", "--vehicle", str(bad), "--v", "1"]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "'mass'" in err
+    assert bad.read_text() == "mass: -1\n"
