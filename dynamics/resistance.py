@@ -172,15 +172,22 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
     """
     wl = np.asarray(wl, float)
     wr = np.asarray(wr, float)
+    scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
+    return _side_torques(unit_friction_right(wr, wl, vehicle, terrain, **quad) * scale,
+                         unit_friction_right(wl, wr, vehicle, terrain, **quad) * scale,
+                         wl, wr, vehicle, terrain, pitch)
+
+
+def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pitch):
+    """Eqs. 18, 21 for both sides from unit frictions, with mu_sa where the side drives
+    (torque and speed of one sign, strictly) and mu_op where it brakes or holds."""
     r = vehicle.wheel_radius
     p = patch_pressure(vehicle, pitch)
-    scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
     out = []
-    for unit, w in ((unit_friction_right(wr, wl, vehicle, terrain, **quad), wl),
-                    (unit_friction_right(wl, wr, vehicle, terrain, **quad), wr)):
+    for unit, w in ((unit_l, wl), (unit_r, wr)):
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
-        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit * scale, roll)
-        tau_op = resistance_torque(r, p * terrain.mu_op * unit * scale, roll)
+        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit, roll)
+        tau_op = resistance_torque(r, p * terrain.mu_op * unit, roll)
         out.append(np.where(tau_sa * w > 0.0, tau_sa, tau_op))
     return out[0], out[1]
 
@@ -314,12 +321,4 @@ def steady_resistance_fast(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0
     for idx in np.ndindex(flat_l.shape):
         res = unit_friction_fast(table, float(flat_l[idx]), float(flat_r[idx]))
         fl[idx], fr[idx] = res[0], res[1]
-    r = vehicle.wheel_radius
-    p = patch_pressure(vehicle, pitch)
-    out = []
-    for unit, w in ((fl, flat_l), (fr, flat_r)):
-        roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
-        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit, roll)
-        tau_op = resistance_torque(r, p * terrain.mu_op * unit, roll)
-        out.append(np.where(tau_sa * w > 0.0, tau_sa, tau_op))
-    return out[0], out[1]
+    return _side_torques(fl, fr, flat_l, flat_r, vehicle, terrain, pitch)
