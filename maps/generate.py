@@ -1,0 +1,128 @@
+"""Seeded generators of hills, ramps, ridges and valleys, described as plain data (YAML).
+
+A description is a mapping::
+
+    size: [60, 60]          # metres (x, y)
+    resolution: 0.25        # metres per cell
+    origin: [0, 0]          # optional, world (x, y) of cell [0, 0]
+    seed: 7                 # for random features
+    base: 0.0               # metres
+    features:
+      - {type: hill, x: 20, y: 30, height: 3.0, radius: 6.0}        # Gaussian bump (radius = sigma)
+      - {type: plateau, x: 40, y: 20, height: 2.0, radius: 5.0, edge: 1.0}
+      - {type: ramp, x0: 10, y0: 5, x1: 14, y1: 5, height: 1.0, width: 4.0}  # rises from (x0,y0) to (x1,y1), then stays
+      - {type: ridge, x0: 5, y0: 50, x1: 55, y1: 50, height: 2.0, width: 3.0}
+      - {type: valley, x0: 5, y0: 10, x1: 55, y1: 10, depth: 1.5, width: 4.0}
+      - {type: random_hills, count: 12, height: [0.5, 3.0], radius: [2.0, 6.0]}
+
+Heights add up. The same description and seed always give the same map.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .grid import ElevationMap
+
+FEATURE_KEYS = {
+    "hill": {"x", "y", "height", "radius"},
+    "plateau": {"x", "y", "height", "radius", "edge"},
+    "ramp": {"x0", "y0", "x1", "y1", "height", "width"},
+    "ridge": {"x0", "y0", "x1", "y1", "height", "width"},
+    "valley": {"x0", "y0", "x1", "y1", "depth", "width"},
+    "random_hills": {"count", "height", "radius"},
+}
+
+
+class GeneratorError(ValueError):
+    """A generator description is wrong; the message gives the key path."""
+
+
+def _num(d, key, path, positive=False):
+    if key not in d:
+        raise GeneratorError(f"{path}.{key}: expected a number, found nothing")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise GeneratorError(f"{path}.{key}: expected a number, found {v!r}")
+    if positive and v <= 0:
+        raise GeneratorError(f"{path}.{key}: expected a positive number, found {v!r}")
+    return float(v)
+
+
+def _range(d, key, path):
+    v = d.get(key)
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return float(v), float(v)
+    if isinstance(v, (list, tuple)) and len(v) == 2 and all(isinstance(a, (int, float)) for a in v) and v[0] <= v[1]:
+        return float(v[0]), float(v[1])
+    raise GeneratorError(f"{path}.{key}: expected a number or a range [low, high], found {v!r}")
+
+
+def _segment_coords(X, Y, x0, y0, x1, y1):
+    """Along-segment fraction (unclipped) and distance from the segment's line."""
+    dx, dy = x1 - x0, y1 - y0
+    L2 = dx * dx + dy * dy
+    s = ((X - x0) * dx + (Y - y0) * dy) / L2
+    d = np.abs((X - x0) * dy - (Y - y0) * dx) / np.sqrt(L2)
+    return s, d
+
+
+def generate(desc: dict, path: str = "map.generate") -> ElevationMap:
+    """An :class:`ElevationMap` from a generator description (module doc)."""
+    if not isinstance(desc, dict):
+        raise GeneratorError(f"{path}: expected a mapping, found {type(desc).__name__}")
+    size = desc.get("size")
+    if not (isinstance(size, (list, tuple)) and len(size) == 2 and all(isinstance(a, (int, float)) and a > 0 for a in size)):
+        raise GeneratorError(f"{path}.size: expected [width, height] in metres, found {size!r}")
+    res = _num(desc, "resolution", path, positive=True)
+    nx, ny = int(round(size[0] / res)) + 1, int(round(size[1] / res)) + 1
+    if nx * ny > 25_000_000:
+        raise GeneratorError(f"{path}: expected at most 25 million cells, found {nx} x {ny}")
+    origin = desc.get("origin", [0.0, 0.0])
+    seed = desc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise GeneratorError(f"{path}.seed: expected an integer, found {seed!r}")
+    rng = np.random.default_rng(seed)
+    x = origin[0] + np.arange(nx) * res
+    y = origin[1] + np.arange(ny) * res
+    X, Y = np.meshgrid(x, y)
+    H = np.full((ny, nx), float(desc.get("base", 0.0)))
+    feats = desc.get("features", [])
+    if not isinstance(feats, list):
+        raise GeneratorError(f"{path}.features: expected a list, found {type(feats).__name__}")
+    for k, f in enumerate(feats):
+        fp = f"{path}.features[{k}]"
+        if not isinstance(f, dict) or f.get("type") not in FEATURE_KEYS:
+            raise GeneratorError(f"{fp}.type: expected one of {', '.join(FEATURE_KEYS)}, found {f.get('type') if isinstance(f, dict) else f!r}")
+        kind = f["type"]
+        extra = set(f) - FEATURE_KEYS[kind] - {"type"}
+        if extra:
+            raise GeneratorError(f"{fp}: unknown key '{sorted(extra)[0]}' for a {kind}: expected {', '.join(sorted(FEATURE_KEYS[kind]))}")
+        if kind == "hill":
+            r = _num(f, "radius", fp, True)
+            H += _num(f, "height", fp) * np.exp(-((X - _num(f, "x", fp)) ** 2 + (Y - _num(f, "y", fp)) ** 2) / (2 * r * r))
+        elif kind == "plateau":
+            r, e = _num(f, "radius", fp, True), _num(f, "edge", fp, True)
+            d = np.hypot(X - _num(f, "x", fp), Y - _num(f, "y", fp))
+            H += _num(f, "height", fp) * np.clip((r + e - d) / e, 0.0, 1.0)
+        elif kind == "random_hills":
+            hlo, hhi = _range(f, "height", fp)
+            rlo, rhi = _range(f, "radius", fp)
+            count = f.get("count")
+            if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+                raise GeneratorError(f"{fp}.count: expected a whole number >= 0, found {count!r}")
+            for _ in range(count):
+                cx, cy = rng.uniform(x[0], x[-1]), rng.uniform(y[0], y[-1])
+                h, r = rng.uniform(hlo, hhi), rng.uniform(rlo, rhi)
+                H += h * np.exp(-((X - cx) ** 2 + (Y - cy) ** 2) / (2 * r * r))
+        else:
+            x0, y0, x1, y1 = (_num(f, key, fp) for key in ("x0", "y0", "x1", "y1"))
+            if x0 == x1 and y0 == y1:
+                raise GeneratorError(f"{fp}: expected two different end points, found ({x0}, {y0}) twice")
+            w = _num(f, "width", fp, True)
+            s, d = _segment_coords(X, Y, x0, y0, x1, y1)
+            if kind == "ramp":      # a strip rising linearly from end 0 to end 1, level beyond
+                H += _num(f, "height", fp) * np.clip(s, 0.0, 1.0) * (s >= 0) * (d <= w / 2)
+            else:                   # a Gaussian cross-section (sigma = width / 2) along the segment
+                amp = _num(f, "height", fp) if kind == "ridge" else -_num(f, "depth", fp)
+                H += amp * np.exp(-0.5 * (d / (w / 2)) ** 2) * ((s >= 0) & (s <= 1))
+    return ElevationMap(H, res, (float(origin[0]), float(origin[1])), name=str(desc.get("name", "")))

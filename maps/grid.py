@@ -1,0 +1,156 @@
+"""The ground: an elevation grid with an optional terrain layer, and compiled queries.
+
+Conventions (CONTRACTS.md): heights [m] in a 2-D array, row = y index, column = x index;
+``origin`` is the world (x, y) of the centre of cell [0, 0]; ``resolution`` is metres per
+cell. x is east, y north, z up; yaw is counter-clockwise from +x.
+
+The queries are numba kernels over plain arrays so that the planner's compiled edge
+rollouts can call them: :func:`height_at` (bilinear), :func:`gradient_at`, and
+:func:`pitch_roll_at`, the pitch and roll of a vehicle from the heights under its front,
+rear, left and right wheels.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, error_model="numpy")
+def height_at(H, res, ox, oy, x, y):
+    """Bilinear height [m] at world (x, y) [m]; clamped to the edge outside the grid."""
+    ny, nx = H.shape
+    u = (x - ox) / res
+    v = (y - oy) / res
+    if u < 0.0:
+        u = 0.0
+    elif u > nx - 1:
+        u = nx - 1.0
+    if v < 0.0:
+        v = 0.0
+    elif v > ny - 1:
+        v = ny - 1.0
+    i = min(int(u), nx - 2) if nx > 1 else 0
+    j = min(int(v), ny - 2) if ny > 1 else 0
+    fu = u - i
+    fv = v - j
+    i1 = min(i + 1, nx - 1)
+    j1 = min(j + 1, ny - 1)
+    return ((1 - fu) * (1 - fv) * H[j, i] + fu * (1 - fv) * H[j, i1]
+            + (1 - fu) * fv * H[j1, i] + fu * fv * H[j1, i1])
+
+
+@njit(cache=True, error_model="numpy")
+def gradient_at(H, res, ox, oy, x, y):
+    """Gradient (dz/dx, dz/dy) [m/m] at (x, y) by central differences of the bilinear
+    surface over one cell."""
+    h = 0.5 * res
+    gx = (height_at(H, res, ox, oy, x + h, y) - height_at(H, res, ox, oy, x - h, y)) / (2 * h)
+    gy = (height_at(H, res, ox, oy, x, y + h) - height_at(H, res, ox, oy, x, y - h)) / (2 * h)
+    return gx, gy
+
+
+@njit(cache=True, error_model="numpy")
+def pitch_roll_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
+    """Pitch and roll [rad] of a vehicle centred at (x, y) heading yaw, from the mean
+    heights under its front and rear axles (half_length ahead and behind) and under its
+    left and right wheels (half_width aside). Pitch is positive nose up, roll positive
+    when the left side is higher (right-hand rotation about the heading)."""
+    c = math.cos(yaw)
+    s = math.sin(yaw)
+    fx, fy = half_length * c, half_length * s      # to the front axle
+    lx, ly = -half_width * s, half_width * c       # to the left side
+    zfl = height_at(H, res, ox, oy, x + fx + lx, y + fy + ly)
+    zfr = height_at(H, res, ox, oy, x + fx - lx, y + fy - ly)
+    zrl = height_at(H, res, ox, oy, x - fx + lx, y - fy + ly)
+    zrr = height_at(H, res, ox, oy, x - fx - lx, y - fy - ly)
+    pitch = math.atan2(0.5 * (zfl + zfr) - 0.5 * (zrl + zrr), 2.0 * half_length)
+    roll = math.atan2(0.5 * (zfl + zrl) - 0.5 * (zfr + zrr), 2.0 * half_width)
+    return pitch, roll
+
+
+@njit(cache=True, error_model="numpy")
+def cell_value(L, res, ox, oy, x, y):
+    """Value of the nearest cell of an integer layer L at (x, y); -1 outside the grid."""
+    ny, nx = L.shape
+    i = int(math.floor((x - ox) / res + 0.5))
+    j = int(math.floor((y - oy) / res + 0.5))
+    if i < 0 or j < 0 or i >= nx or j >= ny:
+        return -1
+    return L[j, i]
+
+
+@dataclass(frozen=True, eq=False)
+class ElevationMap:
+    """Heights on a regular grid, with an optional terrain-class layer.
+
+    ``heights`` (ny, nx) [m]; ``resolution`` [m/cell]; ``origin`` world (x, y) of the centre
+    of cell [0, 0]; ``terrain_layer`` (ny, nx) integer indices into ``terrain_names`` (or
+    None: one terrain everywhere).
+    """
+
+    heights: np.ndarray
+    resolution: float
+    origin: tuple = (0.0, 0.0)
+    terrain_layer: np.ndarray | None = None
+    terrain_names: tuple = ()
+    name: str = ""
+
+    def __post_init__(self):
+        H = np.ascontiguousarray(self.heights, dtype=float)
+        if H.ndim != 2 or min(H.shape) < 2:
+            raise ValueError(f"heights: expected a 2-D array of at least 2 x 2 cells, found shape {H.shape}")
+        if not np.all(np.isfinite(H)):
+            raise ValueError("heights: expected finite numbers, found NaN or inf")
+        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+            raise ValueError(f"resolution: expected a positive number of metres per cell, found {self.resolution}")
+        H.setflags(write=False)
+        object.__setattr__(self, "heights", H)
+        object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
+        if self.terrain_layer is not None:
+            Lr = np.ascontiguousarray(self.terrain_layer, dtype=np.int64)
+            if Lr.shape != H.shape:
+                raise ValueError(f"terrain layer: expected shape {H.shape} like the heights, found {Lr.shape}")
+            if Lr.min() < 0 or Lr.max() >= len(self.terrain_names):
+                raise ValueError(f"terrain layer: expected indices 0..{len(self.terrain_names) - 1}, found {Lr.min()}..{Lr.max()}")
+            Lr.setflags(write=False)
+            object.__setattr__(self, "terrain_layer", Lr)
+
+    # geometry ----------------------------------------------------------------------
+    @property
+    def shape(self):
+        return self.heights.shape
+
+    @property
+    def extent(self):
+        """(x_min, x_max, y_min, y_max) [m] of the cell centres."""
+        ny, nx = self.heights.shape
+        ox, oy = self.origin
+        return ox, ox + (nx - 1) * self.resolution, oy, oy + (ny - 1) * self.resolution
+
+    def contains(self, x, y, margin: float = 0.0) -> bool:
+        x0, x1, y0, y1 = self.extent
+        return x0 + margin <= x <= x1 - margin and y0 + margin <= y <= y1 - margin
+
+    # queries (Python-facing wrappers of the kernels) -------------------------------
+    def height(self, x, y) -> float:
+        return height_at(self.heights, self.resolution, self.origin[0], self.origin[1], float(x), float(y))
+
+    def gradient(self, x, y):
+        return gradient_at(self.heights, self.resolution, self.origin[0], self.origin[1], float(x), float(y))
+
+    def pitch_roll(self, x, y, yaw, half_length: float, half_width: float):
+        return pitch_roll_at(self.heights, self.resolution, self.origin[0], self.origin[1], float(x), float(y),
+                             float(yaw), float(half_length), float(half_width))
+
+    def terrain_index(self, x, y) -> int:
+        if self.terrain_layer is None:
+            return 0 if self.contains(x, y) else -1
+        return int(cell_value(self.terrain_layer, self.resolution, self.origin[0], self.origin[1], float(x), float(y)))
+
+    def max_slope_deg(self) -> np.ndarray:
+        """Steepest slope [deg] of every cell (from the gradient of the grid)."""
+        gy, gx = np.gradient(self.heights, self.resolution)
+        return np.degrees(np.arctan(np.hypot(gx, gy)))

@@ -1,0 +1,107 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from maps import ElevationMap, MapError, generate, load_map
+
+
+def plane(gx=0.2, gy=-0.1, res=0.5, n=41, origin=(-5.0, 3.0)):
+    x = origin[0] + np.arange(n) * res
+    y = origin[1] + np.arange(n) * res
+    X, Y = np.meshgrid(x, y)
+    return ElevationMap(1.0 + gx * X + gy * Y, res, origin)
+
+
+@given(x=st.floats(-4, 14), y=st.floats(4, 22))
+def test_bilinear_height_and_gradient_are_exact_on_a_plane(x, y):
+    m = plane()
+    assert m.height(x, y) == pytest.approx(1.0 + 0.2 * x - 0.1 * y, abs=1e-9)
+    gx, gy = m.gradient(x, y)
+    assert (gx, gy) == (pytest.approx(0.2, abs=1e-9), pytest.approx(-0.1, abs=1e-9))
+
+
+@given(yaw=st.floats(-math.pi, math.pi))
+def test_pitch_and_roll_on_a_plane(yaw):
+    m = plane()
+    pitch, roll = m.pitch_roll(5.0, 12.0, yaw, 0.15, 0.2)
+    # pitch: slope along the heading; roll: slope to the left (positive when left is higher)
+    assert pitch == pytest.approx(math.atan(0.2 * math.cos(yaw) - 0.1 * math.sin(yaw)), abs=1e-9)
+    assert roll == pytest.approx(math.atan(-0.2 * math.sin(yaw) - 0.1 * math.cos(yaw)), abs=1e-9)
+    back, back_roll = m.pitch_roll(5.0, 12.0, yaw + math.pi, 0.15, 0.2)
+    assert back == pytest.approx(-pitch, abs=1e-9) and back_roll == pytest.approx(-roll, abs=1e-9)
+
+
+def test_row_is_y_and_column_is_x_and_origin_is_cell_centre():
+    H = np.zeros((3, 4))
+    H[2, 1] = 5.0                    # row 2 (y index), column 1 (x index)
+    m = ElevationMap(H, 2.0, (10.0, 20.0))
+    assert m.height(12.0, 24.0) == 5.0
+    assert m.extent == (10.0, 16.0, 20.0, 24.0)
+    assert m.contains(16.0, 24.0) and not m.contains(16.1, 24.0)
+
+
+def test_npy_and_png_loading(tmp_path):
+    H = np.add.outer(np.arange(5.0), np.arange(6.0))       # rises to the north and east
+    np.save(tmp_path / "m.npy", H)
+    m = load_map({"file": "m.npy", "resolution": 0.5, "origin": [1, 2]}, tmp_path)
+    assert m.height(1.0 + 0.5 * 3, 2.0 + 0.5 * 2) == pytest.approx(H[2, 3])
+    import matplotlib.image as mpimg
+    img = np.flipud(H / H.max())                            # top row of the image = north
+    mpimg.imsave(tmp_path / "m.png", img, cmap="gray", vmin=0, vmax=1)
+    p = load_map({"file": "m.png", "resolution": 0.5, "height_range": [0, 9.0]}, tmp_path)
+    assert p.heights.shape == H.shape
+    assert np.allclose(p.heights, H, atol=9.0 / 255 + 1e-9)
+
+
+@pytest.mark.parametrize("spec, words", [
+    ({"file": "none.npy", "resolution": 1}, ["map.file", "no file"]),
+    ({"file": "m.npy", "resolution": 0}, ["map.resolution", "positive"]),
+    ({"file": "m.npy", "resolution": 1, "origin": [1]}, ["map.origin"]),
+    ({"file": "m.npy", "resolution": 1, "size": 3}, ["unknown key 'size'"]),
+    ({"file": "m.png", "resolution": 1}, ["map.height_range"]),
+    ({"file": "bad.npy", "resolution": 1}, ["bad.npy", "expected a 2-D array"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [{"type": "volcano"}]}}, ["features[0].type"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [{"type": "hill", "x": 1, "y": 1, "height": 1}]}},
+     ["features[0].radius"]),
+])
+def test_bad_map_specs_name_key_expected_found(tmp_path, spec, words):
+    np.save(tmp_path / "m.npy", np.zeros((3, 3)))
+    np.save(tmp_path / "bad.npy", np.zeros(3))
+    (tmp_path / "m.png").write_bytes(b"")
+    with pytest.raises(MapError) as err:
+        load_map(spec, tmp_path)
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_generator_is_deterministic_and_shapes_features():
+    desc = {"size": [40, 30], "resolution": 0.5, "seed": 4, "features": [
+        {"type": "hill", "x": 10, "y": 10, "height": 2.0, "radius": 3.0},
+        {"type": "ramp", "x0": 20, "y0": 5, "x1": 24, "y1": 5, "height": 1.0, "width": 4.0},
+        {"type": "ridge", "x0": 2, "y0": 25, "x1": 38, "y1": 25, "height": 1.5, "width": 2.0},
+        {"type": "valley", "x0": 2, "y0": 18, "x1": 38, "y1": 18, "depth": 1.0, "width": 3.0},
+        {"type": "random_hills", "count": 5, "height": [0.2, 0.5], "radius": [1, 2]}]}
+    a, b = generate(desc), generate(desc)
+    assert np.array_equal(a.heights, b.heights)
+    assert not np.array_equal(a.heights, generate({**desc, "seed": 5}).heights)
+    assert a.shape == (61, 81)
+    quiet = generate({**desc, "features": desc["features"][:4]})
+    assert quiet.height(10, 10) == pytest.approx(2.0, abs=0.01)
+    assert quiet.height(22, 5) == pytest.approx(0.5, abs=0.01)          # half way up the ramp
+    assert quiet.height(30, 5) == pytest.approx(1.0, abs=0.01)          # level beyond its top
+    assert quiet.gradient(22, 5)[0] == pytest.approx(0.25, abs=0.01)    # 1 m over 4 m
+    assert quiet.height(20, 25) == pytest.approx(1.5, abs=0.01)
+    assert quiet.height(20, 18) == pytest.approx(-1.0, abs=0.01)
+
+
+def test_terrain_layer_lookup():
+    H = np.zeros((4, 4))
+    layer = np.zeros((4, 4), int)
+    layer[:, 2:] = 1
+    m = ElevationMap(H, 1.0, (0, 0), terrain_layer=layer, terrain_names=("asphalt", "grass"))
+    assert m.terrain_index(0.2, 1.0) == 0 and m.terrain_index(2.6, 1.0) == 1
+    assert m.terrain_index(-3, 0) == -1
+    with pytest.raises(ValueError, match="terrain layer"):
+        ElevationMap(H, 1.0, terrain_layer=layer, terrain_names=("asphalt",))
