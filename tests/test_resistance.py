@@ -127,3 +127,13 @@ def test_fast_form_scale_free_and_jacobian_consistent():
     h = 1e-6
     num = (unit_friction_fast(table, 1.0 + h, 1.3)[1] - unit_friction_fast(table, 1.0 - h, 1.3)[1]) / (2 * h)
     assert a[4] == pytest.approx(num, rel=1e-3)
+
+
+def test_friction_forces_and_eq18_give_the_resistance_torques():
+    from dynamics.resistance import friction_forces, rolling_resistance
+    wl, wr = commanded(0.7)
+    fl, fr = friction_forces(wl, wr, V, VINYL, VINYL.mu_op, VINYL.mu_sa)   # inner brakes, outer drives
+    tl, tr = steady_resistance(wl, wr, V, VINYL)
+    roll = rolling_resistance(VINYL.mu_roll, V.mass, 0.0, 1.0)
+    assert float(tr) == pytest.approx(V.wheel_radius * (float(fr) + roll), rel=1e-12)
+    assert float(tl) == pytest.approx(V.wheel_radius * (float(fl) + roll), rel=1e-12)
