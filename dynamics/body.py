@@ -34,3 +34,19 @@ def wheel_accelerations(m11, m12, tau_l, tau_r, res_l, res_r, grav):
     br = tau_r - res_r - grav
     det = m11 * m11 - m12 * m12
     return (m11 * bl - m12 * br) / det, (m11 * br - m12 * bl) / det
+
+
+@jit
+def implicit_wheel_step(m11, m12, j_ll, j_lr, j_rl, j_rr, tau_l, tau_r, res_l, res_r, grav_l, grav_r, dt):
+    """Eq. 25 advanced by one linearly implicit Euler step of dt [s]: solve
+    (M + dt J) dw = dt (tau - C - G) for the wheel-speed increments (dw_l, dw_r) [rad/s],
+    with J = d(C - tau)/dw [N m s/rad] the slope of the speed-dependent torques. With J = 0
+    it is dt times :func:`wheel_accelerations`."""
+    a11 = m11 + dt * j_ll
+    a12 = m12 + dt * j_lr
+    a21 = m12 + dt * j_rl
+    a22 = m11 + dt * j_rr
+    bl = dt * (tau_l - res_l - grav_l)
+    br = dt * (tau_r - res_r - grav_r)
+    det = a11 * a22 - a12 * a21
+    return (a22 * bl - a12 * br) / det, (a11 * br - a21 * bl) / det

@@ -38,17 +38,17 @@ def current_window(omega, v_max, k, r_a, i_max):
     limit |I| <= I_max intersected with the voltage limit of eq. 27, |k w + R_a I| <= V_max.
     When the back-EMF alone exceeds V_max (over-speed) the window is the single current at
     the nearest voltage bound."""
-    lo = (-v_max - k * omega) / r_a
-    hi = (v_max - k * omega) / r_a
+    lo = motor_torque(-v_max, omega, k, r_a) / k     # eq. 26 at the voltage bounds
+    hi = motor_torque(v_max, omega, k, r_a) / k
     if lo < -i_max:
         lo = -i_max
     if hi > i_max:
         hi = i_max
     if lo > hi:                       # back-EMF beyond the supply: voltage bound wins
         if omega > 0.0:
-            lo = hi = (v_max - k * omega) / r_a
+            lo = hi
         else:
-            lo = hi = (-v_max - k * omega) / r_a
+            hi = lo
     return lo, hi
 
 

@@ -32,7 +32,7 @@ import math
 import numpy as np
 from ._jit import jit
 
-from .body import gravity_torque, mass_matrix
+from .body import gravity_torque, implicit_wheel_step, mass_matrix
 from .drive import current_window, electrical_power, pid_current
 from .kinematics import alpha_model
 from .params import G, Terrain, Vehicle
@@ -185,15 +185,10 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     j_lr = r * scl * press * mu_l * dlr * scr
     j_rl = r * scr * press * mu_r * drl * scl
     j_rr = r * scr * (press * mu_r * drr * scr + droll_r) + visc + dvr
-    a11 = P[P_M11] + dt * j_ll
-    a12 = P[P_M12] + dt * j_lr
-    a21 = P[P_M12] + dt * j_rl
-    a22 = P[P_M11] + dt * j_rr
-    bl = dt * (tau_l - res_l - g_l)
-    br = dt * (tau_r - res_r - g_r)
-    det = a11 * a22 - a12 * a21
-    wl = wl + (a22 * bl - a12 * br) / det
-    wr = wr + (a11 * br - a21 * bl) / det
+    dwl, dwr = implicit_wheel_step(P[P_M11], P[P_M12], j_ll, j_lr, j_rl, j_rr,
+                                   tau_l, tau_r, res_l, res_r, g_l, g_r, dt)
+    wl = wl + dwl
+    wr = wr + dwr
     S[S_WL] = wl
     S[S_WR] = wr
     # 4: kinematics (eq. 1) and pose

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kinematics import wheel_speeds
-from .simulate import Model
+from .simulate import Model, simulate
 
 
 def straight(model: Model, v: float, duration: float, dt: float | None = None):
@@ -76,8 +76,6 @@ def ramp_run(model: Model, v: float, v0: float, slope_deg: float, length: float,
     """The paper's hill-climbing test (Figs. 18-20): enter a straight ramp of grade
     ``slope_deg`` and ``length`` [m] at speed v0 [m/s] (drive in steady state on the flat),
     commanded to speed v [m/s]. Returns (trajectory, crossed, time to the top or None)."""
-    from .simulate import simulate
-
     dt = model.step_s if dt is None else dt
     w0 = v0 / model.vehicle.wheel_radius
     cmd_l, cmd_r = straight(model, v, duration, dt)

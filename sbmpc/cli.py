@@ -20,22 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     from . import simulate_cmd
     simulate_cmd.add_parser(sub)
-    for mod in _optional_commands():
-        mod.add_parser(sub)
     return p
-
-
-def _optional_commands():
-    """Subcommands beyond ``simulate`` register here as they land."""
-    import importlib
-    mods = []
-    for name in ("plan_cmd", "diagnose_cmd", "run_cmd"):
-        try:
-            mods.append(importlib.import_module(f"sbmpc.{name}"))
-        except ModuleNotFoundError as exc:
-            if exc.name != f"sbmpc.{name}":
-                raise
-    return mods
 
 
 def main(argv=None) -> int:

@@ -163,3 +163,23 @@ def test_no_nan_or_inf_over_random_commands_grades_and_terrains(wl, wr, pitch, t
         assert np.all(np.isfinite(tr.data[name])), name
     assert np.all(np.abs(tr.i_l) <= m.vehicle.current_limit + 1e-9)
     assert np.all(np.abs(tr.wl) < 1.5 * m.vehicle.no_load_speed + 10 * abs(pitch) + 1)
+
+
+def test_implicit_step_reduces_to_eq25_and_drive_window_to_eqs26_27(p3at):
+    from dynamics.body import implicit_wheel_step, mass_matrix, wheel_accelerations
+    from dynamics.drive import current_window, max_motor_voltage, motor_torque
+    m11, m12 = mass_matrix(p3at.mass, p3at.inertia, p3at.wheel_radius, p3at.width, 1.5)
+    al, ar = wheel_accelerations(m11, m12, 3.0, -1.0, 0.5, 0.2, 0.4)
+    dl, dr = implicit_wheel_step(m11, m12, 0.0, 0.0, 0.0, 0.0, 3.0, -1.0, 0.5, 0.2, 0.4, 0.4, 0.01)
+    assert (dl, dr) == (pytest.approx(0.01 * al), pytest.approx(0.01 * ar))
+    k, ra, vmax = p3at.torque_constant, p3at.armature_resistance, p3at.v_max
+    lo, hi = current_window(7.0, vmax, k, ra, p3at.current_limit)      # voltage-bound at 7 rad/s
+    assert hi == pytest.approx(motor_torque(vmax, 7.0, k, ra) / k) and hi < p3at.current_limit
+    assert k * 7.0 == pytest.approx(max_motor_voltage(vmax, ra, hi))   # eq. 27: back-EMF at the limit
+    assert current_window(0.0, vmax, k, ra, p3at.current_limit) == (-p3at.current_limit, p3at.current_limit)
+    lo, hi = current_window(10.0, vmax, k, ra, p3at.current_limit)     # braking window below over-speed
+    assert (lo, hi) == (-p3at.current_limit, pytest.approx((vmax - k * 10.0) / ra))
+    lo, hi = current_window(12.0, vmax, k, ra, p3at.current_limit)     # over-speed (> 10.53 rad/s): one current
+    assert lo == hi == pytest.approx((vmax - k * 12.0) / ra)
+    lo, hi = current_window(-12.0, vmax, k, ra, p3at.current_limit)
+    assert lo == hi == pytest.approx((-vmax + k * 12.0) / ra)
