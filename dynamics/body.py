@@ -41,12 +41,23 @@ def implicit_wheel_step(m11, m12, j_ll, j_lr, j_rl, j_rr, tau_l, tau_r, res_l, r
     """Eq. 25 advanced by one linearly implicit Euler step of dt [s]: solve
     (M + dt J) dw = dt (tau - C - G) for the wheel-speed increments (dw_l, dw_r) [rad/s],
     with J = d(C - tau)/dw [N m s/rad] the slope of the speed-dependent torques. With J = 0
-    it is dt times :func:`wheel_accelerations`."""
+    it is dt times :func:`wheel_accelerations`.
+
+    A dissipative J (positive semi-definite symmetric part) can only make M + dt J better
+    conditioned than M. Near standstill the tabulated friction's cross slopes can break
+    that (det(M + dt J) < det M, up to a singular matrix and a blow-up); the step then
+    keeps only the non-negative diagonal of J, which is always stable."""
     a11 = m11 + dt * j_ll
     a12 = m12 + dt * j_lr
     a21 = m12 + dt * j_rl
     a22 = m11 + dt * j_rr
+    det = a11 * a22 - a12 * a21
+    if det < m11 * m11 - m12 * m12:
+        a11 = m11 + dt * max(j_ll, 0.0)
+        a22 = m11 + dt * max(j_rr, 0.0)
+        a12 = m12
+        a21 = m12
+        det = a11 * a22 - a12 * a21
     bl = dt * (tau_l - res_l - grav_l)
     br = dt * (tau_r - res_r - grav_r)
-    det = a11 * a22 - a12 * a21
     return (a22 * bl - a12 * br) / det, (a11 * br - a21 * bl) / det

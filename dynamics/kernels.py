@@ -243,7 +243,19 @@ def profile_pitch(profile, s0, ds, s):
 
 
 @jit
-def _record(S, O, pitch, row):
+def state_outputs(P, S, O):
+    """Fill the outputs O that follow from a state alone (speed, yaw rate, currents,
+    torques), for the first recorded row of a rollout."""
+    O[O_V], O[O_YAWRATE] = alpha_model(P[P_SCL] * S[S_WL], P[P_SCR] * S[S_WR], P[P_R], P[P_B], P[P_ALPHA])
+    O[O_IL] = S[S_IL]
+    O[O_IR] = S[S_IR]
+    O[O_TAUL] = P[P_K] * S[S_IL]
+    O[O_TAUR] = P[P_K] * S[S_IR]
+
+
+@jit
+def record(S, O, pitch, row):
+    """Write the recorded channels (CHANNELS) of state S and outputs O into ``row``."""
     row[R_T] = S[S_T]
     row[R_X] = S[S_X]
     row[R_Y] = S[S_Y]
@@ -277,12 +289,8 @@ def rollout(P, table, S, cmd_l, cmd_r, pitch_t, profile, s0, ds, dt, open_loop, 
     n = cmd_l.shape[0]
     O = np.zeros(NO)
     pitch = profile_pitch(profile, s0, ds, S[S_S]) if profile.shape[0] > 0 else pitch_t[0]
-    O[O_V], O[O_YAWRATE] = alpha_model(P[P_SCL] * S[S_WL], P[P_SCR] * S[S_WR], P[P_R], P[P_B], P[P_ALPHA])
-    O[O_IL] = S[S_IL]
-    O[O_IR] = S[S_IR]
-    O[O_TAUL] = P[P_K] * S[S_IL]
-    O[O_TAUR] = P[P_K] * S[S_IR]
-    _record(S, O, pitch, out[0])
+    state_outputs(P, S, O)
+    record(S, O, pitch, out[0])
     rows = 1
     for i in range(n):
         if profile.shape[0] > 0:
@@ -291,7 +299,7 @@ def rollout(P, table, S, cmd_l, cmd_r, pitch_t, profile, s0, ds, dt, open_loop, 
             pitch = pitch_t[i]
         step(P, table, S, cmd_l[i], cmd_r[i], pitch, dt, open_loop, O)
         if (i + 1) % every == 0 and rows < out.shape[0]:
-            _record(S, O, pitch, out[rows])
+            record(S, O, pitch, out[rows])
             rows += 1
     return rows
 

@@ -56,3 +56,66 @@ def plot_trajectory(traj, path, title: str = "") -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+PLAN_COLOURS = {"time": "tab:orange", "energy": "tab:green"}
+
+
+def _relief(ax, emap):
+    """The map as shaded relief with height contours; returns the image."""
+    import numpy as np
+    from matplotlib.colors import LightSource
+    H = emap.heights
+    x0, x1, y0, y1 = emap.extent
+    ls = LightSource(azdeg=315, altdeg=45)
+    span = max(float(np.ptp(H)), 1e-6)
+    rgb = ls.shade(H, cmap=plt.get_cmap("terrain"), vert_exag=max(1.0, 3.0 / span) * emap.resolution,
+                   blend_mode="soft", vmin=H.min() - 0.3 * span, vmax=H.max() + 0.3 * span)
+    if emap.terrain_layer is not None and len(emap.terrain_names) > 1:
+        tint = plt.get_cmap("Set2")(emap.terrain_layer % 8)[..., :3]
+        rgb[..., :3] = 0.6 * rgb[..., :3] + 0.4 * tint
+    h = (x1 - x0) / max(H.shape[1] - 1, 1) / 2
+    ax.imshow(rgb, origin="lower", extent=(x0 - h, x1 + h, y0 - h, y1 + h), interpolation="bilinear")
+    if span > 0.05:
+        xs = np.linspace(x0, x1, H.shape[1])
+        ys = np.linspace(y0, y1, H.shape[0])
+        cs = ax.contour(xs, ys, H, levels=10, colors="k", linewidths=0.4, alpha=0.6)
+        ax.clabel(cs, fontsize=6, fmt="%.1f m")
+    ax.set_xlabel("x [m] (east)")
+    ax.set_ylabel("y [m] (north)")
+    ax.set_aspect("equal")
+
+
+def plot_compare(emap, plans: dict, scenario, path, title: str = "") -> None:
+    """PNG comparing plans ({label: Plan}): the map with the paths, and speed, battery
+    power and cumulative energy along each path."""
+    import numpy as np
+    fig = plt.figure(figsize=(13, 7.2))
+    gs = fig.add_gridspec(3, 2, width_ratios=[1.25, 1.0])
+    ax = fig.add_subplot(gs[:, 0])
+    _relief(ax, emap)
+    s, g = scenario.start, scenario.goal
+    ax.plot(s["x"], s["y"], "ko", ms=6)
+    ax.add_patch(plt.Circle((g["x"], g["y"]), g["radius"], fill=False, ec="k", lw=1.5))
+    axes = [fig.add_subplot(gs[i, 1]) for i in range(3)]
+    for label, p in plans.items():
+        if not p.found:
+            continue
+        tr = p.trajectory
+        c = PLAN_COLOURS.get(label, "tab:blue")
+        ax.plot(tr["x"], tr["y"], color=c, lw=2.2,
+                label=f"{label}-optimal: {p.travel_time_s:.1f} s, {p.energy_J:.0f} J, {p.length_m:.1f} m")
+        d = np.r_[0.0, np.cumsum(np.hypot(np.diff(tr["x"]), np.diff(tr["y"])))]
+        axes[0].plot(d, tr["v"], color=c, label=label)
+        axes[1].plot(d, tr["power_W"], color=c, lw=0.8)
+        axes[2].plot(d, tr["energy_J"] - tr["energy_J"][0], color=c)
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
+    ax.set_title(title)
+    for a, lab in zip(axes, ("speed [m/s]", "battery power [W]", "energy used [J]")):
+        a.set_ylabel(lab)
+        a.grid(alpha=0.3)
+    axes[-1].set_xlabel("distance along the path [m]")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,420 @@
+"""The SBMPC graph search: A* over sampled controls with an implicit state grid.
+
+The search knows nothing of a particular robot (OMPL's split): a *problem* supplies
+
+* ``propagate(params, data, state, control, out) -> cost``: simulate one edge from
+  ``state`` under ``control`` into ``out``; returns the edge cost (>= 0) or a negative
+  code saying why the edge is invalid (the problem names its codes);
+* ``heuristic(params, data, state) -> float``: a lower bound of the cost to the goal
+  (admissible for optimal plans);
+* ``is_goal(params, data, state) -> bool``;
+
+as numba functions compiled for the signatures :data:`PROPAGATE`, :data:`HEURISTIC`,
+:data:`GOAL` (first-class function types, so the compiled search is cached on disk once
+for every problem), plus flat float arrays ``params`` and ``data`` that only the problem
+reads, and the control set, an (m, control_dim) array.
+
+The implicit grid maps a state to the integer cell ``round(state[dims] / res)`` (half
+away from zero). A child that lands in its parent's cell is dropped; a child that lands
+in a known cell replaces that cell's node only when it is cheaper. Two modes:
+
+* ``snap`` (the reference C++ SBMPO): a node's state is its cell centre and children
+  are propagated from it; a closed node may still take a cheaper parent (not expanded
+  again).
+* no snap (the skid-steer planner): a node keeps the exact state its edge ended in, so
+  that replaying the chosen controls reproduces the path; closed nodes are never
+  changed, open ones are replaced by a cheaper arrival.
+
+Priority: lowest f = g + h first; ties go to the node pushed first (FIFO, by a push
+counter), which makes the search deterministic.
+
+The compiled loop runs in chunks of at most ``chunk`` expansions and returns to Python,
+which checks the wall-clock budget, shows progress and grows the arrays when asked
+(status ``GROW``); no Python object is made per node or per simulated step.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit, types
+
+# ---- first-class function types of a problem -------------------------------------
+_ARR = types.float64[::1]
+PROPAGATE = types.FunctionType(types.float64(_ARR, _ARR, _ARR, _ARR, _ARR))
+HEURISTIC = types.FunctionType(types.float64(_ARR, _ARR, _ARR))
+GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
+
+# ---- status of a chunk -----------------------------------------------------------
+RUNNING, FOUND, EXHAUSTED, ITERATIONS, GROW = 0, 1, 2, 3, 4
+# ---- counters (int64 array) ------------------------------------------------------
+C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT = range(7)
+C_INVALID = 8          # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
+MAX_CODE = 8
+NC = C_INVALID + MAX_CODE + 1
+
+_EMPTY = -1
+
+
+@njit(cache=True)
+def _cell(x, res):
+    """round(x / res), half away from zero."""
+    q = x / res
+    return int(math.floor(q + 0.5)) if q >= 0.0 else -int(math.floor(-q + 0.5))
+
+
+@njit(cache=True)
+def _hash(key):
+    h = np.uint64(1469598103934665603)
+    for k in key:
+        h = (h ^ np.uint64(k & 0xFFFFFFFFFFFF)) * np.uint64(1099511628211)
+        h ^= h >> np.uint64(29)
+    return h
+
+
+@njit(cache=True)
+def _lookup(table, keys, key):
+    """Slot of ``key`` in the open-addressing ``table`` (node ids, -1 empty): returns
+    (slot, node id or -1)."""
+    mask = np.int64(table.shape[0] - 1)
+    i = np.int64(_hash(key) >> np.uint64(1)) & mask
+    kd = key.shape[0]
+    while True:
+        n = table[i]
+        if n == _EMPTY:
+            return i, -1
+        same = True
+        for d in range(kd):
+            if keys[n, d] != key[d]:
+                same = False
+                break
+        if same:
+            return i, n
+        i = (i + 1) & mask
+
+
+@njit(cache=True)
+def rehash(table, keys, n_nodes):
+    """Rebuild a hash table for the first n_nodes keys (after growing)."""
+    table[:] = _EMPTY
+    for n in range(n_nodes):
+        slot, _ = _lookup(table, keys, keys[n])
+        table[slot] = n
+
+
+@njit(cache=True)
+def _less(hf, hs, a, b):
+    return hf[a] < hf[b] or (hf[a] == hf[b] and hs[a] < hs[b])
+
+
+@njit(cache=True)
+def _swap(hf, hs, hn, a, b):
+    hf[a], hf[b] = hf[b], hf[a]
+    hs[a], hs[b] = hs[b], hs[a]
+    hn[a], hn[b] = hn[b], hn[a]
+
+
+@njit(cache=True)
+def _push(hf, hs, hn, cnt, f, node):
+    i = cnt[C_HEAP]
+    hf[i] = f
+    hs[i] = cnt[C_SEQ]
+    hn[i] = node
+    cnt[C_HEAP] += 1
+    cnt[C_SEQ] += 1
+    while i > 0:
+        p = (i - 1) >> 1
+        if _less(hf, hs, i, p):
+            _swap(hf, hs, hn, i, p)
+            i = p
+        else:
+            break
+
+
+@njit(cache=True)
+def _pop(hf, hs, hn, cnt):
+    top = hn[0]
+    last = cnt[C_HEAP] - 1
+    cnt[C_HEAP] = last
+    if last > 0:
+        hf[0], hs[0], hn[0] = hf[last], hs[last], hn[last]
+        i = 0
+        while True:
+            l = 2 * i + 1
+            if l >= last:
+                break
+            c = l
+            if l + 1 < last and _less(hf, hs, l + 1, l):
+                c = l + 1
+            if _less(hf, hs, c, i):
+                _swap(hf, hs, hn, c, i)
+                i = c
+            else:
+                break
+    return top
+
+
+@njit(cache=True)
+def _key_of(state, dims, res, key):
+    for d in range(dims.shape[0]):
+        key[d] = _cell(state[dims[d]], res[d])
+
+
+@njit(cache=True)
+def start_search(heur, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
+                 table, hf, hs, hn, cnt):
+    """Put the start node into empty search arrays."""
+    cnt[:] = 0
+    cnt[C_GOAL] = -1
+    table[:] = _EMPTY
+    _key_of(start, dims, res, KEYS[0])
+    X[0, :] = start
+    if snap:
+        for d in range(dims.shape[0]):
+            X[0, dims[d]] = KEYS[0, d] * res[d]
+    G[0] = 0.0
+    PAR[0] = -1
+    CTL[0] = -1
+    DEP[0] = 0
+    CLO[0] = 0
+    slot, _ = _lookup(table, KEYS, KEYS[0])
+    table[slot] = 0
+    cnt[C_NODES] = 1
+    _push(hf, hs, hn, cnt, heur(params, data, X[0]), 0)
+
+
+@njit(cache=True)
+def run_search(prop, heur, goal, params, data, controls, nbranch, nfixed, rotate, dims, res,
+               snap, max_depth, max_iters, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf, hs,
+               hn, cnt):
+    """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
+    cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
+    arrays are too small for the next expansion) or RUNNING (chunk done)."""
+    kd = dims.shape[0]
+    key = np.empty(kd, dtype=np.int64)
+    child = np.empty(X.shape[1])
+    m = controls.shape[0]
+    cap = X.shape[0]
+    done = 0
+    while done < chunk:
+        if cnt[C_HEAP] == 0:
+            return EXHAUSTED
+        if cnt[C_ITERS] >= max_iters:
+            return ITERATIONS
+        if (cnt[C_NODES] + nbranch > cap or cnt[C_HEAP] + nbranch > hf.shape[0]
+                or 2 * (cnt[C_NODES] + nbranch) > table.shape[0]):
+            return GROW
+        n = _pop(hf, hs, hn, cnt)
+        if CLO[n]:
+            continue
+        if goal(params, data, X[n]):
+            cnt[C_GOAL] = n
+            return FOUND
+        CLO[n] = 1
+        cnt[C_ITERS] += 1
+        done += 1
+        if DEP[n] >= max_depth:
+            cnt[C_DEPTHCUT] += 1
+            continue
+        base = (cnt[C_ITERS] - 1) * (nbranch - nfixed) if rotate else 0
+        for b in range(nbranch):
+            c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
+            cost = prop(params, data, X[n], controls[c], child)
+            cnt[C_EDGES] += 1
+            if cost < 0.0:
+                code = int(-cost)
+                if code > MAX_CODE:
+                    code = MAX_CODE
+                cnt[C_INVALID + code] += 1
+                continue
+            _key_of(child, dims, res, key)
+            same = True
+            for d in range(kd):
+                if key[d] != KEYS[n, d]:
+                    same = False
+                    break
+            if same:
+                continue
+            g = G[n] + cost
+            slot, j = _lookup(table, KEYS, key)
+            if j < 0:
+                j = cnt[C_NODES]
+                cnt[C_NODES] += 1
+                table[slot] = j
+                KEYS[j, :] = key
+                CLO[j] = 0
+            elif g >= G[j] or (CLO[j] and not snap):
+                continue
+            X[j, :] = child
+            if snap:
+                for d in range(kd):
+                    X[j, dims[d]] = key[d] * res[d]
+            G[j] = g
+            PAR[j] = n
+            CTL[j] = c
+            DEP[j] = DEP[n] + 1
+            if not CLO[j]:
+                _push(hf, hs, hn, cnt, g + heur(params, data, X[j]), j)
+    return RUNNING
+
+
+# ---- Python side -----------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """What the search needs to know about a robot and its task (module doc).
+
+    ``start`` (state_dim,); ``controls`` (m, control_dim); ``dims``/``res``: which state
+    entries form the grid cell and the cell size of each; ``branching``: controls tried
+    per expansion: the first ``fixed_controls`` rows always, then the next rows (the same
+    ones at every expansion, or with ``rotate`` the next window of the remaining rows); ``max_depth``: edges from the start; ``codes``: names of the
+    invalid-edge codes (1-based) for the reason of a failure.
+    """
+
+    propagate: object
+    heuristic: object
+    is_goal: object
+    params: np.ndarray
+    data: np.ndarray
+    start: np.ndarray
+    controls: np.ndarray
+    dims: np.ndarray
+    res: np.ndarray
+    branching: int
+    rotate: bool = False
+    fixed_controls: int = 0
+    snap: bool = False
+    max_depth: int = 1 << 30
+    codes: tuple = ()
+
+
+@dataclass
+class SearchResult:
+    """Outcome of a search: ``status`` is 'found' or 'no_path' (with ``reason``);
+    ``path`` the node ids from start to goal, ``states`` (len(path), state_dim),
+    ``controls`` the row of ``problem.controls`` of each edge (len(path) - 1), ``cost``
+    the goal node's g."""
+
+    status: str
+    reason: str | None
+    cost: float
+    path: np.ndarray
+    states: np.ndarray
+    control_rows: np.ndarray
+    iterations: int
+    nodes: int
+    edges: int
+    planning_time_s: float
+    invalid: dict = field(default_factory=dict)
+
+
+class Search:
+    """Arrays of one search and the chunked driver around the compiled loop."""
+
+    def __init__(self, problem: Problem, capacity: int = 4096):
+        p = problem
+        self.problem = p
+        ns = p.start.shape[0]
+        kd = p.dims.shape[0]
+        cap = max(int(capacity), 4 * p.branching + 4)
+        self.X = np.empty((cap, ns))
+        self.G = np.empty(cap)
+        self.PAR = np.empty(cap, np.int64)
+        self.CTL = np.empty(cap, np.int64)
+        self.DEP = np.empty(cap, np.int64)
+        self.CLO = np.empty(cap, np.uint8)
+        self.KEYS = np.empty((cap, kd), np.int64)
+        self.table = np.empty(_pow2(4 * cap), np.int64)
+        self.hf = np.empty(2 * cap)
+        self.hs = np.empty(2 * cap, np.int64)
+        self.hn = np.empty(2 * cap, np.int64)
+        self.cnt = np.zeros(NC, np.int64)
+        start_search(p.heuristic, p.params, p.data, p.start, p.dims, p.res, p.snap, self.X, self.G,
+                     self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
+                     self.hn, self.cnt)
+
+    def _grow(self):
+        n = self.cnt[C_NODES]
+        if n + self.problem.branching > self.X.shape[0] or 2 * (n + self.problem.branching) > self.table.shape[0]:
+            cap = 2 * self.X.shape[0]
+            for name in ("X", "G", "PAR", "CTL", "DEP", "CLO", "KEYS"):
+                a = getattr(self, name)
+                b = np.empty((cap,) + a.shape[1:], a.dtype)
+                b[:n] = a[:n]
+                setattr(self, name, b)
+            self.table = np.empty(_pow2(4 * cap), np.int64)
+            rehash(self.table, self.KEYS, n)
+        h = self.cnt[C_HEAP]
+        if h + self.problem.branching > self.hf.shape[0]:
+            for name in ("hf", "hs", "hn"):
+                a = getattr(self, name)
+                b = np.empty(2 * a.shape[0], a.dtype)
+                b[:h] = a[:h]
+                setattr(self, name, b)
+
+    def run(self, max_iterations: int, time_budget_s: float = math.inf, chunk: int = 256,
+            progress=None) -> SearchResult:
+        """Search until the goal, an empty open set, ``max_iterations`` expansions or
+        ``time_budget_s`` of wall-clock time. ``progress(iterations, nodes, best_h)`` is
+        called after every chunk."""
+        p = self.problem
+        t0 = time.perf_counter()
+        while True:
+            st = run_search(p.propagate, p.heuristic, p.is_goal, p.params, p.data, p.controls,
+                            p.branching, p.fixed_controls, p.rotate, p.dims, p.res, p.snap, p.max_depth,
+                            max_iterations, chunk, self.X, self.G, self.PAR, self.CTL, self.DEP,
+                            self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt)
+            if st == GROW:
+                self._grow()
+                continue
+            elapsed = time.perf_counter() - t0
+            if st != RUNNING:
+                break
+            if progress is not None:
+                progress(int(self.cnt[C_ITERS]), int(self.cnt[C_NODES]), elapsed)
+            if elapsed > time_budget_s:
+                break
+        return self._result(st, elapsed, max_iterations, time_budget_s)
+
+    def _result(self, st, elapsed, max_iterations, time_budget_s) -> SearchResult:
+        p = self.problem
+        cnt = self.cnt
+        invalid = {}
+        for k in range(1, MAX_CODE + 1):
+            if cnt[C_INVALID + k]:
+                name = p.codes[k - 1] if k - 1 < len(p.codes) else f"code {k}"
+                invalid[name] = int(cnt[C_INVALID + k])
+        common = dict(iterations=int(cnt[C_ITERS]), nodes=int(cnt[C_NODES]), edges=int(cnt[C_EDGES]),
+                      planning_time_s=elapsed, invalid=invalid)
+        if st == FOUND:
+            path = []
+            n = int(cnt[C_GOAL])
+            while n >= 0:
+                path.append(n)
+                n = int(self.PAR[n])
+            path = np.array(path[::-1], np.int64)
+            return SearchResult("found", None, float(self.G[path[-1]]), path, self.X[path].copy(),
+                                self.CTL[path[1:]].copy(), **common)
+        if st == EXHAUSTED:
+            why = "every reachable state was explored without reaching the goal"
+        elif st == ITERATIONS:
+            why = f"node budget of {max_iterations} expansions used up"
+        else:
+            why = f"time budget of {time_budget_s:g} s used up"
+        if invalid:
+            why += "; edges rejected: " + ", ".join(f"{v} {k}" for k, v in sorted(invalid.items(), key=lambda kv: -kv[1]))
+        if cnt[C_DEPTHCUT]:
+            why += f"; {int(cnt[C_DEPTHCUT])} nodes at the depth limit {p.max_depth}"
+        empty = np.zeros(0, np.int64)
+        return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty, **common)
+
+
+def _pow2(n: int) -> int:
+    return 1 << max(4, int(n - 1).bit_length())
+
+
+def search(problem: Problem, max_iterations: int, time_budget_s: float = math.inf,
+           progress=None, chunk: int = 256) -> SearchResult:
+    """Run the SBMPC search on a problem (see :class:`Search`)."""
+    return Search(problem).run(max_iterations, time_budget_s, chunk=chunk, progress=progress)

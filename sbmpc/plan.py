@@ -1,0 +1,358 @@
+"""Planning a scenario: resolve it into a world, build the search problem, search, replay.
+
+``plan(world, cost)`` returns a :class:`Plan` whose controls, replayed through the
+closed-loop model over the map (:func:`replay`), reproduce its trajectory and end in
+the goal; the plan's trajectory *is* that replay.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+from scipy import ndimage
+from scipy.stats import qmc
+
+from dynamics import ParameterError, kernels as K
+from dynamics.params import G, Terrain, Vehicle, load_terrain, load_vehicle
+from dynamics.resistance import friction_table
+from dynamics.simulate import Model
+from maps import ElevationMap
+from maps.grid import pitch_roll_at
+from maps.io import MapError, load_map
+
+from . import skidsteer as SS
+from .astar import Problem, Search, SearchResult
+from .errors import InputError
+from .scenario import Scenario, terrain_layer
+
+RECORD_EVERY = 0.05   # s: trajectory samples in the plan JSON
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A scenario resolved: the map (with its terrain layer), the vehicle, the terrains."""
+
+    scenario: Scenario
+    emap: ElevationMap
+    vehicle: Vehicle
+    terrains: tuple
+
+    @property
+    def half_length(self) -> float:
+        """Half the wheelbase [m]: where the axles touch the ground ahead and behind."""
+        v = self.vehicle
+        return 0.25 * (v.patch_outer + v.patch_inner)
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * self.vehicle.width
+
+    @property
+    def margin(self) -> float:
+        """Half-diagonal of the footprint [m]: how close the centre may come to the map edge."""
+        v = self.vehicle
+        return math.hypot(0.5 * v.patch_outer, 0.5 * (v.width + v.patch_width))
+
+    def terrain_at(self, x: float, y: float) -> Terrain:
+        k = self.emap.terrain_index(x, y)
+        return self.terrains[max(k, 0)]
+
+    def model(self, x: float, y: float) -> Model:
+        return Model(self.vehicle, self.terrain_at(x, y), self.scenario.planner.dt)
+
+
+def resolve(scn: Scenario) -> World:
+    """Load the map, vehicle and terrains of a scenario; InputError on any problem."""
+    src = str(scn.path) if scn.path else scn.name
+    try:
+        emap = load_map(scn.map_spec, scn.base, "map")
+    except MapError as exc:
+        raise InputError(f"{src}: {exc}") from None
+    try:
+        vehicle = load_vehicle(scn.vehicle, scn.base)
+    except ParameterError as exc:
+        raise InputError(f"{src}: vehicle: {exc}") from None
+    if isinstance(scn.terrain, str):
+        names = [scn.terrain]
+    else:
+        names = [scn.terrain["default"]] + [r.terrain for r in scn.terrain["regions"]]
+        names = list(dict.fromkeys(names))
+    terrains = []
+    for n in names:
+        try:
+            terrains.append(load_terrain(n, scn.base))
+        except ParameterError as exc:
+            raise InputError(f"{src}: terrain: {exc}") from None
+    if not isinstance(scn.terrain, str):
+        ny, nx = emap.shape
+        ox, oy = emap.origin
+        layer = terrain_layer(scn.terrain["regions"], 0, names, ox + emap.resolution * np.arange(nx),
+                              oy + emap.resolution * np.arange(ny))
+        emap = ElevationMap(emap.heights, emap.resolution, emap.origin, layer, tuple(names), emap.name)
+    world = World(scn, emap, vehicle, tuple(terrains))
+    problems = []
+    x0, x1, y0, y1 = emap.extent
+    m = world.margin
+    for key, p in (("start", scn.start), ("goal", scn.goal)):
+        if not emap.contains(p["x"], p["y"], m):
+            problems.append(f"{key}: expected (x, y) at least {m:.2f} m inside the map "
+                            f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
+    if scn.cost == "energy" and vehicle.regen:
+        problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
+    if problems:
+        raise InputError(f"{src}: " + "; ".join(problems))
+    return world
+
+
+# ---- the search problem ------------------------------------------------------------
+def wheel_speed_range(world: World) -> tuple:
+    ws = world.scenario.planner.wheel_speeds
+    if ws is not None:
+        return ws
+    w0 = world.vehicle.no_load_speed
+    return -0.5 * w0, w0
+
+
+FIXED_CONTROLS = ((1.0, 1.0), (1.0, 0.85), (0.85, 1.0))   # x the top of the range
+
+
+def control_set(world: World) -> np.ndarray:
+    """Desired wheel speeds (m, 2) [rad/s]: first the fixed rows (top speed straight and
+    two gentle turns at top speed, tried at every expansion: a uniform sample of the
+    square almost never has both wheels at full speed), then a scrambled Halton sequence
+    over the sampled range (seeded: the same seed gives the same plan)."""
+    ps = world.scenario.planner
+    lo, hi = wheel_speed_range(world)
+    nh = ps.branching - len(FIXED_CONTROLS)
+    m = nh * (64 if ps.samples == "rotating" else 1)
+    pts = qmc.Halton(d=2, scramble=True, seed=ps.seed).random(m)
+    fixed = hi * np.array(FIXED_CONTROLS)
+    return np.ascontiguousarray(np.vstack([fixed, lo + (hi - lo) * pts]))
+
+
+def start_state(world: World) -> np.ndarray:
+    """The model's state at the scenario's start: steady driving at the start speed."""
+    s = world.scenario.start
+    e = world.emap
+    yaw = math.radians(s["yaw_deg"])
+    pitch, _ = e.pitch_roll(s["x"], s["y"], yaw, world.half_length, world.half_width)
+    w = s["v"] / world.vehicle.wheel_radius
+    v = world.vehicle
+    S = world.model(s["x"], s["y"]).state(w / v.radius_scale_left, w / v.radius_scale_right, pitch,
+                                          s["x"], s["y"], yaw, e.height(s["x"], s["y"]))
+    X = np.zeros(SS.NX)
+    X[:K.NS] = S
+    X[SS.X_YAWW] = math.atan2(math.sin(yaw), math.cos(yaw))
+    X[SS.X_V] = s["v"]
+    return X
+
+
+def pack_world(world: World, cost: str) -> tuple:
+    """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost."""
+    scn, e, v = world.scenario, world.emap, world.vehicle
+    ps = scn.planner
+    ny, nx = e.shape
+    blocks = [np.concatenate([K.pack(v, t), friction_table(v, t)]) for t in world.terrains]
+    parts = [e.heights.ravel()]
+    offl = -1
+    if e.terrain_layer is not None and len(world.terrains) > 1:
+        offl = nx * ny
+        parts.append(e.terrain_layer.astype(float).ravel())
+    offt = sum(p.size for p in parts)
+    data = np.ascontiguousarray(np.concatenate(parts + blocks))
+    Q = np.zeros(SS.NQ)
+    Q[SS.Q_DT] = ps.dt
+    Q[SS.Q_NSTEP] = max(1, round(ps.period_s / ps.dt))
+    Q[SS.Q_GX], Q[SS.Q_GY], Q[SS.Q_GR] = scn.goal["x"], scn.goal["y"], scn.goal["radius"]
+    Q[SS.Q_HL], Q[SS.Q_HW] = world.half_length, world.half_width
+    tip = math.radians(ps.tip_over_deg)
+    Q[SS.Q_TIP] = tip
+    Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
+    Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny
+    Q[SS.Q_COST] = SS.COST_TIME if cost == "time" else SS.COST_ENERGY
+    lo, hi = wheel_speed_range(world)
+    Q[SS.Q_VBOUND] = 1.05 * v.wheel_radius * max(abs(lo), abs(hi)) * max(v.radius_scale_left, v.radius_scale_right)
+    Q[SS.Q_FROLL] = min(t.mu_roll for t in world.terrains) * v.mass * G * math.cos(tip)
+    Q[SS.Q_MG] = v.mass * G
+    Q[SS.Q_MKE] = max(K.pack(v, t)[K.P_M11] + abs(K.pack(v, t)[K.P_M12]) for t in world.terrains)
+    Q[SS.Q_ZG] = _lowest_in_disc(e, scn.goal["x"], scn.goal["y"], scn.goal["radius"])
+    Q[SS.Q_MARGIN] = world.margin
+    Q[SS.Q_OFFL] = offl
+    Q[SS.Q_OFFT] = offt
+    Q[SS.Q_BLOCK] = blocks[0].size
+    return Q, data
+
+
+def _lowest_in_disc(e: ElevationMap, x, y, r) -> float:
+    ang = np.linspace(0, 2 * np.pi, 33)
+    pts = [(x, y)] + [(x + rr * np.cos(a), y + rr * np.sin(a)) for rr in (0.5 * r, r) for a in ang]
+    # bilinear heights: the minimum over the disc lies on a grid node inside it or on the samples
+    zs = [e.height(px, py) for px, py in pts]
+    ny, nx = e.shape
+    ox, oy = e.origin
+    X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
+    inside = (X - x) ** 2 + (Y - y) ** 2 <= r * r
+    if inside.any():
+        zs.append(float(e.heights[inside].min()))
+    return float(min(zs))
+
+
+def problem(world: World, cost: str) -> Problem:
+    ps = world.scenario.planner
+    Q, data = pack_world(world, cost)
+    dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
+    res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
+    return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, start_state(world), control_set(world),
+                   dims, res, ps.branching, rotate=ps.samples == "rotating",
+                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES)
+
+
+# ---- reachability pre-check -----------------------------------------------------------
+@njit(cache=True)
+def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
+    """Cells where the vehicle would exceed the tip-over limit at every heading."""
+    ny, nx = H.shape
+    out = np.zeros((ny, nx), np.bool_)
+    for j in range(ny):
+        for i in range(nx):
+            x = ox + i * res
+            y = oy + j * res
+            blocked = True
+            for k in range(nheadings):
+                p, r = pitch_roll_at(H, res, ox, oy, x, y, math.pi * k / nheadings, hl, hw)
+                if abs(p) <= tip and abs(r) <= tip:
+                    blocked = False
+                    break
+            out[j, i] = blocked
+    return out
+
+
+def unreachable_reason(world: World) -> str | None:
+    """Why no path can exist, when the goal disc is cut off from the start by cells where
+    the vehicle tips over at every heading (checked at cell centres); else None."""
+    e, scn = world.emap, world.scenario
+    ox, oy = e.origin
+    tip = math.radians(scn.planner.tip_over_deg)
+    blocked = _blocked(e.heights, e.resolution, ox, oy, world.half_length, world.half_width, tip, 16)
+    labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3)))
+    def cell(x, y):
+        return (min(max(int(round((y - oy) / e.resolution)), 0), e.shape[0] - 1),
+                min(max(int(round((x - ox) / e.resolution)), 0), e.shape[1] - 1))
+    s = labels[cell(scn.start["x"], scn.start["y"])]
+    ny, nx = e.shape
+    X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
+    g = scn.goal
+    in_goal = (X - g["x"]) ** 2 + (Y - g["y"]) ** 2 <= max(g["radius"], 0.5 * e.resolution) ** 2
+    if s == 0:
+        return f"the start stands on a slope beyond the tip-over limit of {scn.planner.tip_over_deg:g} deg at every heading"
+    if not np.any(labels[in_goal] == s):
+        return (f"the goal is cut off from the start by slopes beyond the tip-over limit of "
+                f"{scn.planner.tip_over_deg:g} deg (no heading crosses them); no path can exist")
+    return None
+
+
+# ---- the plan ------------------------------------------------------------------------
+@dataclass
+class Plan:
+    """The result of planning one scenario for one cost (CONTRACTS.md plan JSON)."""
+
+    scenario: str
+    cost: str
+    status: str
+    reason: str | None
+    controls: list = field(default_factory=list)       # [(wl, wr, duration_s)]
+    trajectory: dict = field(default_factory=dict)     # channel -> np.ndarray
+    planning_time_s: float = 0.0
+    nodes_expanded: int = 0
+    edges_simulated: int = 0
+    nodes: int = 0
+    invalid_edges: dict = field(default_factory=dict)
+
+    @property
+    def found(self) -> bool:
+        return self.status == "found"
+
+    def _last(self, key):
+        tr = self.trajectory
+        return float(tr[key][-1] - tr[key][0]) if self.found and len(tr.get(key, ())) else None
+
+    @property
+    def travel_time_s(self):
+        return self._last("t")
+
+    @property
+    def energy_J(self):
+        return self._last("energy_J")
+
+    @property
+    def length_m(self):
+        if not self.found:
+            return None
+        x, y = self.trajectory["x"], self.trajectory["y"]
+        return float(np.sum(np.hypot(np.diff(x), np.diff(y))))
+
+    def to_json(self) -> dict:
+        keys = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W",
+                "energy_J", "pitch", "i_l", "i_r")
+        return {
+            "schema": "sbmpc.plan/1",
+            "scenario": self.scenario,
+            "cost": self.cost,
+            "status": self.status,
+            "reason": self.reason,
+            "travel_time_s": self.travel_time_s,
+            "energy_J": self.energy_J,
+            "length_m": self.length_m,
+            "planning_time_s": self.planning_time_s,
+            "nodes_expanded": self.nodes_expanded,
+            "edges_simulated": self.edges_simulated,
+            "controls": [{"wl": wl, "wr": wr, "duration_s": d} for wl, wr, d in self.controls],
+            "trajectory": {k: [float(a) for a in self.trajectory[k]] for k in keys if k in self.trajectory},
+            "nodes": self.nodes,
+            "invalid_edges": self.invalid_edges,
+        }
+
+
+def replay(world: World, cost: str, controls, every: int = 1) -> tuple:
+    """Replay controls [(wl, wr, duration_s)] through the closed-loop model over the map
+    from the scenario's start. Returns (trajectory dict sampled every ``every`` steps
+    plus the last step, end code of the last edge (0 or IN_GOAL, negative if invalid),
+    final state)."""
+    Q, data = pack_world(world, cost)
+    dt = world.scenario.planner.dt
+    cl = np.array([c[0] for c in controls], float)
+    cr = np.array([c[1] for c in controls], float)
+    n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
+    rec = np.zeros((int(n.sum()) + 1, K.NR))
+    rows, S, end, _ = SS.replay(Q, data, start_state(world), cl, cr, n, rec)
+    idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
+    traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
+    return traj, int(end), S
+
+
+def plan(world: World, cost: str | None = None, progress=None) -> Plan:
+    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's)."""
+    cost = cost or world.scenario.cost
+    ps = world.scenario.planner
+    t0 = time.perf_counter()
+    why = unreachable_reason(world)
+    if why is not None:
+        return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0)
+    prob = problem(world, cost)
+    res: SearchResult = Search(prob).run(ps.max_expansions, ps.time_budget_s, progress=progress)
+    elapsed = time.perf_counter() - t0
+    common = dict(planning_time_s=elapsed, nodes_expanded=res.iterations, edges_simulated=res.edges,
+                  nodes=res.nodes, invalid_edges=res.invalid)
+    if res.status != "found":
+        return Plan(world.scenario.name, cost, "no_path", res.reason, **common)
+    T = res.states[:, K.S_T]
+    controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+                for i, c in enumerate(res.control_rows)]
+    every = max(1, round(RECORD_EVERY / ps.dt))
+    traj, end, S = replay(world, cost, controls, every)
+    if end < 0 or not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9):
+        raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
+    return Plan(world.scenario.name, cost, "found", None, controls, traj, **common)

@@ -1,0 +1,140 @@
+"""``sbmpc plan`` and ``sbmpc compare``: plan a scenario for one cost, or for both."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from .errors import InputError, NoResult
+
+
+def add_parsers(sub):
+    p = sub.add_parser("plan", help="plan a scenario (SBMPC over its elevation map)",
+                       description="Plan a scenario with SBMPC: print a summary; optionally write the plan "
+                       "JSON (schema sbmpc.plan/1) and a rerun recording. Exit code 1 when no path is found.")
+    p.add_argument("scenario", type=Path, help="scenario YAML file")
+    p.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
+    p.add_argument("--json", type=Path, help="write the plan JSON here")
+    p.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
+    p.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    p.set_defaults(func=run_plan)
+
+    c = sub.add_parser("compare", help="plan both costs and compare the time- and energy-optimal paths",
+                       description="Plan the time-optimal and the energy-optimal path of a scenario; write "
+                       "compare.json, compare.png (map with both paths; speed, power, energy along each) and "
+                       "compare.rrd into --out.")
+    c.add_argument("scenario", type=Path, help="scenario YAML file")
+    c.add_argument("--out", type=Path, default=Path("."), help="output folder (created if missing; default .)")
+    c.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
+    c.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    c.set_defaults(func=run_compare)
+
+
+def _out_file(path: Path | None, flag: str):
+    if path is None:
+        return
+    if path.exists() and path.is_dir():
+        raise InputError(f"{flag}: expected a file path, found the folder '{path}'")
+    if not path.parent.exists():
+        raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{path.parent}')")
+
+
+def _world(args):
+    from . import plan as PL
+    from . import scenario as SC
+    scn = SC.load(args.scenario)
+    if args.seed is not None:
+        if not 0 <= args.seed < 2**31:
+            raise InputError(f"--seed: expected an integer in [0, 2^31), found {args.seed}")
+        scn = replace(scn, planner=replace(scn.planner, seed=args.seed))
+    return PL.resolve(scn)
+
+
+class Progress:
+    """Progress lines on stderr for searches longer than ``after`` seconds."""
+
+    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0):
+        self.label, self.quiet, self.after, self.every = label, quiet, after, every
+        self.next = after
+
+    def __call__(self, iterations, nodes, elapsed):
+        if self.quiet or elapsed < self.next:
+            return
+        self.next = elapsed + self.every
+        print(f"  {self.label}: {iterations} expansions, {nodes} nodes, {elapsed:.1f} s", file=sys.stderr, flush=True)
+
+
+def summary(plan) -> str:
+    if not plan.found:
+        return (f"{plan.scenario} [{plan.cost}]: no_path: {plan.reason}\n"
+                f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
+                f"{plan.edges_simulated} edges simulated")
+    return (f"{plan.scenario} [{plan.cost}]: found\n"
+            f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
+            f"{len(plan.controls)} controls\n"
+            f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
+            f"{plan.edges_simulated} edges simulated")
+
+
+def run_plan(args) -> int:
+    from . import plan as PL
+    from . import recording
+    _out_file(args.json, "--json")
+    _out_file(args.rrd, "--rrd")
+    world = _world(args)
+    cost = args.cost or world.scenario.cost
+    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet))
+    print(summary(plan))
+    if args.json:
+        args.json.write_text(json.dumps(plan.to_json(), indent=1))
+    if args.rrd:
+        recording.write(args.rrd, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}")
+    if not plan.found:
+        raise NoResult(f"no path: {plan.reason}")
+    return 0
+
+
+def compare_table(plans: dict) -> str:
+    rows = [("", "time [s]", "energy [J]", "length [m]", "planning [s]", "expanded")]
+    for label, p in plans.items():
+        if p.found:
+            rows.append((f"{label}-optimal", f"{p.travel_time_s:.2f}", f"{p.energy_J:.1f}", f"{p.length_m:.2f}",
+                         f"{p.planning_time_s:.2f}", str(p.nodes_expanded)))
+        else:
+            rows.append((f"{label}-optimal", "no path", "", "", f"{p.planning_time_s:.2f}", str(p.nodes_expanded)))
+    w = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.rjust(w[i]) if i else c.ljust(w[i]) for i, c in enumerate(r)) for r in rows)
+
+
+def run_compare(args) -> int:
+    from . import plan as PL
+    from . import recording
+    from .figures import plot_compare
+    out = args.out
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out: expected a folder, found the file '{out}'")
+    world = _world(args)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    plans = {c: PL.plan(world, c, progress=Progress(f"{c} search", args.quiet)) for c in ("time", "energy")}
+    print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
+    print(compare_table(plans))
+    doc = {"schema": "sbmpc.compare/1", "scenario": world.scenario.name,
+           "plans": {c: {k: v for k, v in p.to_json().items() if k not in ("trajectory",)} for c, p in plans.items()},
+           "total_time_s": time.perf_counter() - t0}
+    t, e = plans["time"], plans["energy"]
+    if t.found and e.found:
+        doc["tradeoff"] = {"time_saved_s": e.travel_time_s - t.travel_time_s,
+                           "energy_saved_J": t.energy_J - e.energy_J,
+                           "holds": bool(t.travel_time_s <= e.travel_time_s + 1e-9 and e.energy_J <= t.energy_J + 1e-9)}
+    (out / "compare.json").write_text(json.dumps(doc, indent=1))
+    plot_compare(world.emap, plans, world.scenario, out / "compare.png",
+                 title=f"{world.scenario.name}: time- vs energy-optimal")
+    recording.write(out / "compare.rrd", world.emap, plans, app=f"sbmpc compare {world.scenario.name}")
+    print(f"wrote {out / 'compare.json'}, {out / 'compare.png'}, {out / 'compare.rrd'}")
+    if not any(p.found for p in plans.values()):
+        raise NoResult(f"no path: {plans['time'].reason}")
+    return 0

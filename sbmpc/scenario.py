@@ -1,0 +1,303 @@
+"""Scenario files: map, terrain (one or a layer of regions), vehicle, start, goal, cost and
+planner settings, validated with every problem reported at once by its key path.
+
+The minimum is CONTRACTS.md's; additions (all optional)::
+
+    description: what the scenario shows
+    map: {generate: {...}}          # or {file: x.png, resolution:, height_range: [lo, hi]}
+    terrain:                        # a layer of regions instead of one name
+      default: asphalt
+      regions:
+        - {terrain: grass, rect: [x0, y0, x1, y1]}
+        - {terrain: packed_dirt, circle: [x, y, r]}
+        - {terrain: grass, polygon: [[x, y], [x, y], [x, y]]}   # later regions win
+    planner: {branching: 16, period_s: 1.0, ...}                 # see PlannerSettings
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .errors import InputError
+
+COSTS = ("time", "energy")
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """Settings of the SBMPC search (scenario key ``planner``).
+
+    branching: controls tried per expansion; period_s: how long each control is held
+    [s]; dt: integration step of the edge rollouts [s]; cell_xy [m], cell_yaw_deg [deg],
+    cell_v [m/s]: the implicit grid; max_expansions and time_budget_s: budgets after
+    which the search gives up with the reason; seed: scrambles the Halton sequence;
+    wheel_speeds: [low, high] range of desired wheel speeds sampled [rad/s] (default
+    [-0.5, 1] x the no-load speed); samples: 'fixed' (the same Halton points at every
+    expansion) or 'rotating' (the next window of the sequence at every expansion);
+    tip_over_deg: pitch or roll at which an edge is rejected.
+    """
+
+    branching: int = 16
+    period_s: float = 1.0
+    dt: float = 0.01
+    cell_xy: float = 0.5
+    cell_yaw_deg: float = 7.5
+    cell_v: float = 0.2
+    max_expansions: int = 20000
+    time_budget_s: float = 60.0
+    seed: int = 0
+    wheel_speeds: tuple | None = None
+    samples: str = "rotating"
+    tip_over_deg: float = 30.0
+
+
+# (key, type, low, high) of the numeric settings; low/high inclusive
+_SETTING_RANGES = {
+    "branching": (int, 4, 256),
+    "period_s": (float, 0.05, 10.0),
+    "dt": (float, 1e-4, 0.05),
+    "cell_xy": (float, 0.01, 10.0),
+    "cell_yaw_deg": (float, 1.0, 180.0),
+    "cell_v": (float, 0.01, 5.0),
+    "max_expansions": (int, 1, 10_000_000),
+    "time_budget_s": (float, 0.01, 86400.0),
+    "seed": (int, 0, 2**31 - 1),
+    "tip_over_deg": (float, 1.0, 89.0),
+}
+
+
+@dataclass(frozen=True)
+class Region:
+    terrain: str
+    kind: str          # rect | circle | polygon
+    coords: tuple
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. ``path`` is the file it came from (None if built in code)."""
+
+    name: str
+    map_spec: dict
+    terrain: object            # str (name or path) or {"default": str, "regions": [Region]}
+    vehicle: str
+    start: dict
+    goal: dict
+    cost: str = "time"
+    planner: PlannerSettings = field(default_factory=PlannerSettings)
+    description: str = ""
+    path: Path | None = None
+
+    @property
+    def base(self) -> Path:
+        return self.path.parent if self.path is not None else Path(".")
+
+    def with_cost(self, cost: str) -> "Scenario":
+        return replace(self, cost=cost)
+
+
+class _Problems:
+    """Collects every problem of a file, then raises one InputError listing them."""
+
+    def __init__(self, src: str):
+        self.src = src
+        self.items: list[str] = []
+
+    def add(self, key: str, expected: str, found):
+        self.items.append(f"{key}: expected {expected}, found {found!r}")
+
+    def raise_if_any(self):
+        if len(self.items) == 1:
+            raise InputError(f"{self.src}: {self.items[0]}")
+        if self.items:
+            raise InputError(f"{self.src}: {len(self.items)} problems:\n  " + "\n  ".join(self.items))
+
+
+def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math.inf, hi=math.inf, what="a number"):
+    if key not in d:
+        if default is None:
+            probs.add(f"{where}.{key}", what, None)
+            return math.nan
+        return default
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+        probs.add(f"{where}.{key}", what, v)
+        return math.nan
+    return float(v)
+
+
+def _unknown(d: dict, known: set, where: str, probs: _Problems):
+    for k in d:
+        if k not in known:
+            probs.add(f"{where}.{k}" if where else str(k), f"one of the keys {', '.join(sorted(known))}", "an unknown key")
+
+
+def _point_list(v, n_min):
+    return (isinstance(v, (list, tuple)) and len(v) >= n_min
+            and all(isinstance(p, (list, tuple)) and len(p) == 2
+                    and all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in p) for p in v))
+
+
+def _numbers(v, n):
+    return (isinstance(v, (list, tuple)) and len(v) == n
+            and all(isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in v))
+
+
+def _terrain(spec, probs: _Problems):
+    if isinstance(spec, str):
+        return spec
+    if not isinstance(spec, dict):
+        probs.add("terrain", "a terrain name, a path to a terrain YAML, or {default:, regions:}", spec)
+        return "vinyl"
+    _unknown(spec, {"default", "regions"}, "terrain", probs)
+    default = spec.get("default")
+    if not isinstance(default, str):
+        probs.add("terrain.default", "a terrain name or path", default)
+    regions = []
+    raw = spec.get("regions", [])
+    if not isinstance(raw, list):
+        probs.add("terrain.regions", "a list of regions", raw)
+        raw = []
+    for i, r in enumerate(raw):
+        w = f"terrain.regions[{i}]"
+        if not isinstance(r, dict):
+            probs.add(w, "a mapping {terrain:, rect:|circle:|polygon:}", r)
+            continue
+        _unknown(r, {"terrain", "rect", "circle", "polygon"}, w, probs)
+        if not isinstance(r.get("terrain"), str):
+            probs.add(f"{w}.terrain", "a terrain name or path", r.get("terrain"))
+        shapes = [k for k in ("rect", "circle", "polygon") if k in r]
+        if len(shapes) != 1:
+            probs.add(w, "exactly one of rect, circle, polygon", shapes or None)
+            continue
+        k = shapes[0]
+        v = r[k]
+        ok = (_numbers(v, 4) and v[0] < v[2] and v[1] < v[3]) if k == "rect" else \
+             (_numbers(v, 3) and v[2] > 0) if k == "circle" else _point_list(v, 3)
+        if not ok:
+            want = {"rect": "[x0, y0, x1, y1] with x0 < x1, y0 < y1",
+                    "circle": "[x, y, r] with r > 0", "polygon": "a list of at least 3 [x, y] points"}[k]
+            probs.add(f"{w}.{k}", want, v)
+            continue
+        regions.append(Region(str(r.get("terrain")), k, tuple(map(tuple, v)) if k == "polygon" else tuple(v)))
+    return {"default": default if isinstance(default, str) else "vinyl", "regions": regions}
+
+
+def _planner(spec, probs: _Problems) -> PlannerSettings:
+    if spec is None:
+        return PlannerSettings()
+    if not isinstance(spec, dict):
+        probs.add("planner", "a mapping of planner settings", spec)
+        return PlannerSettings()
+    names = {f.name for f in fields(PlannerSettings)}
+    _unknown(spec, names, "planner", probs)
+    kw = {}
+    for key, (typ, lo, hi) in _SETTING_RANGES.items():
+        if key not in spec:
+            continue
+        v = spec[key]
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi
+              and (typ is float or float(v).is_integer()))
+        if not ok:
+            kind = "an integer" if typ is int else "a number"
+            probs.add(f"planner.{key}", f"{kind} in [{lo:g}, {hi:g}]", v)
+        else:
+            kw[key] = typ(v)
+    if "wheel_speeds" in spec:
+        v = spec["wheel_speeds"]
+        if not (_numbers(v, 2) and v[0] < v[1]):
+            probs.add("planner.wheel_speeds", "[low, high] desired wheel speeds in rad/s with low < high", v)
+        else:
+            kw["wheel_speeds"] = (float(v[0]), float(v[1]))
+    if "samples" in spec:
+        if spec["samples"] not in ("fixed", "rotating"):
+            probs.add("planner.samples", "'fixed' or 'rotating'", spec["samples"])
+        else:
+            kw["samples"] = spec["samples"]
+    if kw.get("dt", 0.01) > kw.get("period_s", 1.0):
+        probs.add("planner.dt", "a step no longer than planner.period_s", kw.get("dt"))
+    return PlannerSettings(**kw)
+
+
+def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
+    """A :class:`Scenario` from parsed YAML; raises InputError listing every problem."""
+    probs = _Problems(src)
+    if not isinstance(data, dict):
+        raise InputError(f"{src}: expected a mapping of scenario keys (name, map, terrain, vehicle, start, goal), "
+                         f"found {type(data).__name__}")
+    known = {"name", "description", "map", "terrain", "vehicle", "start", "goal", "cost", "planner"}
+    _unknown(data, known, "", probs)
+    name = data.get("name", path.stem if path else "scenario")
+    if not isinstance(name, str) or not name:
+        probs.add("name", "a non-empty string", name)
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        probs.add("description", "a string", desc)
+    map_spec = data.get("map")
+    if not isinstance(map_spec, dict):
+        probs.add("map", "a mapping with 'file' or 'generate'", map_spec)
+    terrain = _terrain(data.get("terrain", "vinyl"), probs)
+    vehicle = data.get("vehicle", "p3at")
+    if not isinstance(vehicle, str):
+        probs.add("vehicle", "a vehicle name or a path to a vehicle YAML", vehicle)
+    start, goal = {}, {}
+    s = data.get("start")
+    if not isinstance(s, dict):
+        probs.add("start", "a mapping {x:, y:, yaw_deg:, v:}", s)
+    else:
+        _unknown(s, {"x", "y", "yaw_deg", "v"}, "start", probs)
+        start = {"x": _num(s, "x", "start", probs), "y": _num(s, "y", "start", probs),
+                 "yaw_deg": _num(s, "yaw_deg", "start", probs, default=0.0),
+                 "v": _num(s, "v", "start", probs, default=0.0, lo=-2.0, hi=2.0, what="a speed in [-2, 2] m/s")}
+    g = data.get("goal")
+    if not isinstance(g, dict):
+        probs.add("goal", "a mapping {x:, y:, radius:}", g)
+    else:
+        _unknown(g, {"x", "y", "radius"}, "goal", probs)
+        goal = {"x": _num(g, "x", "goal", probs), "y": _num(g, "y", "goal", probs),
+                "radius": _num(g, "radius", "goal", probs, default=0.5, lo=0.01, hi=1e4, what="a positive radius in metres")}
+    cost = data.get("cost", "time")
+    if cost not in COSTS:
+        probs.add("cost", "time or energy", cost)
+    planner = _planner(data.get("planner"), probs)
+    probs.raise_if_any()
+    return Scenario(name, map_spec, terrain, vehicle, start, goal, cost, planner, desc, path)
+
+
+def load(path: Path | str) -> Scenario:
+    """Read and validate a scenario file (the file is only read)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: expected a scenario YAML file, found no such file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise InputError(f"{path}{where}: expected valid YAML, found {getattr(exc, 'problem', exc)}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{path}: expected a UTF-8 text file, found binary data") from None
+    return parse(data, str(path), path)
+
+
+def terrain_layer(regions, default_index: int, names: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Raster of terrain indices (into ``names``) over the grid of cell centres (x, y)."""
+    from matplotlib.path import Path as MplPath
+    X, Y = np.meshgrid(x, y)
+    layer = np.full(X.shape, default_index, dtype=np.int64)
+    for r in regions:
+        k = names.index(r.terrain)
+        if r.kind == "rect":
+            x0, y0, x1, y1 = r.coords
+            inside = (X >= x0) & (X <= x1) & (Y >= y0) & (Y <= y1)
+        elif r.kind == "circle":
+            cx, cy, rad = r.coords
+            inside = (X - cx) ** 2 + (Y - cy) ** 2 <= rad ** 2
+        else:
+            inside = MplPath(np.array(r.coords)).contains_points(np.c_[X.ravel(), Y.ravel()]).reshape(X.shape)
+        layer[inside] = k
+    return layer

@@ -1,0 +1,177 @@
+"""The skid-steered vehicle on an elevation map, as a search problem for :mod:`sbmpc.astar`.
+
+State: the closed-loop model's state vector (``dynamics.kernels``: wheel speeds, PID
+references and integrals, currents, pose, time, energy, stall timer) plus two entries
+for the grid, the wrapped heading and the speed at the end of the edge. So a child
+carries its speed and controller state: the entry speed into a hill matters.
+
+An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period,
+stepping ``dynamics.kernels.step`` every ``dt`` with the pitch under the vehicle from
+``maps.pitch_roll_at`` and the terrain under its centre from the map's terrain layer.
+It is invalid (codes below) when the vehicle leaves the map, pitches or rolls beyond the
+tip-over limit, or stalls (drive saturated, commanded motion not achieved for
+``STALL_TIME``). An edge that enters the goal disc ends there, so the last control of a
+plan may be shorter than the period.
+
+Edge cost: the period's travel time [s] or battery energy [J] (no regeneration).
+Heuristics, both lower bounds of the cost to go over the remaining straight-line
+distance d to the goal disc:
+
+* time: d / v_bound, v_bound the wheel radius times the largest sampled wheel speed
+  plus 5 % (the PID holds the wheels to their commands; overshoot downhill is smaller);
+* energy: what the wheels must at least do, with no regeneration counted:
+  max(0, mu_roll,min m g cos(tip) d + m g (z_goal - z) - KE), where KE is the kinetic
+  energy the vehicle carries (eq. 5's mass matrix) and z_goal the lowest height of the
+  goal disc; electrical energy is at least the mechanical work of the motors.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from dynamics import kernels as K
+from maps.grid import cell_value, height_at, pitch_roll_at
+
+from .astar import GOAL, HEURISTIC, PROPAGATE
+
+# ---- extra state entries after the model's ------------------------------------------
+X_YAWW = K.NS          # heading wrapped to (-pi, pi] [rad]
+X_V = K.NS + 1         # speed at the end of the edge [m/s]
+NX = K.NS + 2
+
+# ---- invalid-edge codes (returned negated by propagate) -----------------------------
+CODES = ("left the map", "stalled (drive saturated, commanded motion not achieved)", "tipped over (pitch or roll beyond the limit)")
+OFF_MAP, STALL, TIP = 1, 2, 3
+# ---- edge ends ---------------------------------------------------------------------
+IN_GOAL = 1
+
+# ---- params vector ---------------------------------------------------------------
+(Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
+ Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK) = range(23)
+NQ = 23
+COST_TIME, COST_ENERGY = 0.0, 1.0
+
+
+@njit(cache=True)
+def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
+    """Simulate one edge in place on S for up to ``nsteps`` steps (module doc). When
+    ``rec`` has rows, every step is recorded from row ``rows`` on. Returns (end, rows):
+    end is 0 (full period), IN_GOAL (stopped in the goal disc) or a negative code."""
+    dt = params[Q_DT]
+    res = params[Q_RES]
+    ox = params[Q_OX]
+    oy = params[Q_OY]
+    nx = int(params[Q_NX])
+    ny = int(params[Q_NY])
+    H = data[:nx * ny].reshape((ny, nx))
+    offl = int(params[Q_OFFL])
+    has_layer = offl >= 0
+    L = data[max(offl, 0):max(offl, 0) + nx * ny].reshape((ny, nx))
+    offt = int(params[Q_OFFT])
+    block = int(params[Q_BLOCK])
+    tip = params[Q_TIP]
+    margin = params[Q_MARGIN]
+    x_lo = ox + margin
+    y_lo = oy + margin
+    x_hi = ox + (nx - 1) * res - margin
+    y_hi = oy + (ny - 1) * res - margin
+    gx = params[Q_GX]
+    gy = params[Q_GY]
+    gr2 = params[Q_GR] * params[Q_GR]
+    O = np.zeros(K.NO)
+    record = rec.shape[0] > 0
+    end = 0
+    for i in range(nsteps + 1):
+        x = S[K.S_X]
+        y = S[K.S_Y]
+        if x < x_lo or x > x_hi or y < y_lo or y > y_hi:
+            end = -OFF_MAP
+            break
+        pitch, roll = pitch_roll_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
+        if abs(pitch) > tip or abs(roll) > tip:
+            end = -TIP
+            break
+        if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:
+            end = IN_GOAL
+            break
+        if i == nsteps:
+            break
+        k = 0
+        if has_layer:
+            k = int(cell_value(L, res, ox, oy, x, y))
+        a = offt + k * block
+        K.step(data[a:a + K.NP], data[a + K.NP:a + block], S, cmd_l, cmd_r, pitch, dt, False, O)
+        S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
+        if record and rows < rec.shape[0]:
+            K.record(S, O, pitch, rec[rows])
+            rows += 1
+        if S[K.S_STALLED] > 0.0:
+            end = -STALL
+            break
+    yaw = S[K.S_YAW]
+    S[X_YAWW] = yaw - 2.0 * math.pi * math.floor((yaw + math.pi) / (2.0 * math.pi))
+    S[X_V] = O[K.O_V] if i > 0 else S[X_V]
+    return end, rows
+
+
+@njit(PROPAGATE.signature, cache=True)
+def propagate(params, data, state, control, out):
+    """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
+    out[:] = state
+    end, _ = edge(params, data, out, control[0], control[1], int(params[Q_NSTEP]),
+                  np.empty((0, K.NR)), 0)
+    if end < 0:
+        return float(end)
+    if params[Q_COST] == COST_TIME:
+        return out[K.S_T] - state[K.S_T]
+    return out[K.S_E] - state[K.S_E]
+
+
+@njit(HEURISTIC.signature, cache=True)
+def heuristic(params, data, state):
+    """Lower bound of the time [s] or energy [J] to the goal disc (module doc)."""
+    dx = params[Q_GX] - state[K.S_X]
+    dy = params[Q_GY] - state[K.S_Y]
+    d = math.sqrt(dx * dx + dy * dy) - params[Q_GR]
+    if d < 0.0:
+        d = 0.0
+    if params[Q_COST] == COST_TIME:
+        return d / params[Q_VBOUND]
+    wl = state[K.S_WL]
+    wr = state[K.S_WR]
+    ke = 0.5 * params[Q_MKE] * (wl * wl + wr * wr)
+    h = params[Q_FROLL] * d + params[Q_MG] * (params[Q_ZG] - state[K.S_Z]) - ke
+    return h if h > 0.0 else 0.0
+
+
+@njit(GOAL.signature, cache=True)
+def is_goal(params, data, state):
+    dx = params[Q_GX] - state[K.S_X]
+    dy = params[Q_GY] - state[K.S_Y]
+    return dx * dx + dy * dy <= params[Q_GR] * params[Q_GR]
+
+
+@njit(cache=True)
+def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
+    """Replay controls (cmd_l[i], cmd_r[i]) each for nsteps[i] steps from ``start``,
+    recording every step into ``rec`` (row 0 the start). Returns (rows, end state, end
+    code of the last edge, index of the edge that ended the replay early or -1)."""
+    S = start.copy()
+    O = np.zeros(K.NO)
+    a = int(params[Q_OFFT])
+    K.state_outputs(data[a:a + K.NP], S, O)
+    nx = int(params[Q_NX])
+    ny = int(params[Q_NY])
+    H = data[:nx * ny].reshape((ny, nx))
+    pitch, _ = pitch_roll_at(H, params[Q_RES], params[Q_OX], params[Q_OY], S[K.S_X], S[K.S_Y],
+                             S[K.S_YAW], params[Q_HL], params[Q_HW])
+    K.record(S, O, pitch, rec[0])
+    rows = 1
+    end = 0
+    for e in range(cmd_l.shape[0]):
+        end, rows = edge(params, data, S, cmd_l[e], cmd_r[e], nsteps[e], rec, rows)
+        if end < 0 or (end == IN_GOAL and e < cmd_l.shape[0] - 1):
+            return rows, S, end, e
+    return rows, S, end, -1
