@@ -25,7 +25,7 @@ in a known cell replaces that cell's node only when it is cheaper. Two modes:
   that replaying the chosen controls reproduces the path; closed nodes are never
   changed, open ones are replaced by a cheaper arrival.
 
-Priority: lowest f = g + h first; ties go to the node pushed first (FIFO, by a push
+Priority: lowest f = g + w h first (w = 1: A*; w > 1: weighted A*); ties go to the node pushed first (FIFO, by a push
 counter), which makes the search deterministic.
 
 The compiled loop runs in chunks of at most ``chunk`` expansions and returns to Python,
@@ -50,7 +50,7 @@ GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 # ---- status of a chunk -----------------------------------------------------------
 RUNNING, FOUND, EXHAUSTED, ITERATIONS, GROW = 0, 1, 2, 3, 4
 # ---- counters (int64 array) ------------------------------------------------------
-C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT = range(7)
+C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST = range(8)
 C_INVALID = 8          # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
 MAX_CODE = 8
 NC = C_INVALID + MAX_CODE + 1
@@ -163,11 +163,13 @@ def _key_of(state, dims, res, key):
 
 
 @njit(cache=True)
-def start_search(heur, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
-                 table, hf, hs, hn, cnt):
+def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
+                 table, hf, hs, hn, cnt, best):
     """Put the start node into empty search arrays."""
     cnt[:] = 0
     cnt[C_GOAL] = -1
+    cnt[C_FIRST] = -1
+    best[0] = np.inf
     table[:] = _EMPTY
     _key_of(start, dims, res, KEYS[0])
     X[0, :] = start
@@ -182,16 +184,22 @@ def start_search(heur, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP
     slot, _ = _lookup(table, KEYS, KEYS[0])
     table[slot] = 0
     cnt[C_NODES] = 1
-    _push(hf, hs, hn, cnt, heur(params, data, X[0]), 0)
+    _push(hf, hs, hn, cnt, weight * heur(params, data, X[0]), 0)
 
 
 @njit(cache=True)
-def run_search(prop, heur, goal, params, data, controls, nbranch, nfixed, rotate, dims, res,
-               snap, max_depth, max_iters, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf, hs,
-               hn, cnt):
+def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed, rotate, dims, res,
+               snap, max_depth, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
+               hs, hn, cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
     cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
-    arrays are too small for the next expansion) or RUNNING (chunk done)."""
+    arrays are too small for the next expansion) or RUNNING (chunk done).
+
+    With ``refine`` > 0 the search is anytime (AWA*): a goal reached becomes the
+    incumbent (cost in best[0]) and the search goes on, pruning every node whose g + h
+    (unweighted) cannot beat it, for ``refine`` times the expansions the first solution
+    took; FOUND then means the open set was emptied (the incumbent is optimal over the
+    grid) or that refinement budget was spent."""
     kd = dims.shape[0]
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
@@ -200,18 +208,30 @@ def run_search(prop, heur, goal, params, data, controls, nbranch, nfixed, rotate
     done = 0
     while done < chunk:
         if cnt[C_HEAP] == 0:
-            return EXHAUSTED
+            return FOUND if cnt[C_GOAL] >= 0 else EXHAUSTED
         if cnt[C_ITERS] >= max_iters:
-            return ITERATIONS
+            return FOUND if cnt[C_GOAL] >= 0 else ITERATIONS
+        if cnt[C_FIRST] >= 0 and cnt[C_ITERS] >= cnt[C_FIRST] * (1.0 + refine):
+            return FOUND
         if (cnt[C_NODES] + nbranch > cap or cnt[C_HEAP] + nbranch > hf.shape[0]
                 or 2 * (cnt[C_NODES] + nbranch) > table.shape[0]):
             return GROW
         n = _pop(hf, hs, hn, cnt)
         if CLO[n]:
             continue
+        if cnt[C_GOAL] >= 0 and G[n] + heur(params, data, X[n]) >= best[0]:
+            CLO[n] = 1
+            continue
         if goal(params, data, X[n]):
-            cnt[C_GOAL] = n
-            return FOUND
+            if G[n] < best[0]:
+                best[0] = G[n]
+                cnt[C_GOAL] = n
+                if cnt[C_FIRST] < 0:
+                    cnt[C_FIRST] = max(cnt[C_ITERS], 1)
+            if refine <= 0.0:
+                return FOUND
+            CLO[n] = 1
+            continue
         CLO[n] = 1
         cnt[C_ITERS] += 1
         done += 1
@@ -256,7 +276,9 @@ def run_search(prop, heur, goal, params, data, controls, nbranch, nfixed, rotate
             CTL[j] = c
             DEP[j] = DEP[n] + 1
             if not CLO[j]:
-                _push(hf, hs, hn, cnt, g + heur(params, data, X[j]), j)
+                h = heur(params, data, X[j])
+                if g + h < best[0]:
+                    _push(hf, hs, hn, cnt, g + weight * h, j)
     return RUNNING
 
 
@@ -287,6 +309,8 @@ class Problem:
     snap: bool = False
     max_depth: int = 1 << 30
     codes: tuple = ()
+    weight: float = 1.0
+    refine: float = 0.0
 
 
 @dataclass
@@ -307,6 +331,7 @@ class SearchResult:
     edges: int
     planning_time_s: float
     invalid: dict = field(default_factory=dict)
+    first_solution_iterations: int = -1
 
 
 class Search:
@@ -330,9 +355,10 @@ class Search:
         self.hs = np.empty(2 * cap, np.int64)
         self.hn = np.empty(2 * cap, np.int64)
         self.cnt = np.zeros(NC, np.int64)
-        start_search(p.heuristic, p.params, p.data, p.start, p.dims, p.res, p.snap, self.X, self.G,
+        self.best = np.zeros(1)
+        start_search(p.heuristic, p.weight, p.params, p.data, p.start, p.dims, p.res, p.snap, self.X, self.G,
                      self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
-                     self.hn, self.cnt)
+                     self.hn, self.cnt, self.best)
 
     def _grow(self):
         n = self.cnt[C_NODES]
@@ -361,10 +387,10 @@ class Search:
         p = self.problem
         t0 = time.perf_counter()
         while True:
-            st = run_search(p.propagate, p.heuristic, p.is_goal, p.params, p.data, p.controls,
+            st = run_search(p.propagate, p.heuristic, p.weight, p.is_goal, p.params, p.data, p.controls,
                             p.branching, p.fixed_controls, p.rotate, p.dims, p.res, p.snap, p.max_depth,
-                            max_iterations, chunk, self.X, self.G, self.PAR, self.CTL, self.DEP,
-                            self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt)
+                            max_iterations, p.refine, chunk, self.X, self.G, self.PAR, self.CTL, self.DEP,
+                            self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)
             if st == GROW:
                 self._grow()
                 continue
@@ -374,6 +400,8 @@ class Search:
             if progress is not None:
                 progress(int(self.cnt[C_ITERS]), int(self.cnt[C_NODES]), elapsed)
             if elapsed > time_budget_s:
+                if self.cnt[C_GOAL] >= 0:
+                    st = FOUND
                 break
         return self._result(st, elapsed, max_iterations, time_budget_s)
 
@@ -385,7 +413,7 @@ class Search:
             if cnt[C_INVALID + k]:
                 name = p.codes[k - 1] if k - 1 < len(p.codes) else f"code {k}"
                 invalid[name] = int(cnt[C_INVALID + k])
-        common = dict(iterations=int(cnt[C_ITERS]), nodes=int(cnt[C_NODES]), edges=int(cnt[C_EDGES]),
+        common = dict(first_solution_iterations=int(cnt[C_FIRST]), iterations=int(cnt[C_ITERS]), nodes=int(cnt[C_NODES]), edges=int(cnt[C_EDGES]),
                       planning_time_s=elapsed, invalid=invalid)
         if st == FOUND:
             path = []

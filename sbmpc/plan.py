@@ -162,7 +162,9 @@ def pack_world(world: World, cost: str) -> tuple:
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
-    data = np.ascontiguousarray(np.concatenate(parts + blocks))
+    ctg, slack = cost_to_go(world, cost)
+    offd = offt + sum(b.size for b in blocks)
+    data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
     Q[SS.Q_DT] = ps.dt
     Q[SS.Q_NSTEP] = max(1, round(ps.period_s / ps.dt))
@@ -173,16 +175,15 @@ def pack_world(world: World, cost: str) -> tuple:
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny
     Q[SS.Q_COST] = SS.COST_TIME if cost == "time" else SS.COST_ENERGY
-    lo, hi = wheel_speed_range(world)
-    Q[SS.Q_VBOUND] = 1.05 * v.wheel_radius * max(abs(lo), abs(hi)) * max(v.radius_scale_left, v.radius_scale_right)
-    Q[SS.Q_FROLL] = min(t.mu_roll for t in world.terrains) * v.mass * G * math.cos(tip)
-    Q[SS.Q_MG] = v.mass * G
+    Q[SS.Q_VBOUND], Q[SS.Q_FROLL], Q[SS.Q_MG] = _bounds(world, cost)
     Q[SS.Q_MKE] = max(K.pack(v, t)[K.P_M11] + abs(K.pack(v, t)[K.P_M12]) for t in world.terrains)
     Q[SS.Q_ZG] = _lowest_in_disc(e, scn.goal["x"], scn.goal["y"], scn.goal["radius"])
     Q[SS.Q_MARGIN] = world.margin
     Q[SS.Q_OFFL] = offl
     Q[SS.Q_OFFT] = offt
     Q[SS.Q_BLOCK] = blocks[0].size
+    Q[SS.Q_OFFD] = offd
+    Q[SS.Q_DSLACK] = slack
     return Q, data
 
 
@@ -200,6 +201,94 @@ def _lowest_in_disc(e: ElevationMap, x, y, r) -> float:
     return float(min(zs))
 
 
+OCTILE = 1.0823922002923938   # largest ratio of an 8-neighbour grid path to the straight line
+
+
+def _bounds(world: World, cost: str):
+    """(v_bound [m/s], F_roll [N], m g [N]) of the straight-line heuristics."""
+    v = world.vehicle
+    lo, hi = wheel_speed_range(world)
+    vb = 1.05 * v.wheel_radius * max(abs(lo), abs(hi)) * max(v.radius_scale_left, v.radius_scale_right)
+    # rolling resistance is mu m g cos(pitch): the pitch is at most the steepest slope
+    # of the map (and the tip-over limit)
+    steepest = min(math.radians(world.scenario.planner.tip_over_deg), math.atan(_max_rise(world.emap.heights, world.emap.resolution, 1.0)))
+    froll = min(t.mu_roll for t in world.terrains) * v.mass * G * math.cos(steepest)
+    return vb, froll, v.mass * G
+
+
+RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle
+
+
+def climb_limit(world: World) -> float:
+    """Steepest uphill grade [rad] the cost-to-go grid lets a step take: the steepest
+    grade the vehicle holds at any speed on the best of the map's terrains
+    (``dynamics.limits``) plus RUNUP_DEG for what momentum carries over a short ramp."""
+    from dynamics.limits import steepest_grade
+    return max(steepest_grade(world.vehicle, t) for t in world.terrains) + math.radians(RUNUP_DEG)
+
+
+def cost_to_go(world: World, cost: str) -> tuple:
+    """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
+    over 8-neighbour steps, see :mod:`sbmpc.skidsteer`), and the slack [s or J] the
+    heuristic subtracts for the way from a pose to its nearest node. Unreachable nodes
+    get a large finite cost."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+    e, scn = world.emap, world.scenario
+    H = e.heights
+    ny, nx = H.shape
+    res = e.resolution
+    vb, froll, mg = _bounds(world, cost)
+    ox, oy = e.origin
+    blocked = _blocked(H, res, ox, oy, world.half_length, world.half_width,
+                       math.radians(scn.planner.tip_over_deg), 16).ravel()
+    if e.terrain_layer is not None and len(world.terrains) > 1:
+        mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer].ravel()
+    else:
+        mu = np.full(nx * ny, world.terrains[0].mu_roll)
+    gy, gx = np.gradient(H, res)
+    # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
+    froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    climb = math.tan(climb_limit(world))
+    src, dst, w = [], [], []
+    for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = idx[:ny - dj, max(0, -di):nx - max(0, di)].ravel()
+        b = idx[dj:, max(0, di):nx - max(0, -di)].ravel()      # the cell (j + dj, i + di)
+        d = res * math.hypot(di, dj)
+        ok = ~(blocked[a] | blocked[b])
+        a, b = a[ok], b[ok]
+        for p, q in ((a, b), (b, a)):          # step from p to q
+            up = (H.ravel()[q] - H.ravel()[p]) / d
+            p, q = p[up <= climb], q[up <= climb]
+            if cost == "time":
+                wt = np.full(p.size, d / vb)
+            else:
+                f = np.minimum(froll_cell[p], froll_cell[q])
+                wt = np.maximum(0.0, f * d + mg * (H.ravel()[q] - H.ravel()[p]))
+            # reversed edges: Dijkstra runs from the goal
+            src.append(q)
+            dst.append(p)
+            w.append(wt / OCTILE + 1e-12)
+    G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(nx * ny, nx * ny)).tocsr()
+    X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
+    g = scn.goal
+    goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
+    if goal_nodes.size == 0:
+        return np.zeros((ny, nx)), 0.0
+    D = dijkstra(G_, indices=goal_nodes, min_only=True)
+    D[~np.isfinite(D)] = 1e12
+    diag = res * math.sqrt(2.0)
+    slack = diag / vb if cost == "time" else (froll_cell.max() * diag + mg * _max_rise(H, res, diag))
+    return D.reshape(ny, nx), float(slack)
+
+
+def _max_rise(H, res, dist):
+    """Largest height gain [m] within ``dist`` [m] on the map (from its steepest slope)."""
+    gy, gx = np.gradient(H, res)
+    return float(np.hypot(gx, gy).max() * dist)
+
+
 def problem(world: World, cost: str) -> Problem:
     ps = world.scenario.planner
     Q, data = pack_world(world, cost)
@@ -207,7 +296,8 @@ def problem(world: World, cost: str) -> Problem:
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, start_state(world), control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
-                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES)
+                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES,
+                   weight=ps.weight(cost), refine=ps.refine)
 
 
 # ---- reachability pre-check -----------------------------------------------------------
@@ -270,6 +360,7 @@ class Plan:
     edges_simulated: int = 0
     nodes: int = 0
     invalid_edges: dict = field(default_factory=dict)
+    found_by: str = ""            # the search that produced the controls (compare may adopt the other's)
 
     @property
     def found(self) -> bool:
@@ -313,6 +404,7 @@ class Plan:
             "trajectory": {k: [float(a) for a in self.trajectory[k]] for k in keys if k in self.trajectory},
             "nodes": self.nodes,
             "invalid_edges": self.invalid_edges,
+            "found_by": self.found_by or f"{self.cost} search",
         }
 
 
@@ -356,3 +448,26 @@ def plan(world: World, cost: str | None = None, progress=None) -> Plan:
     if end < 0 or not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
     return Plan(world.scenario.name, cost, "found", None, controls, traj, **common)
+
+
+def plan_both(world: World, progress=None) -> dict:
+    """The time- and the energy-optimal plan of a world, {"time": Plan, "energy": Plan}.
+
+    The implicit grid merges states, so a search can lose a path that the other search
+    kept: then the energy search's plan may cost more energy than the time search's.
+    Each plan is checked against the other on its own cost; the better one is kept and
+    ``found_by`` says which search produced it (reported by ``sbmpc compare``)."""
+    plans = {c: plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy")}
+    t, e = plans["time"], plans["energy"]
+    if t.found and e.found:
+        if e.travel_time_s < t.travel_time_s:
+            plans["time"] = _adopt(e, "time", t)
+        if t.energy_J < e.energy_J:
+            plans["energy"] = _adopt(t, "energy", e)
+    return plans
+
+
+def _adopt(other: Plan, cost: str, own: Plan) -> Plan:
+    from dataclasses import replace as _replace
+    return _replace(other, cost=cost, found_by=f"{other.cost} search (better on {cost} than the {cost} search's own plan)",
+                    planning_time_s=own.planning_time_s + other.planning_time_s)

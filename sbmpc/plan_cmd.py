@@ -119,9 +119,12 @@ def run_compare(args) -> int:
     world = _world(args)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    plans = {c: PL.plan(world, c, progress=Progress(f"{c} search", args.quiet)) for c in ("time", "energy")}
+    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet))
     print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
     print(compare_table(plans))
+    for c, p in plans.items():
+        if p.found_by:
+            print(f"note: the {c}-optimal plan is the {p.found_by}")
     doc = {"schema": "sbmpc.compare/1", "scenario": world.scenario.name,
            "plans": {c: {k: v for k, v in p.to_json().items() if k not in ("trajectory",)} for c, p in plans.items()},
            "total_time_s": time.perf_counter() - t0}

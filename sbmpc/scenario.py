@@ -38,21 +38,32 @@ class PlannerSettings:
     wheel_speeds: [low, high] range of desired wheel speeds sampled [rad/s] (default
     [-0.5, 1] x the no-load speed); samples: 'fixed' (the same Halton points at every
     expansion) or 'rotating' (the next window of the sequence at every expansion);
-    tip_over_deg: pitch or roll at which an edge is rejected.
+    tip_over_deg: pitch or roll at which an edge is rejected; time_weight, energy_weight:
+    w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
+    optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
+    suffices, the energy bound is looser); refine: after the first solution, go on
+    (anytime weighted A*, pruning with the unweighted bound) for refine times the
+    expansions it took, keeping the best plan (0: stop at the first).
     """
 
     branching: int = 16
     period_s: float = 1.0
-    dt: float = 0.01
+    dt: float = 0.02
     cell_xy: float = 0.5
     cell_yaw_deg: float = 7.5
     cell_v: float = 0.2
-    max_expansions: int = 20000
+    max_expansions: int = 30000
     time_budget_s: float = 60.0
     seed: int = 0
     wheel_speeds: tuple | None = None
     samples: str = "rotating"
     tip_over_deg: float = 30.0
+    time_weight: float = 1.1
+    energy_weight: float = 2.0
+    refine: float = 1.0
+
+    def weight(self, cost: str) -> float:
+        return self.time_weight if cost == "time" else self.energy_weight
 
 
 # (key, type, low, high) of the numeric settings; low/high inclusive
@@ -67,6 +78,9 @@ _SETTING_RANGES = {
     "time_budget_s": (float, 0.01, 86400.0),
     "seed": (int, 0, 2**31 - 1),
     "tip_over_deg": (float, 1.0, 89.0),
+    "time_weight": (float, 1.0, 10.0),
+    "refine": (float, 0.0, 100.0),
+    "energy_weight": (float, 1.0, 10.0),
 }
 
 

@@ -23,6 +23,15 @@ distance d to the goal disc:
   max(0, mu_roll,min m g cos(tip) d + m g (z_goal - z) - KE), where KE is the kinetic
   energy the vehicle carries (eq. 5's mass matrix) and z_goal the lowest height of the
   goal disc; electrical energy is at least the mechanical work of the motors.
+
+Both are raised by a cost-to-go grid over the map (``sbmpc.plan.cost_to_go``): Dijkstra
+from the goal over the map's cells, with 8-neighbour steps that cost d / v_bound (time)
+or max(0, F_roll d + m g dz) (energy: a climb costs its potential energy, a descent at
+most pays for its own rolling, none is banked), scaled down by the octile-to-Euclidean
+ratio, and avoiding cells where the vehicle tips over at every heading. It knows the
+shape of the ground that the straight-line bounds cannot see: the hill to be climbed or
+gone around. Its one approximation: kinetic energy gained in a dip and spent on the next
+rise is not credited beyond the KE the node carries now.
 """
 from __future__ import annotations
 
@@ -49,8 +58,9 @@ IN_GOAL = 1
 
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
- Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK) = range(23)
-NQ = 23
+ Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
+ Q_DSLACK) = range(25)
+NQ = 25
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
 
@@ -131,18 +141,39 @@ def propagate(params, data, state, control, out):
 
 @njit(HEURISTIC.signature, cache=True)
 def heuristic(params, data, state):
-    """Lower bound of the time [s] or energy [J] to the goal disc (module doc)."""
-    dx = params[Q_GX] - state[K.S_X]
-    dy = params[Q_GY] - state[K.S_Y]
+    """Lower bound of the time [s] or energy [J] to the goal disc (module doc): the larger
+    of the straight-line bound and the map's cost-to-go grid (when present)."""
+    x = state[K.S_X]
+    y = state[K.S_Y]
+    dx = params[Q_GX] - x
+    dy = params[Q_GY] - y
     d = math.sqrt(dx * dx + dy * dy) - params[Q_GR]
     if d < 0.0:
         d = 0.0
+    ke = 0.0
     if params[Q_COST] == COST_TIME:
-        return d / params[Q_VBOUND]
-    wl = state[K.S_WL]
-    wr = state[K.S_WR]
-    ke = 0.5 * params[Q_MKE] * (wl * wl + wr * wr)
-    h = params[Q_FROLL] * d + params[Q_MG] * (params[Q_ZG] - state[K.S_Z]) - ke
+        h = d / params[Q_VBOUND]
+    else:
+        wl = state[K.S_WL]
+        wr = state[K.S_WR]
+        ke = 0.5 * params[Q_MKE] * (wl * wl + wr * wr)
+        h = params[Q_FROLL] * d + params[Q_MG] * (params[Q_ZG] - state[K.S_Z]) - ke
+    offd = int(params[Q_OFFD])
+    if offd >= 0:
+        # cost-to-go grid: the least of the four surrounding nodes, less what reaching
+        # that node from (x, y) could at most save
+        nx = int(params[Q_NX])
+        ny = int(params[Q_NY])
+        res = params[Q_RES]
+        u = (x - params[Q_OX]) / res
+        v = (y - params[Q_OY]) / res
+        i = min(max(int(math.floor(u)), 0), nx - 2)
+        j = min(max(int(math.floor(v)), 0), ny - 2)
+        a = offd + j * nx + i
+        c = min(min(data[a], data[a + 1]), min(data[a + nx], data[a + nx + 1]))
+        hd = c - params[Q_DSLACK] - ke
+        if hd > h:
+            h = hd
     return h if h > 0.0 else 0.0
 
 

@@ -1,0 +1,119 @@
+"""The generic search (sbmpc.astar) on problems with known answers, and the reference C++
+SBMPO's unicycle benchmark."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from numba import njit
+from scipy.sparse.csgraph import shortest_path
+
+from sbmpc.astar import GOAL, HEURISTIC, PROPAGATE, Problem, search
+
+# ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
+# params: [n, goal_i, goal_j]; data: blocked flags, row-major n x n
+
+
+@njit(PROPAGATE.signature, cache=True)
+def walk(params, data, state, control, out):
+    n = int(params[0])
+    i = state[0] + control[0]
+    j = state[1] + control[1]
+    out[0] = i
+    out[1] = j
+    if i < 0 or j < 0 or i >= n or j >= n:
+        return -1.0
+    if data[int(i) * n + int(j)] > 0:
+        return -2.0
+    return 1.0
+
+
+@njit(HEURISTIC.signature, cache=True)
+def manhattan(params, data, state):
+    return abs(params[1] - state[0]) + abs(params[2] - state[1])
+
+
+@njit(GOAL.signature, cache=True)
+def at_goal(params, data, state):
+    return state[0] == params[1] and state[1] == params[2]
+
+
+MOVES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+
+
+def grid_problem(blocked, goal):
+    n = blocked.shape[0]
+    return Problem(walk, manhattan, at_goal, np.array([n, goal[0], goal[1]], float),
+                   blocked.astype(float).ravel(), np.zeros(2), MOVES, np.array([0, 1], np.int64),
+                   np.ones(2), branching=4, snap=True, codes=("off the grid", "blocked"))
+
+
+def bfs_distance(blocked, goal):
+    n = blocked.shape[0]
+    free = ~blocked.ravel()
+    A = np.zeros((n * n, n * n))
+    for i in range(n):
+        for j in range(n):
+            for di, dj in ((1, 0), (0, 1)):
+                a, b = i + di, j + dj
+                if a < n and b < n and free[i * n + j] and free[a * n + b]:
+                    A[i * n + j, a * n + b] = A[a * n + b, i * n + j] = 1
+    d = shortest_path(A, unweighted=True, indices=0)
+    return d[goal[0] * n + goal[1]]
+
+
+@settings(max_examples=25)
+@given(st.integers(4, 12).flatmap(lambda n: st.tuples(
+    st.just(n), st.lists(st.booleans(), min_size=n * n, max_size=n * n))))
+def test_astar_finds_the_shortest_path_of_a_grid(case):
+    n, flags = case
+    blocked = np.array(flags).reshape(n, n) & (np.random.default_rng(n).random((n, n)) < 0.35)
+    blocked[0, 0] = blocked[n - 1, n - 1] = False
+    goal = (n - 1, n - 1)
+    res = search(grid_problem(blocked, goal), 10_000)
+    d = bfs_distance(blocked, goal)
+    if math.isinf(d):
+        assert res.status == "no_path" and "explored" in res.reason
+    else:
+        assert res.status == "found"
+        assert res.cost == d
+        # the path is a chain of unit moves through free cells
+        steps = np.abs(np.diff(res.states, axis=0)).sum(axis=1)
+        assert np.all(steps == 1) and not blocked[tuple(res.states.astype(int).T)].any()
+
+
+def test_budget_ends_the_search_with_the_reason():
+    blocked = np.zeros((30, 30), bool)
+    blocked[:, 15] = True                      # a wall: the goal is unreachable
+    res = search(grid_problem(blocked, (29, 29)), 300)
+    assert res.status == "no_path"
+    assert res.iterations == 300 and "budget of 300 expansions" in res.reason
+    assert "blocked" in res.reason            # the invalid edges are named
+    res = search(grid_problem(blocked, (29, 29)), 100_000)
+    assert res.status == "no_path" and "every reachable state" in res.reason
+    assert res.iterations == 30 * 15          # the whole reachable half, each cell once
+
+
+def test_arrays_grow_without_changing_the_answer():
+    from sbmpc.astar import Search
+    blocked = np.zeros((40, 40), bool)
+    p = grid_problem(blocked, (39, 39))
+    small = Search(p, capacity=8).run(100_000)
+    big = Search(p, capacity=1 << 14).run(100_000)
+    assert small.cost == big.cost == 78
+    assert small.iterations == big.iterations
+
+
+# ---- the reference C++ SBMPO's unicycle benchmark -------------------------------------
+BENCH = Path(__file__).resolve().parents[2] / "shared" / "data" / "bench" / "sbmpo_unicycle"
+
+
+@pytest.mark.skipif(not BENCH.is_dir(), reason="benchmark inputs ../shared/data/bench absent")
+def test_unicycle_main_map_matches_the_reference_cpp():
+    from sbmpc.unicycle import Benchmark, read_obstacle_maps, solve
+    bench = Benchmark.read(BENCH / "config.csv")
+    res = solve(bench, read_obstacle_maps(BENCH / "obstacles_main.csv")[0])
+    assert res.status == "found"
+    assert res.cost == pytest.approx(8.2448, rel=0.01)
+    assert abs(res.iterations - 410) <= 41

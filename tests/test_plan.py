@@ -1,0 +1,159 @@
+"""Plans of every shipped scenario: replays reproduce them and end in the goal, the
+time/energy trade-off holds, and each scenario shows what its comment says."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynamics import kernels as K
+from sbmpc import plan as PL
+from sbmpc import scenario as SC
+from sbmpc.cli import main
+
+SCEN = Path(__file__).resolve().parents[1] / "scenarios"
+SHIPPED = sorted(p.stem for p in SCEN.glob("*.yaml"))
+SOLVABLE = [s for s in SHIPPED if s != "unreachable"]
+
+
+@pytest.fixture(scope="module")
+def plans():
+    """Both plans of every shipped scenario, computed once."""
+    out = {}
+    for name in SHIPPED:
+        world = PL.resolve(SC.load(SCEN / f"{name}.yaml"))
+        out[name] = (world, {c: PL.plan(world, c) for c in ("time", "energy")})     # each search on its own
+    return out
+
+
+@pytest.mark.parametrize("name", SOLVABLE)
+def test_replayed_controls_reproduce_the_plan_and_end_in_the_goal(plans, name):
+    world, ps = plans[name]
+    for cost, plan in ps.items():
+        assert plan.found, (cost, plan.reason)
+        every = round(PL.RECORD_EVERY / world.scenario.planner.dt)
+        traj, end, S = PL.replay(world, cost, plan.controls, every)
+        for key in ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"):
+            np.testing.assert_allclose(traj[key], plan.trajectory[key], atol=1e-9, err_msg=f"{cost} {key}")
+        g = world.scenario.goal
+        assert math.hypot(S[K.S_X] - g["x"], S[K.S_Y] - g["y"]) <= g["radius"]
+        assert S[K.S_STALLED] == 0.0
+        # the plan's summary numbers are those of its trajectory
+        assert plan.travel_time_s == pytest.approx(sum(c[2] for c in plan.controls), abs=1e-6)
+        assert np.all(np.diff(plan.trajectory["energy_J"]) >= -1e-12)     # no regeneration
+        assert np.all(np.abs(plan.trajectory["pitch"]) <= math.radians(world.scenario.planner.tip_over_deg))
+
+
+@pytest.mark.parametrize("name", SOLVABLE)
+def test_time_optimal_is_never_slower_and_energy_optimal_never_costs_more(plans, name):
+    _, ps = plans[name]
+    t, e = ps["time"], ps["energy"]
+    assert t.travel_time_s <= e.travel_time_s + 1e-9
+    assert e.energy_J <= t.energy_J + 1e-9
+
+
+def test_steep_hill_every_plan_goes_around(plans):
+    world, ps = plans["steep_hill"]
+    top = world.emap.heights.max()
+    for plan in ps.values():
+        assert max(plan.trajectory["z"]) < 0.6 * top      # around the summit, over the lower flank at most
+    assert ps["time"].invalid_edges.get(PL.SS.CODES[PL.SS.STALL - 1], 0) > 0     # the flanks were tried
+
+
+def test_hill_tradeoff_time_crosses_energy_goes_around(plans):
+    world, ps = plans["hill_tradeoff"]
+    top = world.emap.heights.max()
+    assert max(ps["time"].trajectory["z"]) > 0.8 * top
+    assert max(ps["energy"].trajectory["z"]) < max(ps["time"].trajectory["z"]) - 0.3
+
+
+def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
+    world, ps = plans["runup_ramp"]
+    for plan in ps.values():
+        tr = plan.trajectory
+        i = np.searchsorted(tr["x"], 8.0)          # the foot of the ramp
+        assert tr["v"][i] > 0.72, "the plan arrives at the ramp faster than the 0.7 m/s that stalls"
+    # the scenario's premise, on its own map: driving at 0.7 m/s the vehicle stalls on
+    # the ramp; driving at full command from rest 6 m before it, it crosses
+    from dataclasses import replace
+    w0 = world.vehicle.no_load_speed
+    slow = PL.World(replace(world.scenario, start=dict(world.scenario.start, x=6.5, v=0.7)),
+                    world.emap, world.vehicle, world.terrains)
+    w_slow = 0.7 / world.vehicle.wheel_radius
+    _, end, S = PL.replay(slow, "time", [(w_slow, w_slow, 20.0)])
+    assert end == -PL.SS.STALL and S[K.S_X] < 9.0
+    _, end, S = PL.replay(world, "time", [(w0, w0, 12.0)])
+    assert end == PL.SS.IN_GOAL
+
+
+def test_mixed_terrain_energy_keeps_to_the_road(plans):
+    world, ps = plans["mixed_terrain"]
+    road = world.emap.terrain_names.index("packed_dirt")
+
+    def on_road(plan):
+        tr = plan.trajectory
+        return np.mean([world.emap.terrain_index(x, y) == road for x, y in zip(tr["x"], tr["y"])])
+    assert on_road(ps["energy"]) > on_road(ps["time"]) + 0.2
+
+
+def test_hills_field_is_at_least_50_m_square(plans):
+    world, _ = plans["hills_field"]
+    x0, x1, y0, y1 = world.emap.extent
+    assert x1 - x0 >= 50 and y1 - y0 >= 50
+
+
+def test_unreachable_says_why(plans):
+    _, ps = plans["unreachable"]
+    for plan in ps.values():
+        assert plan.status == "no_path" and "tip-over" in plan.reason
+
+
+def test_same_seed_same_plan(plans):
+    world, ps = plans["flat"]
+    again = PL.plan(world, "time")
+    assert again.controls == ps["time"].controls
+
+
+# ---- the command line ---------------------------------------------------------------
+def test_cli_plan_writes_json_and_rrd(tmp_path, capsys):
+    js, rrd = tmp_path / "p.json", tmp_path / "p.rrd"
+    assert main(["plan", str(SCEN / "flat.yaml"), "--cost", "time", "--json", str(js), "--rrd", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    assert "found" in out and "travel time" in out and "nodes expanded" in out
+    doc = json.loads(js.read_text())
+    assert doc["schema"] == "sbmpc.plan/1" and doc["status"] == "found" and doc["cost"] == "time"
+    for key in ("travel_time_s", "energy_J", "length_m", "planning_time_s", "nodes_expanded", "edges_simulated"):
+        assert isinstance(doc[key], (int, float))
+    for key in ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"):
+        assert len(doc["trajectory"][key]) == len(doc["trajectory"]["t"])
+    assert max(np.diff(doc["trajectory"]["t"])) <= 0.05 + 1e-9
+    assert sum(c["duration_s"] for c in doc["controls"]) == pytest.approx(doc["travel_time_s"], abs=1e-6)
+    from sbmpc.recording import entities
+    ents = entities(rrd)
+    for e in ("/terrain", "/paths/time", "/vehicle/time", "/vehicle/time/body", "/plots/speed/time",
+              "/plots/tau_l/time", "/plots/tau_r/time", "/plots/power/time", "/plots/energy/time"):
+        assert e in ents, e
+    assert ents["/vehicle/time"] > 10          # the pose is animated
+
+
+def test_cli_plan_unreachable_exits_1_with_reason(tmp_path, capsys):
+    js = tmp_path / "p.json"
+    assert main(["plan", str(SCEN / "unreachable.yaml"), "--json", str(js)]) == 1
+    captured = capsys.readouterr()
+    assert "no_path" in captured.out and "tip-over" in captured.err
+    doc = json.loads(js.read_text())
+    assert doc["status"] == "no_path" and doc["reason"]
+
+
+def test_cli_compare_writes_table_figure_and_recording(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    assert main(["compare", str(SCEN / "flat.yaml"), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "time-optimal" in text and "energy-optimal" in text
+    doc = json.loads((out / "compare.json").read_text())
+    assert doc["tradeoff"]["holds"] is True
+    assert (out / "compare.png").stat().st_size > 10_000
+    from sbmpc.recording import entities
+    ents = entities(out / "compare.rrd")
+    assert "/paths/time" in ents and "/paths/energy" in ents

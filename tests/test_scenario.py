@@ -1,0 +1,97 @@
+"""Scenario files: validation with every problem at once, key paths, exit code 2."""
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sbmpc import scenario as SC
+from sbmpc.cli import main
+from sbmpc.errors import InputError
+
+SHIPPED = sorted((Path(__file__).resolve().parents[1] / "scenarios").glob("*.yaml"))
+
+GOOD = {
+    "name": "t", "map": {"generate": {"size": [10, 10], "resolution": 0.25, "features": []}},
+    "terrain": "vinyl", "vehicle": "p3at", "start": {"x": 2, "y": 2, "yaw_deg": 0, "v": 0},
+    "goal": {"x": 8, "y": 8, "radius": 0.5}, "cost": "time",
+}
+
+
+def write(tmp_path, data, name="s.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data) if not isinstance(data, str) else data)
+    return p
+
+
+def test_shipped_scenarios_are_valid_and_say_what_they_show():
+    assert len(SHIPPED) >= 7
+    for path in SHIPPED:
+        scn = SC.load(path)
+        first = path.read_text().splitlines()[0]
+        assert first.startswith("#"), f"{path.name} starts with a comment saying what it shows"
+        assert scn.description
+
+
+def test_defaults_fill_the_planner_settings(tmp_path):
+    scn = SC.load(write(tmp_path, GOOD))
+    assert scn.planner == SC.PlannerSettings()
+    assert scn.goal["radius"] == 0.5 and scn.start["v"] == 0.0
+
+
+def test_every_problem_is_reported_at_once_with_its_key_path(tmp_path):
+    bad = dict(GOOD, start={"x": "east", "y": 2, "speed": 1}, goal={"x": 8, "y": 8, "radius": -1},
+               cost="fast", planner={"branching": 0, "period_s": 1.0, "dt": 2.0, "colour": "red"}, extra=1)
+    with pytest.raises(InputError) as e:
+        SC.load(write(tmp_path, bad))
+    msg = str(e.value)
+    for key in ("start.x", "start.speed", "goal.radius", "cost", "planner.branching", "planner.dt",
+                "planner.colour", "extra"):
+        assert key in msg, key
+    assert "problems" in msg and "s.yaml" in msg
+    assert "'fast'" in msg          # what was found
+
+
+def test_terrain_regions_validate_their_shapes(tmp_path):
+    bad = dict(GOOD, terrain={"default": "vinyl", "regions": [{"terrain": "grass", "rect": [5, 5, 1, 1]},
+                                                              {"terrain": "grass", "circle": [1, 1, 1], "rect": [0, 0, 1, 1]}]})
+    with pytest.raises(InputError) as e:
+        SC.load(write(tmp_path, bad))
+    assert "terrain.regions[0].rect" in str(e.value) and "terrain.regions[1]" in str(e.value)
+
+
+def test_yaml_syntax_error_names_the_line(tmp_path):
+    p = write(tmp_path, "name: t\nmap: {generate: [\nstart: 1\n")
+    with pytest.raises(InputError) as e:
+        SC.load(p)
+    assert "line" in str(e.value)
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"terrain": "lava"}, "terrain"),
+    ({"vehicle": "tank"}, "vehicle"),
+    ({"start": {"x": 50, "y": 2}}, "start: expected (x, y)"),
+    ({"map": {"file": "nothing.npy", "resolution": 0.2}}, "map.file"),
+])
+def test_cli_bad_scenarios_exit_2_with_one_message(tmp_path, capsys, change, words):
+    p = write(tmp_path, dict(GOOD, **change))
+    before = p.read_bytes()
+    assert main(["plan", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err and str(p) in err
+    assert p.read_bytes() == before           # input files are never modified
+
+
+def test_cli_missing_scenario_exits_2(tmp_path, capsys):
+    assert main(["plan", str(tmp_path / "none.yaml")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_terrain_layer_rasterises_regions():
+    import numpy as np
+    regions = [SC.Region("b", "rect", (0, 0, 1, 1)), SC.Region("c", "circle", (3, 3, 1)),
+               SC.Region("b", "polygon", ((2, 0), (4, 0), (4, 1)))]
+    x = y = np.arange(0, 5, 0.5)
+    L = SC.terrain_layer(regions, 0, ["a", "b", "c"], x, y)
+    assert L[0, 0] == 1 and L[6, 6] == 2 and L[9, 0] == 0
+    assert L[1, 7] == 1         # (3.5, 0.5) is inside the triangle
