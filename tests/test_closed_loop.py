@@ -183,3 +183,22 @@ def test_implicit_step_reduces_to_eq25_and_drive_window_to_eqs26_27(p3at):
     assert lo == hi == pytest.approx((vmax - k * 12.0) / ra)
     lo, hi = current_window(-12.0, vmax, k, ra, p3at.current_limit)
     assert lo == hi == pytest.approx((-vmax + k * 12.0) / ra)
+
+
+@pytest.mark.parametrize("terrain", ["vinyl", "asphalt", "grass", "packed_dirt"])
+def test_commands_from_rest_stay_bounded_at_the_planners_steps(terrain):
+    """Regression: a point turn from rest (wl = -0.61, wr = 4.56 rad/s on packed dirt) blew
+    up at dt = 10 ms when the friction's cross slopes made the implicit matrix singular.
+    Every command of a grid over the planner's range, from rest, at 10 and 20 ms: wheel
+    speeds stay within the drive's reach and battery power within what the drive can
+    draw (both sides at the current limit and the no-load speed)."""
+    m = Model.load("p3at", terrain)
+    v = m.vehicle
+    p_max = 2 * (v.current_limit ** 2 * v.armature_resistance + v.torque_constant * v.current_limit * v.no_load_speed)
+    w0 = v.no_load_speed
+    cmds = [(-0.608, 4.56)] + [(a * w0, b * w0) for a in np.linspace(-0.5, 1, 7) for b in np.linspace(-0.5, 1, 7)]
+    for dt in (0.01, 0.02):
+        for cl, cr in cmds:
+            tr = simulate(m, hold(cl, 1.5, dt), hold(cr, 1.5, dt), state=m.state(0.0, 0.0), dt=dt)
+            assert np.all(np.abs(tr.wl) <= 1.1 * w0) and np.all(np.abs(tr.wr) <= 1.1 * w0), (dt, cl, cr)
+            assert np.all(tr.power_W <= p_max + 1e-9), (dt, cl, cr)

@@ -1,0 +1,65 @@
+"""Planner speed: planning time, expansions and edge rollouts per second on the shipped
+scenarios (both costs), and how planning time grows with map size and branching factor.
+
+    python bench/bench_planner.py            # writes bench/results/planner.json
+
+Numba is warmed up first (one small plan); every figure is one run on one core.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "bench" / "results" / "planner.json"
+
+
+def row(plan) -> dict:
+    t = plan.planning_time_s
+    return {"status": plan.status, "planning_time_s": round(t, 3), "expansions": plan.nodes_expanded,
+            "edges": plan.edges_simulated, "expansions_per_s": round(plan.nodes_expanded / t),
+            "edges_per_s": round(plan.edges_simulated / t),
+            "travel_time_s": plan.travel_time_s, "energy_J": plan.energy_J}
+
+
+def main() -> int:
+    from sbmpc import plan as PL
+    from sbmpc import scenario as SC
+    t0 = time.perf_counter()
+    PL.plan(PL.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")        # compile / load the cache
+    warm = time.perf_counter() - t0
+    res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+                 "warmup_s": round(warm, 2), "scenarios": {}, "map_size": [], "branching": []}
+    for path in sorted((ROOT / "scenarios").glob("*.yaml")):
+        world = PL.resolve(SC.load(path))
+        res["scenarios"][path.stem] = {c: row(PL.plan(world, c)) for c in ("time", "energy")}
+        print(path.stem, res["scenarios"][path.stem], flush=True)
+    # growth with map size: the hills field's description scaled to L x L metres
+    field = SC.load(ROOT / "scenarios" / "hills_field.yaml")
+    for L in (20, 40, 60, 80):
+        gen = dict(field.map_spec["generate"], size=[L, L])
+        gen["features"] = [dict(gen["features"][0], count=int(round(24 * (L / 60) ** 2)))]
+        scn = replace(field, map_spec={"generate": gen}, goal=dict(field.goal, x=L - 5.0, y=L - 5.0))
+        world = PL.resolve(scn)
+        r = {"size_m": L, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
+        res["map_size"].append(r)
+        print("size", r, flush=True)
+    # growth with the branching factor, on the hill trade-off
+    hill = SC.load(ROOT / "scenarios" / "hill_tradeoff.yaml")
+    for b in (8, 12, 16, 24, 32):
+        world = PL.resolve(replace(hill, planner=replace(hill.planner, branching=b)))
+        r = {"branching": b, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
+        res["branching"].append(r)
+        print("branching", r, flush=True)
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps(res, indent=1))
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
