@@ -301,7 +301,7 @@ def problem(world: World, cost: str) -> Problem:
 
 
 # ---- reachability pre-check -----------------------------------------------------------
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
     """Cells where the vehicle would exceed the tip-over limit at every heading."""
     ny, nx = H.shape

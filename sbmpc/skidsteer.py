@@ -64,7 +64,7 @@ NQ = 25
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
     """Simulate one edge in place on S for up to ``nsteps`` steps (module doc). When
     ``rec`` has rows, every step is recorded from row ``rows`` on. Returns (end, rows):
@@ -126,7 +126,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
     return end, rows
 
 
-@njit(PROPAGATE.signature, cache=True)
+@njit(PROPAGATE.signature, cache=True, error_model="numpy")
 def propagate(params, data, state, control, out):
     """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
     out[:] = state
@@ -139,7 +139,7 @@ def propagate(params, data, state, control, out):
     return out[K.S_E] - state[K.S_E]
 
 
-@njit(HEURISTIC.signature, cache=True)
+@njit(HEURISTIC.signature, cache=True, error_model="numpy")
 def heuristic(params, data, state):
     """Lower bound of the time [s] or energy [J] to the goal disc (module doc): the larger
     of the straight-line bound and the map's cost-to-go grid (when present)."""
@@ -177,14 +177,14 @@ def heuristic(params, data, state):
     return h if h > 0.0 else 0.0
 
 
-@njit(GOAL.signature, cache=True)
+@njit(GOAL.signature, cache=True, error_model="numpy")
 def is_goal(params, data, state):
     dx = params[Q_GX] - state[K.S_X]
     dy = params[Q_GY] - state[K.S_Y]
     return dx * dx + dy * dy <= params[Q_GR] * params[Q_GR]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
     """Replay controls (cmd_l[i], cmd_r[i]) each for nsteps[i] steps from ``start``,
     recording every step into ``rec`` (row 0 the start). Returns (rows, end state, end

@@ -25,14 +25,14 @@ from .astar import GOAL, HEURISTIC, PROPAGATE, Problem, search
 CODES = ("outside the map border", "inside an obstacle")
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _snap(x, res):
     q = x / res
     c = math.floor(q + 0.5) if q >= 0.0 else -math.floor(-q + 0.5)
     return c * res
 
 
-@njit(PROPAGATE.signature, cache=True)
+@njit(PROPAGATE.signature, cache=True, error_model="numpy")
 def propagate(params, data, state, control, out):
     """One edge in float32 as the C++ does; cost = xy distance between snapped states."""
     x = np.float32(state[0])
@@ -68,7 +68,7 @@ def propagate(params, data, state, control, out):
     return math.sqrt(sx * sx + sy * sy)
 
 
-@njit(HEURISTIC.signature, cache=True)
+@njit(HEURISTIC.signature, cache=True, error_model="numpy")
 def heuristic(params, data, state):
     """Distance to the goal plus the wrapped bearing error (not admissible, as in the C++)."""
     dx = params[U_GX] - state[0]
@@ -78,7 +78,7 @@ def heuristic(params, data, state):
     return math.sqrt(dx * dx + dy * dy) + abs(e)
 
 
-@njit(GOAL.signature, cache=True)
+@njit(GOAL.signature, cache=True, error_model="numpy")
 def is_goal(params, data, state):
     if heuristic(params, data, state) <= params[U_THR]:
         return True
