@@ -1,0 +1,326 @@
+"""What the simulation gets wrong on a measured run, and why.
+
+1. :func:`replay` drives the closed-loop model with the logged commands, each segment
+   from its measured initial wheel speeds (the controller in steady state there), and
+   samples the prediction at the logged times.
+2. Errors are per channel (wheel speeds; torques, or currents when torques are absent)
+   in units of that channel's sensor noise, estimated from the data itself (the
+   spread of sample-to-sample differences), so 1.0 means "explained within the noise".
+3. Every candidate of :data:`CANDIDATES`, a physical change to the closed-loop model
+   with one or two parameters, is fitted on the training part (the first 70 % of the
+   run in time) by least squares, or by a grid where the objective is flat between
+   steps (the delay, down to one replay step). It is then scored on the held-out last
+   30 %.
+4. The cause is the candidate with the largest held-out gain (1 - extended / baseline
+   error), if that gain is at least :data:`MARGIN` and its BIC improves by more than
+   10. Otherwise the cause is ``none``.
+
+Evidence reported with each candidate: the held-out error and gain, the BIC change on
+the training part, the parameters with standard errors (from the least-squares
+Jacobian), and the Ljung-Box whiteness statistic of the held-out residuals before and
+after. The diagnosis also reports the baseline's error by regime (steady or transient,
+straight or turning, early or late) and the peak cross-correlation of the residuals
+with the commands over lags.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+from scipy.optimize import least_squares
+
+from .params import Terrain, Vehicle
+from .runs import Run
+from .simulate import Model, simulate
+from .synth import apply
+
+MARGIN = 0.10          # least held-out gain that names a cause
+TRAIN_FRACTION = 0.7
+REPLAY_DT = 0.001      # s: the controller period of the P3-AT; the replay uses the vehicle's own
+
+# name -> (parameter names, lower bounds, upper bounds, start, grid step or 0)
+CANDIDATES = {
+    "command_delay": (("delay_s",), (0.0,), (0.5,), (0.1,), 0.025),
+    "actuator_lag": (("lag_s",), (0.0,), (0.3,), (0.03,), 0.0),
+    "wheel_radius": (("scale_left", "scale_right"), (0.7, 0.7), (1.3, 1.3), (1.0, 1.0), 0.0),
+    "viscous_friction": (("c_Nms",), (-1.0,), (3.0,), (0.1,), 0.0),
+    "voltage_sag": (("sag_V_per_kJ",), (0.0,), (5.0,), (0.3,), 0.0),
+    "shear_relaxation": (("tau_s",), (0.0,), (2.0,), (0.2,), 0.0),
+    "grade": (("grade_deg",), (-20.0,), (20.0,), (0.0,), 0.0),
+}
+
+
+def channels(run: Run) -> tuple:
+    """The channels compared: wheel speeds, and torques (or currents when no torques)."""
+    ch = ["wl", "wr"]
+    if "tau_l" in run and "tau_r" in run:
+        ch += ["tau_l", "tau_r"]
+    elif "i_l" in run and "i_r" in run:
+        ch += ["i_l", "i_r"]
+    return tuple(ch)
+
+
+def noise_scale(y: np.ndarray) -> float:
+    """Standard deviation of white sensor noise on a sampled signal, from the median
+    absolute sample-to-sample difference (robust to the signal's own steps)."""
+    d = np.diff(y[np.isfinite(y)])
+    if d.size < 3:
+        return 1.0
+    s = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+    return s if s > 1e-9 else 1e-9
+
+
+def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt: float = REPLAY_DT) -> dict:
+    """Predicted channels at the run's times (NaN where no segment covers them)."""
+    model = Model(vehicle, terrain, dt)
+    n = len(run)
+    out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r")}
+    t_all = run.t
+    for a, b in run.segments():
+        t = t_all[a:b]
+        cl = _ffill(run["wl_cmd"][a:b])
+        cr = _ffill(run["wr_cmd"][a:b])
+        k = int(round((t[-1] - t[0]) / dt)) + 1
+        tk = t[0] + dt * np.arange(k)
+        j = np.clip(np.searchsorted(t, tk + 1e-9, side="right") - 1, 0, len(t) - 1)
+        w0l = run["wl"][a] if np.isfinite(run["wl"][a]) else cl[0]
+        w0r = run["wr"][a] if np.isfinite(run["wr"][a]) else cr[0]
+        S = model.state(float(w0l), float(w0r), pitch)
+        tr = simulate(model, cl[j], cr[j], state=S, pitch=pitch, record_dt=dt, dt=dt)
+        ts = t[0] + tr.t
+        for c in out:
+            out[c][a:b] = np.interp(t, ts, tr.data[c])
+    return out
+
+
+def _ffill(x: np.ndarray) -> np.ndarray:
+    x = x.copy()
+    ok = np.isfinite(x)
+    if not ok.any():
+        return np.zeros_like(x)
+    idx = np.where(ok, np.arange(len(x)), 0)
+    np.maximum.accumulate(idx, out=idx)
+    x = x[idx]
+    x[~np.isfinite(x)] = x[ok][0]
+    return x
+
+
+@dataclass
+class Candidate:
+    effect: str
+    params: dict
+    stderr: dict
+    heldout_error: float
+    gain: float
+    bic_delta: float
+    whiteness_q: float
+
+
+@dataclass
+class Diagnosis:
+    """The result of :func:`diagnose` (CONTRACTS.md diagnosis JSON via :meth:`to_json`)."""
+
+    channels: tuple
+    scales: dict
+    baseline_error: float
+    baseline_rmse: dict
+    baseline_whiteness_q: float
+    candidates: list
+    cause: str
+    gain: float
+    where: dict = field(default_factory=dict)
+    xcorr: dict = field(default_factory=dict)
+    extended_vehicle: Vehicle | None = None
+    extended_pitch_deg: float = 0.0
+
+    def to_json(self, extended_path: str | None = None) -> dict:
+        return {
+            "schema": "sbmpc.diagnosis/1",
+            "baseline": {"heldout_error": self.baseline_error, "rmse": self.baseline_rmse,
+                         "whiteness_q": self.baseline_whiteness_q, "where": self.where, "xcorr": self.xcorr},
+            "candidates": [{"effect": c.effect, "params": c.params, "stderr": c.stderr,
+                            "heldout_error": c.heldout_error, "gain": c.gain, "bic_delta": c.bic_delta,
+                            "whiteness_q": c.whiteness_q} for c in self.candidates],
+            "cause": self.cause,
+            "gain": self.gain,
+            "margin": MARGIN,
+            "channels": list(self.channels),
+            "noise_scales": self.scales,
+            "extended_vehicle": extended_path,
+            "extended_grade_deg": self.extended_pitch_deg,
+        }
+
+
+def _residuals(run, pred, chans, scales, mask):
+    parts = []
+    for c in chans:
+        r = (run[c] - pred[c]) / scales[c]
+        parts.append(r[mask])
+    r = np.concatenate(parts)
+    return r[np.isfinite(r)]
+
+
+def _error(run, pred, chans, scales, mask):
+    """Mean over channels of the RMS residual in noise units."""
+    errs = []
+    for c in chans:
+        r = ((run[c] - pred[c]) / scales[c])[mask]
+        r = r[np.isfinite(r)]
+        errs.append(math.sqrt(float(np.mean(r * r))) if r.size else math.nan)
+    return float(np.nanmean(errs))
+
+
+def ljung_box(r: np.ndarray, lags: int = 20) -> float:
+    """Ljung-Box Q statistic of a residual series (large = not white)."""
+    r = r[np.isfinite(r)]
+    n = r.size
+    if n <= lags + 1:
+        return math.nan
+    r = r - r.mean()
+    den = float(np.dot(r, r))
+    q = 0.0
+    for k in range(1, lags + 1):
+        rho = float(np.dot(r[k:], r[:-k])) / den
+        q += rho * rho / (n - k)
+    return n * (n + 2) * q
+
+
+def _model_for(effect, x, vehicle, names):
+    return apply(vehicle, effect, dict(zip(names, x)))
+
+
+def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
+    """Fit one candidate on the training mask: (x, standard errors).
+
+    One parameter: a bounded Brent search of the residual sum of squares, after a coarse
+    grid where the objective is flat between steps (the delay); the standard error from
+    the curvature of that sum at the optimum. Two parameters: least squares, the
+    standard errors from its Jacobian."""
+    names, lo, hi, x0, step = CANDIDATES[effect]
+    last = int(np.flatnonzero(train)[-1]) + 1
+    part = run.slice(0, last)
+    tmask = train[:last]
+
+    def fun(x):
+        v, pitch = _model_for(effect, x, vehicle, names)
+        return _residuals(part, replay(part, v, terrain, pitch), chans, scales, tmask)
+
+    if len(names) == 1:
+        from scipy.optimize import minimize_scalar
+        cost = lambda a: float(np.sum(fun([a]) ** 2))
+        a_lo, a_hi = lo[0], hi[0]
+        if step > 0:
+            # piecewise constant (whole replay steps): nested grids down to one replay step
+            g, st = None, step
+            grid = np.arange(lo[0], hi[0] + 1e-12, st)
+            while True:
+                costs = [cost(a) for a in grid]
+                g = float(grid[int(np.argmin(costs))])
+                if st <= REPLAY_DT * 1.001:
+                    break
+                st = max(st / 5.0, REPLAY_DT)
+                grid = np.arange(max(lo[0], g - 5 * st), min(hi[0], g + 5 * st) + 1e-12, st)
+            return np.array([g]), np.array([REPLAY_DT / math.sqrt(12.0)])
+        res = minimize_scalar(cost, bounds=(a_lo, a_hi), method="bounded",
+                              options={"xatol": 1e-4 * max(abs(a_hi - a_lo), 1e-3)})
+        x = float(res.x)
+        h = max(1e-3 * (hi[0] - lo[0]), 1e-6)
+        c0, cp, cm = res.fun, cost(min(x + h, hi[0])), cost(max(x - h, lo[0]))
+        curv = (cp - 2 * c0 + cm) / (h * h)
+        m = fun([x]).size
+        se = math.sqrt(2.0 * c0 / max(m - 1, 1) / curv) if curv > 0 else math.nan
+        return np.array([x]), np.array([se])
+    res = least_squares(fun, np.array(x0, float), bounds=(np.array(lo), np.array(hi)), diff_step=1e-3,
+                        x_scale="jac", max_nfev=40)
+    J = res.jac
+    m, k = J.shape
+    s2 = float(np.sum(res.fun ** 2)) / max(m - k, 1)
+    try:
+        cov = np.linalg.inv(J.T @ J) * s2
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(k, math.nan)
+    return res.x, se
+
+
+def _bic(r, k):
+    n = r.size
+    return n * math.log(float(np.sum(r * r)) / n) + k * math.log(n)
+
+
+def _where(run, pred, chans, scales):
+    """Baseline error by regime: steady vs transient, straight vs turning, early vs late."""
+    cl, cr = run["wl_cmd"], run["wr_cmd"]
+    t = run.t
+    change = np.r_[True, (np.abs(np.diff(cl)) + np.abs(np.diff(cr))) > 1e-9]
+    last = np.maximum.accumulate(np.where(change, np.arange(len(t)), 0))
+    since = t - t[last]
+    masks = {
+        "transient": since < 1.0, "steady": since >= 1.0,
+        "straight": np.abs(cl - cr) <= 0.05 * (np.abs(cl) + np.abs(cr) + 1e-9),
+        "turning": np.abs(cl - cr) > 0.05 * (np.abs(cl) + np.abs(cr) + 1e-9),
+        "early": t < t[0] + 0.5 * (t[-1] - t[0]), "late": t >= t[0] + 0.5 * (t[-1] - t[0]),
+    }
+    return {k: _error(run, pred, chans, scales, m) for k, m in masks.items() if m.any()}
+
+
+def _xcorr(run, pred, scales, max_lag_s=1.0):
+    """Peak cross-correlation of the wheel-speed residuals with the commanded wheel-speed
+    changes over lags of +-max_lag_s (a delay or lag shows as a peak at a positive lag)."""
+    t = run.t
+    dt = float(np.median(np.diff(t)))
+    L = int(round(max_lag_s / dt))
+    best = (0.0, 0.0)
+    for c in ("l", "r"):
+        r = (run[f"w{c}"] - pred[f"w{c}"]) / scales[f"w{c}"]
+        u = np.r_[0.0, np.diff(_ffill(run[f"w{c}_cmd"]))]
+        ok = np.isfinite(r)
+        r = np.where(ok, r - np.nanmean(r), 0.0)
+        u = u - u.mean()
+        den = math.sqrt(float(np.dot(r, r)) * float(np.dot(u, u))) or 1.0
+        for lag in range(-L, L + 1):
+            rho = float(np.dot(r[max(lag, 0):len(r) + min(lag, 0)], u[max(-lag, 0):len(u) - max(lag, 0)])) / den
+            if abs(rho) > abs(best[0]):
+                best = (rho, lag * dt)
+    return {"peak_rho": best[0], "lag_s": best[1]}
+
+
+def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
+             effects: tuple | None = None) -> Diagnosis:
+    """Diagnose a measured run (module doc)."""
+    chans = channels(run)
+    scales = {c: noise_scale(run[c]) for c in chans}
+    t = run.t
+    split = t[0] + TRAIN_FRACTION * (t[-1] - t[0])
+    train, held = t < split, t >= split
+    base = replay(run, vehicle, terrain, pitch)
+    base_err = _error(run, base, chans, scales, held)
+    r_base_train = _residuals(run, base, chans, scales, train)
+    bic0 = _bic(r_base_train, 0)
+    q0 = ljung_box(((run["wl"] - base["wl"]) / scales["wl"])[held])
+    rmse = {c: float(np.sqrt(np.nanmean(((run[c] - base[c]))[held] ** 2))) for c in chans}
+    cands = []
+    for eff in effects or tuple(CANDIDATES):
+        names = CANDIDATES[eff][0]
+        x, se = fit_candidate(eff, run, vehicle, terrain, chans, scales, train)
+        v, p = _model_for(eff, x, vehicle, names)
+        p = p + pitch
+        pred = replay(run, v, terrain, p)
+        err = _error(run, pred, chans, scales, held)
+        r_train = _residuals(run, pred, chans, scales, train)
+        cands.append(Candidate(eff, {n: float(a) for n, a in zip(names, x)}, {n: float(s) for n, s in zip(names, se)},
+                               err, 1.0 - err / base_err, _bic(r_train, len(names)) - bic0,
+                               ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held])))
+    cands.sort(key=lambda c: -c.gain)
+    best = cands[0] if cands else None
+    named = best is not None and best.gain >= MARGIN and best.bic_delta < -10.0
+    ext_v, ext_p = vehicle, 0.0
+    if named:
+        ext_v, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
+                              CANDIDATES[best.effect][0])
+        ext_p = math.degrees(p)
+    return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
+                     best.gain if named else 0.0, _where(run, base, chans, scales), _xcorr(run, base, scales),
+                     ext_v, ext_p)

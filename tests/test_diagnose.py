@@ -1,0 +1,126 @@
+"""Measured runs: the CSV reader, and the diagnosis finding effects hidden in generated data."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from dynamics import load_terrain, load_vehicle
+from dynamics.discrepancy import CANDIDATES, MARGIN, diagnose, noise_scale, replay
+from dynamics.runs import Run, RunError, read_run, write_run
+from dynamics.synth import STRENGTHS, synth_run
+from sbmpc.cli import main
+
+P3AT, VINYL = load_vehicle("p3at"), load_terrain("vinyl")
+DURATION = 60.0
+
+
+# ---- the run CSV -------------------------------------------------------------------
+def test_run_csv_round_trip_with_gaps_and_segments(tmp_path):
+    t = np.arange(0, 2, 0.01)
+    cols = {"t": t, "wl_cmd": np.ones_like(t), "wr_cmd": np.ones_like(t), "wl": np.sin(t), "wr": np.cos(t),
+            "segment": (t >= 1).astype(float)}
+    cols["wl"][5] = np.nan
+    p = tmp_path / "r.csv"
+    write_run(p, Run(cols, {"vehicle": "p3at"}))
+    run = read_run(p)
+    assert run.meta["vehicle"] == "p3at"
+    assert np.isnan(run["wl"][5]) and run["wr"][5] == pytest.approx(math.cos(0.05), abs=1e-5)
+    assert run.segments() == [(0, 100), (100, 200)]
+    # a logging gap also starts a segment
+    cols2 = {k: np.delete(v, np.arange(50, 80)) for k, v in cols.items() if k != "segment"}
+    assert len(Run(cols2).segments()) == 2
+
+
+@pytest.mark.parametrize("text, words", [
+    ("t,wl_cmd,wr_cmd,wl\n0,1,1,1\n", "found no wr"),
+    ("t,wl_cmd,wr_cmd,wl,wr\n0,1,1,1,1\n0.01,1,1,fast,1\n", "line 3, column wl: expected a number, found 'fast'"),
+    ("t,wl_cmd,wr_cmd,wl,wr\n0,1,1,1,1\n0.02,1,1,1,1\n0.01,1,1,1,1\n", "line 4, column t: expected time to increase"),
+    ("# vehicle: p3at\n", "empty file"),
+    ("t,wl_cmd,wr_cmd,wl,wr\n", "found none"),
+    ("t,wl_cmd,wr_cmd,wl,wr\n0,1,1,1\n", "expected 5 cells, found 4"),
+])
+def test_bad_run_files_name_line_and_column(tmp_path, capsys, text, words):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(RunError) as e:
+        read_run(p)
+    assert words in str(e.value) and str(p) in str(e.value)
+    assert main(["diagnose", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err and err.count("\n") == 1
+    assert p.read_text() == text                   # never modified
+
+
+def test_noise_scale_recovers_white_noise_on_a_stepping_signal():
+    rng = np.random.default_rng(0)
+    y = np.repeat(rng.uniform(-5, 5, 40), 100) + rng.normal(0, 0.05, 4000)
+    assert noise_scale(y) == pytest.approx(0.05, rel=0.1)
+
+
+def test_replay_of_a_clean_run_is_exact():
+    run, _ = synth_run("none", 1, duration=20.0, noise=False)
+    pred = replay(run, P3AT, VINYL)
+    for c in ("wl", "wr", "tau_l", "tau_r"):
+        assert np.max(np.abs(pred[c] - run[c])) < 0.05, c
+
+
+# ---- effects hidden in generated data ------------------------------------------------
+TOLERANCE = {   # absolute tolerance on the fitted parameter
+    "command_delay": {"delay_s": 0.004},
+    "actuator_lag": {"lag_s": 0.012},
+    "wheel_radius": {"scale_left": 0.01, "scale_right": 0.01},
+    "viscous_friction": {"c_Nms": 0.03},
+    "voltage_sag": {"sag_V_per_kJ": 0.15},
+    "shear_relaxation": {"tau_s": 0.08},
+    "grade": {"grade_deg": 0.3},
+}
+
+
+@pytest.mark.parametrize("effect, seed", [(e, 11 + i) for i, e in enumerate(CANDIDATES)])
+def test_the_hidden_effect_is_named_and_its_parameter_recovered(effect, seed):
+    run, hidden = synth_run(effect, seed, duration=DURATION)
+    d = diagnose(run, P3AT, VINYL)
+    assert d.cause == effect, [(c.effect, round(c.gain, 3)) for c in d.candidates[:3]]
+    assert d.gain >= MARGIN
+    fitted = d.candidates[0].params
+    for name, tol in TOLERANCE[effect].items():
+        assert fitted[name] == pytest.approx(hidden[name], abs=tol), (name, fitted, hidden)
+    # the extended model explains the held-out part within about the noise
+    assert d.candidates[0].heldout_error < 1.3
+    assert d.candidates[0].whiteness_q < d.baseline_whiteness_q
+
+
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_no_false_alarm_on_runs_without_an_effect(seed):
+    run, _ = synth_run("none", seed, duration=DURATION)
+    d = diagnose(run, P3AT, VINYL)
+    assert d.cause == "none"
+    assert d.baseline_error < 1.3
+    assert max(c.gain for c in d.candidates) < 0.5 * MARGIN
+
+
+def test_effect_strengths_cover_the_vocabulary():
+    assert set(STRENGTHS) == set(CANDIDATES) | {"none"}
+
+
+# ---- the commands ------------------------------------------------------------------
+def test_cli_synth_then_diagnose_writes_json_vehicle_and_report(tmp_path, capsys):
+    csv = tmp_path / "run.csv"
+    assert main(["synth", "--effect", "wheel_radius", "--seed", "5", "--out", str(csv), "--duration", "40"]) == 0
+    js, rep = tmp_path / "d.json", tmp_path / "rep"
+    assert main(["diagnose", str(csv), "--json", str(js), "--report", str(rep)]) == 0
+    out = capsys.readouterr().out
+    assert "cause: wheel_radius" in out
+    doc = json.loads(js.read_text())
+    assert doc["schema"] == "sbmpc.diagnosis/1" and doc["cause"] == "wheel_radius"
+    assert doc["candidates"][0]["effect"] == "wheel_radius"
+    assert [c["gain"] for c in doc["candidates"]] == sorted((c["gain"] for c in doc["candidates"]), reverse=True)
+    for key in ("heldout_error", "rmse"):
+        assert key in doc["baseline"]
+    ext = load_vehicle(doc["extended_vehicle"])
+    assert min(ext.radius_scale_left, ext.radius_scale_right) < 0.96
+    for f in ("report.md", "replay.png", "residuals.png"):
+        assert (rep / f).stat().st_size > 500
+    # the extended vehicle is accepted by simulate
+    assert main(["simulate", "--vehicle", doc["extended_vehicle"], "--v", "0.5", "--duration", "2"]) == 0
