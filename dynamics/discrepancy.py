@@ -8,7 +8,7 @@
    spread of sample-to-sample differences), so 1.0 means "explained within the noise".
 3. Every candidate of :data:`CANDIDATES`, a physical change to the closed-loop model
    with one or two parameters, is fitted on the training part (the first 70 % of the
-   run in time) by least squares, or by a grid where the objective is flat between
+   run in time, at most its first FIT_WINDOW_S seconds) by least squares, or by a grid where the objective is flat between
    steps (the delay, down to one replay step). It is then scored on the held-out last
    30 %.
 4. The cause is the candidate with the largest held-out gain (1 - extended / baseline
@@ -38,6 +38,7 @@ from .synth import apply
 
 MARGIN = 0.10          # least held-out gain that names a cause
 TRAIN_FRACTION = 0.7
+FIT_WINDOW_S = 120.0   # s: fits use at most the first 120 s of the training part (speed)
 REPLAY_DT = 0.001      # s: the controller period of the P3-AT; the replay uses the vehicle's own
 
 # name -> (parameter names, lower bounds, upper bounds, start, grid step or 0)
@@ -49,7 +50,37 @@ CANDIDATES = {
     "voltage_sag": (("sag_V_per_kJ",), (0.0,), (5.0,), (0.3,), 0.0),
     "shear_relaxation": (("tau_s",), (0.0,), (2.0,), (0.2,), 0.0),
     "grade": (("grade_deg",), (-20.0,), (20.0,), (0.0,), 0.0),
+    # sbmpc's own candidate: one scale on the terrain's mu_sa and mu_op (turning friction)
+    "turning_friction": (("mu_scale",), (0.1,), (3.0,), (1.0,), 0.0),
 }
+
+
+def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=None, max_nfev: int = 30):
+    """Least-squares calibration of vehicle fields ({name: (low, high)}) on the wheel-speed
+    (and torque or current) replay of ``run`` (restricted to ``mask``). Returns the
+    calibrated vehicle and {name: (value, standard error)}."""
+    chans = channels(run)
+    scales = {c: noise_scale(run[c]) for c in chans}
+    mask = np.ones(len(run), bool) if mask is None else mask
+    names = list(fields)
+    x0 = np.array([getattr(vehicle, n) for n in names], float)
+    lo = np.array([fields[n][0] for n in names], float)
+    hi = np.array([fields[n][1] for n in names], float)
+
+    def fun(x):
+        v = vehicle.replace(**dict(zip(names, map(float, x))))
+        return _residuals(run, replay(run, v, terrain), chans, scales, mask)
+
+    res = least_squares(fun, np.clip(x0, lo, hi), bounds=(lo, hi), diff_step=1e-2, x_scale="jac",
+                        max_nfev=max_nfev)
+    J = res.jac
+    s2 = float(np.sum(res.fun ** 2)) / max(J.shape[0] - J.shape[1], 1)
+    try:
+        se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(len(names), math.nan)
+    v = vehicle.replace(**dict(zip(names, map(float, res.x))))
+    return v, {n: (float(a), float(e)) for n, a, e in zip(names, res.x, se)}
 
 
 def channels(run: Run) -> tuple:
@@ -68,6 +99,9 @@ def noise_scale(y: np.ndarray) -> float:
     d = np.diff(y[np.isfinite(y)])
     if d.size < 3:
         return 1.0
+    nz = d[d != 0.0]
+    if nz.size < 0.5 * d.size:      # a held (slower sensor) or quantised signal: use its changes
+        d = nz if nz.size >= 3 else d
     s = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
     return s if s > 1e-9 else 1e-9
 
@@ -134,6 +168,7 @@ class Diagnosis:
     xcorr: dict = field(default_factory=dict)
     extended_vehicle: Vehicle | None = None
     extended_pitch_deg: float = 0.0
+    extended_terrain: Terrain | None = None
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -150,6 +185,9 @@ class Diagnosis:
             "noise_scales": self.scales,
             "extended_vehicle": extended_path,
             "extended_grade_deg": self.extended_pitch_deg,
+            "extended_terrain": None if self.extended_terrain is None else
+            {"name": self.extended_terrain.name, "mu_sa": self.extended_terrain.mu_sa,
+             "mu_op": self.extended_terrain.mu_op},
         }
 
 
@@ -187,8 +225,9 @@ def ljung_box(r: np.ndarray, lags: int = 20) -> float:
     return n * (n + 2) * q
 
 
-def _model_for(effect, x, vehicle, names):
-    return apply(vehicle, effect, dict(zip(names, x)))
+def _model_for(effect, x, vehicle, terrain, names):
+    """(vehicle, terrain, pitch) of a candidate at parameters x."""
+    return apply(vehicle, effect, dict(zip(names, x)), terrain)
 
 
 def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
@@ -200,12 +239,13 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
     standard errors from its Jacobian."""
     names, lo, hi, x0, step = CANDIDATES[effect]
     last = int(np.flatnonzero(train)[-1]) + 1
+    last = min(last, int(np.searchsorted(run.t, run.t[0] + FIT_WINDOW_S)) + 1)
     part = run.slice(0, last)
     tmask = train[:last]
 
     def fun(x):
-        v, pitch = _model_for(effect, x, vehicle, names)
-        return _residuals(part, replay(part, v, terrain, pitch), chans, scales, tmask)
+        v, ter, pitch = _model_for(effect, x, vehicle, terrain, names)
+        return _residuals(part, replay(part, v, ter, pitch), chans, scales, tmask)
 
     if len(names) == 1:
         from scipy.optimize import minimize_scalar
@@ -305,9 +345,9 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     for eff in effects or tuple(CANDIDATES):
         names = CANDIDATES[eff][0]
         x, se = fit_candidate(eff, run, vehicle, terrain, chans, scales, train)
-        v, p = _model_for(eff, x, vehicle, names)
+        v, ter, p = _model_for(eff, x, vehicle, terrain, names)
         p = p + pitch
-        pred = replay(run, v, terrain, p)
+        pred = replay(run, v, ter, p)
         err = _error(run, pred, chans, scales, held)
         r_train = _residuals(run, pred, chans, scales, train)
         cands.append(Candidate(eff, {n: float(a) for n, a in zip(names, x)}, {n: float(s) for n, s in zip(names, se)},
@@ -316,11 +356,11 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     cands.sort(key=lambda c: -c.gain)
     best = cands[0] if cands else None
     named = best is not None and best.gain >= MARGIN and best.bic_delta < -10.0
-    ext_v, ext_p = vehicle, 0.0
+    ext_v, ext_t, ext_p = vehicle, terrain, 0.0
     if named:
-        ext_v, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
-                              CANDIDATES[best.effect][0])
+        ext_v, ext_t, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
+                                     terrain, CANDIDATES[best.effect][0])
         ext_p = math.degrees(p)
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
                      best.gain if named else 0.0, _where(run, base, chans, scales), _xcorr(run, base, scales),
-                     ext_v, ext_p)
+                     ext_v, ext_p, ext_t)

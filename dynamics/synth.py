@@ -27,6 +27,7 @@ STRENGTHS = {
     "voltage_sag": ("sag_V_per_kJ", (0.5, 1.0)),
     "shear_relaxation": ("tau_s", (0.25, 0.6)),
     "grade": ("grade_deg", (3.0, 6.0)),
+    "turning_friction": ("mu_scale", (0.6, 0.8)),      # sbmpc's own: the terrain turns easier than its file says
 }
 NOISE = {"wl": 0.05, "wr": 0.05, "tau_l": 0.08, "tau_r": 0.08, "i_l": 0.05, "i_r": 0.05,
          "x": 0.01, "y": 0.01, "yaw": 0.005}
@@ -51,9 +52,9 @@ def hidden(effect: str, seed: int) -> dict:
     return {name: x}
 
 
-def apply(vehicle: Vehicle, effect: str, params: dict) -> tuple:
-    """(vehicle, pitch [rad]) with an effect's parameters switched on."""
-    v, pitch = vehicle, 0.0
+def apply(vehicle: Vehicle, effect: str, params: dict, terrain: Terrain | None = None) -> tuple:
+    """(vehicle, terrain, pitch [rad]) with an effect's parameters switched on."""
+    v, t, pitch = vehicle, terrain, 0.0
     if effect == "command_delay":
         v = v.replace(delay=params["delay_s"])
     elif effect == "actuator_lag":
@@ -68,7 +69,10 @@ def apply(vehicle: Vehicle, effect: str, params: dict) -> tuple:
         v = v.replace(shear_lag=params["tau_s"])
     elif effect == "grade":
         pitch = math.radians(params["grade_deg"])
-    return v, pitch
+    elif effect == "turning_friction":
+        k = params["mu_scale"]
+        t = t.replace(mu_sa=t.mu_sa * k, mu_op=t.mu_op * k)
+    return v, t, pitch
 
 
 def excitation(seed: int, duration: float, vehicle: Vehicle, dt: float) -> tuple:
@@ -107,8 +111,8 @@ def synth_run(effect: str, seed: int, vehicle: Vehicle | None = None, terrain: T
     vehicle = vehicle or load_vehicle("p3at")
     terrain = terrain or load_terrain("vinyl")
     params = hidden(effect, seed) if params is None else params
-    truth, pitch = apply(vehicle, effect, params)
-    model = Model(truth, terrain)
+    truth, ground, pitch = apply(vehicle, effect, params, terrain)
+    model = Model(truth, ground)
     dt = model.step_s
     cl, cr = excitation(seed, duration, vehicle, dt)
     tr = simulate(model, cl, cr, state=model.state(0.0, 0.0, pitch), pitch=pitch, record_dt=1.0 / RATE)

@@ -102,6 +102,9 @@ def run_diagnose(args) -> int:
         note = f"extended by sbmpc diagnose from {args.run}: cause {d.cause}"
         if d.cause == "grade":
             note += f" (the run was on a {d.extended_pitch_deg:.2f} deg grade; the vehicle is unchanged)"
+        if d.cause == "turning_friction":
+            note += (f" (the terrain's mu_sa, mu_op are {d.extended_terrain.mu_sa:.3f}, {d.extended_terrain.mu_op:.3f};"
+                     " the vehicle is unchanged)")
         out_vehicle.parent.mkdir(parents=True, exist_ok=True)
         out_vehicle.write_text(vehicle_to_yaml(d.extended_vehicle, note))
     doc = d.to_json(str(out_vehicle) if out_vehicle else None)
@@ -123,7 +126,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     import matplotlib.pyplot as plt
     import numpy as np
     base = replay(run, vehicle, terrain, pitch)
-    ext = replay(run, d.extended_vehicle, terrain, pitch + math.radians(d.extended_pitch_deg))
+    ext = replay(run, d.extended_vehicle, d.extended_terrain or terrain, pitch + math.radians(d.extended_pitch_deg))
     t = run.t
     fig, ax = plt.subplots(len(d.channels), 1, figsize=(11, 2.2 * len(d.channels)), sharex=True)
     for a, c in zip(np.atleast_1d(ax), d.channels):

@@ -74,6 +74,7 @@ TOLERANCE = {   # absolute tolerance on the fitted parameter
     "voltage_sag": {"sag_V_per_kJ": 0.15},
     "shear_relaxation": {"tau_s": 0.08},
     "grade": {"grade_deg": 0.3},
+    "turning_friction": {"mu_scale": 0.03},
 }
 
 
