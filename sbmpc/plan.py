@@ -6,6 +6,7 @@ the goal; the plan's trajectory *is* that replay.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -227,11 +228,24 @@ def climb_limit(world: World) -> float:
     return max(steepest_grade(world.vehicle, t) for t in world.terrains) + math.radians(RUNUP_DEG)
 
 
+@functools.lru_cache(maxsize=8)
+def blocked_cells(world: World) -> np.ndarray:
+    """(ny, nx) cells where the vehicle tips over at every heading (computed once per
+    world: the reachability check and the cost-to-go grid share it)."""
+    e = world.emap
+    ox, oy = e.origin
+    b = _blocked(e.heights, e.resolution, ox, oy, world.half_length, world.half_width,
+                 math.radians(world.scenario.planner.tip_over_deg), 16)
+    b.setflags(write=False)        # cached and shared
+    return b
+
+
+@functools.lru_cache(maxsize=8)
 def cost_to_go(world: World, cost: str) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
     over 8-neighbour steps, see :mod:`sbmpc.skidsteer`), and the slack [s or J] the
     heuristic subtracts for the way from a pose to its nearest node. Unreachable nodes
-    get a large finite cost."""
+    get a large finite cost. Cached per (world, cost): planning and replaying share it."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
     e, scn = world.emap, world.scenario
@@ -240,8 +254,7 @@ def cost_to_go(world: World, cost: str) -> tuple:
     res = e.resolution
     vb, froll, mg = _bounds(world, cost)
     ox, oy = e.origin
-    blocked = _blocked(H, res, ox, oy, world.half_length, world.half_width,
-                       math.radians(scn.planner.tip_over_deg), 16).ravel()
+    blocked = blocked_cells(world).ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:
         mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer].ravel()
     else:
@@ -280,7 +293,9 @@ def cost_to_go(world: World, cost: str) -> tuple:
     D[~np.isfinite(D)] = 1e12
     diag = res * math.sqrt(2.0)
     slack = diag / vb if cost == "time" else (froll_cell.max() * diag + mg * _max_rise(H, res, diag))
-    return D.reshape(ny, nx), float(slack)
+    D = D.reshape(ny, nx)
+    D.setflags(write=False)        # cached and shared
+    return D, float(slack)
 
 
 def _max_rise(H, res, dist):
@@ -325,9 +340,7 @@ def unreachable_reason(world: World) -> str | None:
     the vehicle tips over at every heading (checked at cell centres); else None."""
     e, scn = world.emap, world.scenario
     ox, oy = e.origin
-    tip = math.radians(scn.planner.tip_over_deg)
-    blocked = _blocked(e.heights, e.resolution, ox, oy, world.half_length, world.half_width, tip, 16)
-    labels, _ = ndimage.label(~blocked, structure=np.ones((3, 3)))
+    labels, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
     def cell(x, y):
         return (min(max(int(round((y - oy) / e.resolution)), 0), e.shape[0] - 1),
                 min(max(int(round((x - ox) / e.resolution)), 0), e.shape[1] - 1))
