@@ -74,7 +74,7 @@ def main(argv=None) -> int:
         m = (t > t[0] + 0.75 * (t[-1] - t[0])) & (t < t[0] + 0.75 * (t[-1] - t[0]) + 40)
         a.plot(t[m], run["wl_cmd"][m], color="0.8", lw=1, label="command (left)")
         a.plot(t[m], run["wl"][m], "k.", ms=2, label="measured")
-        a.plot(t[m], b0[m] if False else b0["wl"][m], lw=1, label="nominal model")
+        a.plot(t[m], b0["wl"][m], lw=1, label="nominal model")
         a.plot(t[m], b1["wl"][m], lw=1.2, label="calibrated")
         if cause != "none":
             a.plot(t[m], ext["wl"][m], lw=1.2, label=f"extended ({cause})")

@@ -73,7 +73,7 @@ _RUN_SIG = types.int64(PROPAGATE, HEURISTIC, types.float64, GOAL, _F1, _F1, _F2,
 
 
 @njit(cache=True, error_model="numpy")
-def _cell(x, res):
+def cell_index(x, res):
     """round(x / res), half away from zero."""
     q = x / res
     return int(math.floor(q + 0.5)) if q >= 0.0 else -int(math.floor(-q + 0.5))
@@ -173,7 +173,7 @@ def _pop(hf, hs, hn, cnt):
 @njit(cache=True, error_model="numpy")
 def _key_of(state, dims, res, key):
     for d in range(dims.shape[0]):
-        key[d] = _cell(state[dims[d]], res[d])
+        key[d] = cell_index(state[dims[d]], res[d])
 
 
 @njit(_START_SIG, cache=True, error_model="numpy")

@@ -62,7 +62,7 @@ def run_synth(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    from dynamics.discrepancy import diagnose, replay
+    from dynamics.discrepancy import MARGIN, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
     for path, flag in ((args.json, "--json"), (args.vehicle_out, "--vehicle-out")):
@@ -97,7 +97,7 @@ def run_diagnose(args) -> int:
         ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}")
     print(f"cause: {d.cause}" + (f" (held-out gain {d.gain:.2f})" if d.cause != "none" else
-                                 f" (no candidate gains {100 * 0.1:.0f} % on held-out data)"))
+                                 f" (no candidate gains {100 * MARGIN:.0f} % on held-out data)"))
     if out_vehicle is not None:
         note = f"extended by sbmpc diagnose from {args.run}: cause {d.cause}"
         if d.cause == "grade":
@@ -125,6 +125,8 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
+
+    from dynamics.discrepancy import MARGIN, TRAIN_FRACTION
     base = replay(run, vehicle, terrain, pitch)
     ext = replay(run, d.extended_vehicle, d.extended_terrain or terrain, pitch + math.radians(d.extended_pitch_deg))
     t = run.t
@@ -135,7 +137,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
         if d.cause != "none":
             a.plot(t, ext[c], lw=1, label=f"extended ({d.cause})")
         a.set_ylabel(c)
-        a.axvline(t[0] + 0.7 * (t[-1] - t[0]), color="k", ls=":", lw=1)
+        a.axvline(t[0] + TRAIN_FRACTION * (t[-1] - t[0]), color="k", ls=":", lw=1)
     np.atleast_1d(ax)[0].legend(fontsize=8, loc="upper right")
     np.atleast_1d(ax)[-1].set_xlabel("t [s] (dotted: training | held-out)")
     fig.tight_layout()
@@ -151,7 +153,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     ax[0].legend(fontsize=7)
     names = [c.effect for c in d.candidates]
     ax[1].barh(names[::-1], [c.gain for c in d.candidates][::-1], color="tab:blue")
-    ax[1].axvline(0.1, color="r", ls="--", lw=1)
+    ax[1].axvline(MARGIN, color="r", ls="--", lw=1)
     ax[1].set_xlabel("held-out gain (red: margin)")
     fig.tight_layout()
     fig.savefig(folder / "residuals.png", dpi=100)

@@ -176,8 +176,8 @@ def pack_world(world: World, cost: str) -> tuple:
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny
     Q[SS.Q_COST] = SS.COST_TIME if cost == "time" else SS.COST_ENERGY
-    Q[SS.Q_VBOUND], Q[SS.Q_FROLL], Q[SS.Q_MG] = _bounds(world, cost)
-    Q[SS.Q_MKE] = max(K.pack(v, t)[K.P_M11] + abs(K.pack(v, t)[K.P_M12]) for t in world.terrains)
+    Q[SS.Q_VBOUND], Q[SS.Q_FROLL], Q[SS.Q_MG] = _bounds(world)
+    Q[SS.Q_MKE] = max(b[K.P_M11] + abs(b[K.P_M12]) for b in blocks)
     Q[SS.Q_ZG] = _lowest_in_disc(e, scn.goal["x"], scn.goal["y"], scn.goal["radius"])
     Q[SS.Q_MARGIN] = world.margin
     Q[SS.Q_OFFL] = offl
@@ -205,7 +205,7 @@ def _lowest_in_disc(e: ElevationMap, x, y, r) -> float:
 OCTILE = 1.0823922002923938   # largest ratio of an 8-neighbour grid path to the straight line
 
 
-def _bounds(world: World, cost: str):
+def _bounds(world: World):
     """(v_bound [m/s], F_roll [N], m g [N]) of the straight-line heuristics."""
     v = world.vehicle
     lo, hi = wheel_speed_range(world)
@@ -252,7 +252,7 @@ def cost_to_go(world: World, cost: str) -> tuple:
     H = e.heights
     ny, nx = H.shape
     res = e.resolution
-    vb, froll, mg = _bounds(world, cost)
+    vb, froll, mg = _bounds(world)
     ox, oy = e.origin
     blocked = blocked_cells(world).ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:

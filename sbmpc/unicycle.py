@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from .astar import GOAL, HEURISTIC, PROPAGATE, Problem, search
+from .astar import GOAL, HEURISTIC, PROPAGATE, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt
@@ -27,9 +27,8 @@ CODES = ("outside the map border", "inside an obstacle")
 
 @njit(cache=True, error_model="numpy")
 def _snap(x, res):
-    q = x / res
-    c = math.floor(q + 0.5) if q >= 0.0 else -math.floor(-q + 0.5)
-    return c * res
+    """The centre of x's grid cell (the search's own rounding)."""
+    return cell_index(x, res) * res
 
 
 @njit(PROPAGATE.signature, cache=True, error_model="numpy")
