@@ -135,7 +135,7 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
         path = ss.getSolutionPath()
         controls = [(path.getControl(i)[0], path.getControl(i)[1], world.scenario.planner.period_s)
                     for i in range(path.getControlCount())]
-        traj, end, S = PL.replay(world, cost, controls)
+        traj, end, S, _ = PL.replay(world, cost, controls)
         res.update(travel_time_s=float(traj["t"][-1]), energy_J=float(traj["energy_J"][-1]), replay_end=end)
     return res
 

@@ -23,7 +23,9 @@ in a known cell replaces that cell's node only when it is cheaper. Two modes:
   again).
 * no snap (the skid-steer planner): a node keeps the exact state its edge ended in, so
   that replaying the chosen controls reproduces the path; closed nodes are never
-  changed, open ones are replaced by a cheaper arrival.
+  changed, open ones are replaced by a cheaper arrival. A child in the goal is terminal
+  and never merged: it gets a node of its own even in its parent's or a closed cell
+  (a goal disc smaller than a cell would otherwise be lost near the goal).
 
 Priority: lowest f = g + w h first (w = 1: A*; w > 1: weighted A*); ties go to the node pushed first (FIFO, by a push
 counter), which makes the search deterministic.
@@ -68,7 +70,7 @@ _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
 _START_SIG = types.void(HEURISTIC, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
                         _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
 _RUN_SIG = types.int64(PROPAGATE, HEURISTIC, types.float64, GOAL, _F1, _F1, _F2, types.int64, types.int64,
-                       types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.float64,
+                       types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
 
 
@@ -184,6 +186,7 @@ def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, 
     cnt[C_GOAL] = -1
     cnt[C_FIRST] = -1
     best[0] = np.inf
+    best[1] = 1.0
     table[:] = _EMPTY
     _key_of(start, dims, res, KEYS[0])
     X[0, :] = start
@@ -203,7 +206,7 @@ def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
 def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed, rotate, dims, res,
-               snap, max_depth, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
+               snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
                hs, hn, cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
     cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
@@ -213,7 +216,12 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
     incumbent (cost in best[0]) and the search goes on, pruning every node whose g + h
     (unweighted) cannot beat it, for ``refine`` times the expansions the first solution
     took; FOUND then means the open set was emptied (the incumbent is optimal over the
-    grid) or that refinement budget was spent."""
+    grid) or that refinement budget was spent.
+
+    A search may start with an incumbent found elsewhere (best[0] its cost, best[1] the
+    weight of h in the pruning test, see :meth:`Search.bound`): nodes with
+    g + best[1] h >= best[0] are never opened; the first goal reached (necessarily
+    cheaper) resets the weight to 1."""
     kd = dims.shape[0]
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
@@ -233,12 +241,13 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
         n = _pop(hf, hs, hn, cnt)
         if CLO[n]:
             continue
-        if cnt[C_GOAL] >= 0 and G[n] + heur(params, data, X[n]) >= best[0]:
+        if best[0] < np.inf and G[n] + best[1] * heur(params, data, X[n]) >= best[0]:
             CLO[n] = 1
             continue
         if goal(params, data, X[n]):
             if G[n] < best[0]:
                 best[0] = G[n]
+                best[1] = 1.0
                 cnt[C_GOAL] = n
                 if cnt[C_FIRST] < 0:
                     cnt[C_FIRST] = max(cnt[C_ITERS], 1)
@@ -264,14 +273,32 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
                 cnt[C_INVALID + code] += 1
                 continue
             _key_of(child, dims, res, key)
+            g = G[n] + cost
             same = True
             for d in range(kd):
                 if key[d] != KEYS[n, d]:
                     same = False
                     break
+            terminal = not snap and goal(params, data, child)
+            if terminal or (same and DEP[n] < settle):
+                # a node of its own, outside the grid: a goal state is terminal (the goal
+                # disc may be smaller than a cell, or lie in the parent's or a closed
+                # cell); near the start a child may stay in its parent's cell while its
+                # hidden state moves on (a drive slewing from a stall to reverse)
+                if g < best[0]:
+                    j = cnt[C_NODES]
+                    cnt[C_NODES] += 1
+                    KEYS[j, :] = key
+                    X[j, :] = child
+                    G[j] = g
+                    PAR[j] = n
+                    CTL[j] = c
+                    DEP[j] = DEP[n] + 1
+                    CLO[j] = 0
+                    _push(hf, hs, hn, cnt, g + weight * heur(params, data, child), j)
+                continue
             if same:
                 continue
-            g = G[n] + cost
             slot, j = _lookup(table, KEYS, key)
             if j < 0:
                 j = cnt[C_NODES]
@@ -291,7 +318,7 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
             DEP[j] = DEP[n] + 1
             if not CLO[j]:
                 h = heur(params, data, X[j])
-                if g + h < best[0]:
+                if g + best[1] * h < best[0]:
                     _push(hf, hs, hn, cnt, g + weight * h, j)
     return RUNNING
 
@@ -304,7 +331,10 @@ class Problem:
     ``start`` (state_dim,); ``controls`` (m, control_dim); ``dims``/``res``: which state
     entries form the grid cell and the cell size of each; ``branching``: controls tried
     per expansion: the first ``fixed_controls`` rows always, then the next rows (the same
-    ones at every expansion, or with ``rotate`` the next window of the remaining rows); ``max_depth``: edges from the start; ``codes``: names of the
+    ones at every expansion, or with ``rotate`` the next window of the remaining rows); ``max_depth``: edges from the start; ``settle_depth``: children of nodes less
+    than this many edges from the start that stay in their parent's cell are kept as
+    nodes of their own instead of dropped (for states whose hidden part, such as a
+    controller's, changes while the gridded part does not); ``codes``: names of the
     invalid-edge codes (1-based) for the reason of a failure.
     """
 
@@ -322,6 +352,7 @@ class Problem:
     fixed_controls: int = 0
     snap: bool = False
     max_depth: int = 1 << 30
+    settle_depth: int = 0
     codes: tuple = ()
     weight: float = 1.0
     refine: float = 0.0
@@ -369,10 +400,19 @@ class Search:
         self.hs = np.empty(2 * cap, np.int64)
         self.hn = np.empty(2 * cap, np.int64)
         self.cnt = np.zeros(NC, np.int64)
-        self.best = np.zeros(1)
+        self.best = np.zeros(2)      # [incumbent cost, weight of h in the pruning test]
         start_search(p.heuristic, float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
                      self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
                      self.hn, self.cnt, self.best)
+
+    def bound(self, cost: float, weight: float | None = None) -> None:
+        """Start with an incumbent of ``cost`` found elsewhere (a warm start): nodes
+        with g + weight h >= cost are pruned. With ``weight`` the problem's w (the
+        default), a search that ends without a cheaper goal has shown the incumbent to
+        be within w of the optimum over the grid, the guarantee weighted A* gives
+        anyway; with 1 it must prove optimality, which costs far more expansions."""
+        self.best[0] = cost
+        self.best[1] = self.problem.weight if weight is None else weight
 
     def _grow(self):
         n = self.cnt[C_NODES]
@@ -403,7 +443,7 @@ class Search:
         while True:
             st = run_search(p.propagate, p.heuristic, p.weight, p.is_goal, p.params, p.data, p.controls,
                             p.branching, p.fixed_controls, bool(p.rotate), p.dims, p.res, bool(p.snap),
-                            int(p.max_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
+                            int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)
             if st == GROW:
                 self._grow()

@@ -18,10 +18,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
                 "closed-loop dynamic model of Yu et al. (2010).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    from . import diagnose_cmd, plan_cmd, simulate_cmd
+    from . import diagnose_cmd, plan_cmd, run_cmd, simulate_cmd
     simulate_cmd.add_parser(sub)
     plan_cmd.add_parsers(sub)
     diagnose_cmd.add_parsers(sub)
+    run_cmd.add_parsers(sub)
     return p
 
 

@@ -119,3 +119,49 @@ def plot_compare(emap, plans: dict, scenario, path, title: str = "") -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+RUN_COLOURS = ("tab:red", "tab:blue", "tab:purple", "tab:olive")
+
+
+def plot_runs(emap, runs: dict, scenario, path, title: str = "") -> None:
+    """PNG comparing receding-horizon runs ({label: RunResult}): the map with each run's
+    first plan (dashed), executed path (solid) and re-plan points (dots); and predicted
+    vs executed travel time and energy of each run as bars."""
+    import numpy as np
+    fig = plt.figure(figsize=(13, 6.4))
+    gs = fig.add_gridspec(2, 2, width_ratios=[1.35, 1.0])
+    ax = fig.add_subplot(gs[:, 0])
+    _relief(ax, emap)
+    s, g = scenario.start, scenario.goal
+    ax.plot(s["x"], s["y"], "ko", ms=6)
+    ax.add_patch(plt.Circle((g["x"], g["y"]), g["radius"], fill=False, ec="k", lw=1.5))
+    bars = [fig.add_subplot(gs[i, 1]) for i in range(2)]
+    labels = list(runs)
+    for i, (label, r) in enumerate(runs.items()):
+        c = RUN_COLOURS[i % len(RUN_COLOURS)]
+        first = r.plans[0].plan if r.plans else None
+        if first is not None and first.found:
+            ax.plot(first.trajectory["x"], first.trajectory["y"], "--", color=c, lw=1.2, alpha=0.8)
+        tr = r.trajectory
+        if len(tr.get("x", ())):
+            ax.plot(tr["x"], tr["y"], color=c, lw=2.2,
+                    label=f"{label}: {r.status}, {r.replans} re-plans")
+        pts = np.array([(p.x, p.y) for p in r.plans[1:]])
+        if len(pts):
+            ax.plot(pts[:, 0], pts[:, 1], "o", color=c, ms=4, mec="k", mew=0.5)
+        pred = r.predicted
+        for a, key in zip(bars, ("travel_time_s", "energy_J")):
+            ex = getattr(r, key)
+            a.bar(i - 0.18, pred[key] or 0.0, 0.36, color=c, alpha=0.45, label="predicted" if i == 0 else None)
+            a.bar(i + 0.18, ex or 0.0, 0.36, color=c, label="executed" if i == 0 else None)
+    for a, lab in zip(bars, ("travel time [s]", "energy [J]")):
+        a.set_xticks(range(len(labels)), labels, fontsize=8)
+        a.set_ylabel(lab)
+        a.grid(alpha=0.3, axis="y")
+    bars[0].legend(fontsize=8)
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
+    ax.set_title(title or "dashed: first plan; solid: executed; dots: re-plans")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

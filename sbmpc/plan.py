@@ -30,6 +30,7 @@ from .errors import InputError
 from .scenario import Scenario, terrain_layer
 
 RECORD_EVERY = 0.05   # s: trajectory samples in the plan JSON
+SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
 
 @dataclass(frozen=True, eq=False)
@@ -304,14 +305,17 @@ def _max_rise(H, res, dist):
     return float(np.hypot(gx, gy).max() * dist)
 
 
-def problem(world: World, cost: str) -> Problem:
+def problem(world: World, cost: str, start: np.ndarray | None = None) -> Problem:
+    """The search problem of a world and cost, from ``start`` (a planner state, default
+    the scenario's start state)."""
     ps = world.scenario.planner
     Q, data = pack_world(world, cost)
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
-    return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, start_state(world), control_set(world),
+    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
-                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES,
+                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine)
 
 
@@ -335,16 +339,18 @@ def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
     return out
 
 
-def unreachable_reason(world: World) -> str | None:
-    """Why no path can exist, when the goal disc is cut off from the start by cells where
-    the vehicle tips over at every heading (checked at cell centres); else None."""
+def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
+    """Why no path can exist, when the goal disc is cut off from the start (or from the
+    position ``xy``) by cells where the vehicle tips over at every heading (checked at
+    cell centres); else None."""
     e, scn = world.emap, world.scenario
+    sx, sy = xy if xy is not None else (scn.start["x"], scn.start["y"])
     ox, oy = e.origin
     labels, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
     def cell(x, y):
         return (min(max(int(round((y - oy) / e.resolution)), 0), e.shape[0] - 1),
                 min(max(int(round((x - ox) / e.resolution)), 0), e.shape[1] - 1))
-    s = labels[cell(scn.start["x"], scn.start["y"])]
+    s = labels[cell(sx, sy)]
     ny, nx = e.shape
     X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
     g = scn.goal
@@ -421,46 +427,86 @@ class Plan:
         }
 
 
-def replay(world: World, cost: str, controls, every: int = 1) -> tuple:
+def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray | None = None) -> tuple:
     """Replay controls [(wl, wr, duration_s)] through the closed-loop model over the map
-    from the scenario's start. Returns (trajectory dict sampled every ``every`` steps
-    plus the last step, end code of the last edge (0 or IN_GOAL, negative if invalid),
-    final state)."""
+    from ``start`` (a planner state; default the scenario's start). Returns (trajectory
+    dict sampled every ``every`` steps plus the last step, end code (0 or IN_GOAL,
+    negative if invalid), final state, number of controls used: a replay stops at the
+    first control that enters the goal or fails)."""
     Q, data = pack_world(world, cost)
     dt = world.scenario.planner.dt
     cl = np.array([c[0] for c in controls], float)
     cr = np.array([c[1] for c in controls], float)
     n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
     rec = np.zeros((int(n.sum()) + 1, K.NR))
-    rows, S, end, _ = SS.replay(Q, data, start_state(world), cl, cr, n, rec)
+    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    rows, S, end, early = SS.replay(Q, data, X0, cl, cr, n, rec)
     idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
     traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
-    return traj, int(end), S
+    return traj, int(end), S, (len(controls) if early < 0 else int(early) + 1)
 
 
-def plan(world: World, cost: str | None = None, progress=None) -> Plan:
-    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's)."""
+def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
+    """(cost, controls) of a control sequence replayed from ``start`` when it ends in the
+    goal (its last control cut where it enters the goal disc); else None."""
+    if not controls:
+        return None
+    traj, end, S, used = replay(world, cost, controls, every=1 << 30, start=start)
+    if end != SS.IN_GOAL:
+        return None
+    dt = world.scenario.planner.dt
+    kept = [tuple(c) for c in controls[:used]]
+    last = round(float(S[K.S_T] - start[K.S_T]) - sum(c[2] for c in kept[:-1]), 9)
+    kept[-1] = (kept[-1][0], kept[-1][1], round(max(dt, last), 9))
+    c = S[K.S_T] - start[K.S_T] if cost == "time" else S[K.S_E] - start[K.S_E]
+    return float(c), kept
+
+
+def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
+         incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
+    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's).
+
+    ``start``: a planner state to plan from (default: the scenario's start; a receding-
+    horizon run passes the measured state). ``incumbent``: controls [(wl, wr, duration_s)]
+    of a known way to the goal (the rest of the previous plan): when their replay from
+    ``start`` ends in the goal, its cost bounds the search (branch and bound: no node
+    that cannot beat it by the search's weight w is opened: :meth:`Search.bound`) and
+    it is the plan when the search finds nothing cheaper within its budgets
+    (``found_by`` says so). ``time_budget_s`` overrides the
+    scenario's."""
     cost = cost or world.scenario.cost
     ps = world.scenario.planner
+    budget = ps.time_budget_s if time_budget_s is None else time_budget_s
     t0 = time.perf_counter()
-    why = unreachable_reason(world)
+    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    why = unreachable_reason(world, (float(X0[K.S_X]), float(X0[K.S_Y])))
     if why is not None:
         return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0)
-    prob = problem(world, cost)
-    res: SearchResult = Search(prob).run(ps.max_expansions, ps.time_budget_s, progress=progress)
-    elapsed = time.perf_counter() - t0
-    common = dict(planning_time_s=elapsed, nodes_expanded=res.iterations, edges_simulated=res.edges,
-                  nodes=res.nodes, invalid_edges=res.invalid)
-    if res.status != "found":
-        return Plan(world.scenario.name, cost, "no_path", res.reason, **common)
-    T = res.states[:, K.S_T]
-    controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
-                for i, c in enumerate(res.control_rows)]
+    inc = _incumbent(world, cost, X0, incumbent) if incumbent else None
+    prob = problem(world, cost, X0)
+    search = Search(prob)
+    if inc is not None:
+        search.bound(inc[0] * (1.0 + 1e-9))
+    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress)
+    common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges, nodes=res.nodes, invalid_edges=res.invalid)
+    if res.status == "found":
+        T = res.states[:, K.S_T]
+        controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+                    for i, c in enumerate(res.control_rows)]
+        found_by = ""
+    elif inc is not None:
+        controls = inc[1]
+        found_by = ("previous plan (warm start: the search found nothing cheaper than its remaining "
+                    f"{inc[0]:.4g} {'s' if cost == 'time' else 'J'} within its budgets)")
+    else:
+        return Plan(world.scenario.name, cost, "no_path", res.reason,
+                    planning_time_s=time.perf_counter() - t0, **common)
     every = max(1, round(RECORD_EVERY / ps.dt))
-    traj, end, S = replay(world, cost, controls, every)
-    if end < 0 or not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9):
+    traj, end, S, _ = replay(world, cost, controls, every, start=X0)
+    if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
-    return Plan(world.scenario.name, cost, "found", None, controls, traj, **common)
+    return Plan(world.scenario.name, cost, "found", None, controls, traj,
+                planning_time_s=time.perf_counter() - t0, found_by=found_by, **common)
 
 
 def plan_both(world: World, progress=None) -> dict:

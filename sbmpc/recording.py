@@ -11,6 +11,9 @@ Entities (one set per plan label, e.g. ``time`` and ``energy``)::
     plots/tau_l/<label>, plots/tau_r/<label>   Scalars [N m]
     plots/power/<label>          Scalars [W]
     plots/energy/<label>         Scalars [J]
+
+A receding-horizon run (:func:`write_run`) has the label ``executed`` and the paths of
+its plans as ``plans/<k>``.
 """
 from __future__ import annotations
 
@@ -49,39 +52,73 @@ def terrain_mesh(emap, max_side: int = 160):
     return verts, np.vstack([t1, t2]), (255 * rgb).astype(np.uint8)
 
 
-def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: float = 0.1) -> Path:
-    """Write an .rrd of ``plans`` ({label: Plan}) over ``emap``; returns the path."""
+def _log_trajectory(rec, label: str, tr: dict, col, every_s: float) -> None:
+    """A path (static), the vehicle animated along ``time`` and its time series."""
     import rerun as rr
     from scipy.spatial.transform import Rotation
+    pts = np.c_[tr["x"], tr["y"], tr["z"] + 0.05]
+    rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.06]), static=True)
+    rec.log(f"vehicle/{label}/body", rr.Boxes3D(half_sizes=[[0.26, 0.25, 0.12]], centers=[[0, 0, 0.15]],
+                                                 colors=[col]), static=True)
+    t = tr["t"] - tr["t"][0]
+    step = max(1, int(round(every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
+    keep = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
+    pitch = tr.get("pitch", np.zeros_like(t))
+    quats = Rotation.from_euler("ZY", np.c_[tr["yaw"][keep], -pitch[keep]]).as_quat()   # x, y, z, w
+    times = rr.TimeColumn("time", duration=t[keep])
+    rec.send_columns(f"vehicle/{label}", indexes=[times],
+                     columns=rr.Transform3D.columns(translation=np.c_[tr["x"][keep], tr["y"][keep], tr["z"][keep]],
+                                                    quaternion=quats))
+    for name, key in SERIES:
+        rec.send_columns(f"plots/{name}/{label}", indexes=[rr.TimeColumn("time", duration=t)],
+                         columns=rr.Scalars.columns(scalars=np.asarray(tr[key], float)))
 
-    path = Path(path)
+
+def _open(path: Path, app: str, emap):
+    import rerun as rr
     rec = rr.RecordingStream(app)
     rec.save(str(path))
     verts, tris, cols = terrain_mesh(emap)
     rec.log("terrain", rr.Mesh3D(vertex_positions=verts, triangle_indices=tris, vertex_colors=cols), static=True)
-    for label, plan in plans.items():
-        if not plan.found:
-            continue
-        tr = plan.trajectory
-        col = COLOURS.get(label, (60, 110, 220))
-        pts = np.c_[tr["x"], tr["y"], tr["z"] + 0.05]
-        rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.06]), static=True)
-        rec.log(f"vehicle/{label}/body", rr.Boxes3D(half_sizes=[[0.26, 0.25, 0.12]], centers=[[0, 0, 0.15]],
-                                                     colors=[col]), static=True)
-        t = tr["t"] - tr["t"][0]
-        step = max(1, int(round(every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
-        keep = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
-        pitch = tr.get("pitch", np.zeros_like(t))
-        quats = Rotation.from_euler("ZY", np.c_[tr["yaw"][keep], -pitch[keep]]).as_quat()   # x, y, z, w
-        times = rr.TimeColumn("time", duration=t[keep])
-        rec.send_columns(f"vehicle/{label}", indexes=[times],
-                         columns=rr.Transform3D.columns(translation=np.c_[tr["x"][keep], tr["y"][keep], tr["z"][keep]],
-                                                        quaternion=quats))
-        for name, key in SERIES:
-            rec.send_columns(f"plots/{name}/{label}", indexes=[rr.TimeColumn("time", duration=t)],
-                             columns=rr.Scalars.columns(scalars=np.asarray(tr[key], float)))
+    return rec
+
+
+def _close(rec) -> None:
     rec.flush()
     rec.disconnect()
+
+
+def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: float = 0.1) -> Path:
+    """Write an .rrd of ``plans`` ({label: Plan}) over ``emap``; returns the path."""
+    path = Path(path)
+    rec = _open(path, app, emap)
+    for label, plan in plans.items():
+        if plan.found:
+            _log_trajectory(rec, label, plan.trajectory, COLOURS.get(label, (60, 110, 220)), every_s)
+    _close(rec)
+    return path
+
+
+def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: float = 0.1) -> Path:
+    """Write an .rrd of a receding-horizon run (:class:`sbmpc.receding.RunResult`): the
+    executed path with the vehicle and its time series under the label ``executed``, and
+    every plan of the run as a static path ``plans/<k>`` (0 the first plan) with its
+    start marked at ``plans/<k>/start``."""
+    import rerun as rr
+    path = Path(path)
+    rec = _open(path, app, emap)
+    for k, rp in enumerate(result.plans):
+        if not rp.plan.found:
+            continue
+        tr = rp.plan.trajectory
+        col = (150, 150, 230) if k else (60, 110, 220)
+        rec.log(f"plans/{k}", rr.LineStrips3D([np.c_[tr["x"], tr["y"], tr["z"] + 0.04]], colors=[col], radii=[0.03]),
+                static=True)
+        rec.log(f"plans/{k}/start", rr.Points3D([[tr["x"][0], tr["y"][0], tr["z"][0] + 0.1]], colors=[col],
+                                                radii=[0.08], labels=[rp.why]), static=True)
+    if len(result.trajectory.get("t", ())) > 1:
+        _log_trajectory(rec, "executed", result.trajectory, (220, 50, 50), every_s)
+    _close(rec)
     return path
 
 

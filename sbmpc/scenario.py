@@ -12,6 +12,7 @@ The minimum is CONTRACTS.md's; additions (all optional)::
         - {terrain: packed_dirt, circle: [x, y, r]}
         - {terrain: grass, polygon: [[x, y], [x, y], [x, y]]}   # later regions win
     planner: {branching: 16, period_s: 1.0, ...}                 # see PlannerSettings
+    run: {trigger: tolerance, tol_xy: 0.5, ...}                  # see RunSettings (sbmpc run)
 """
 from __future__ import annotations
 
@@ -66,6 +67,44 @@ class PlannerSettings:
         return self.time_weight if cost == "time" else self.energy_weight
 
 
+@dataclass(frozen=True)
+class RunSettings:
+    """Settings of a receding-horizon run (scenario key ``run``; ``sbmpc run``).
+
+    trigger: 'tolerance' (re-plan only when the measured state leaves the tolerance
+    around the state the plan predicted, or the plan ends short of the goal) or 'every'
+    (re-plan after every period); tol_xy [m], tol_yaw_deg [deg], tol_v [m/s]: the
+    tolerance; execute_periods: periods executed before an 'every' re-plan;
+    replan_time_budget_s: wall-clock budget of each re-plan (the first plan has the
+    planner's); max_replans: the run fails beyond it; max_stalls: stalls of the vehicle
+    (each followed by a re-plan from where it stopped) before the run fails;
+    max_time_factor: the run fails when it takes longer than this times the first
+    plan's travel time (plus 30 s).
+    """
+
+    trigger: str = "tolerance"
+    tol_xy: float = 0.5
+    tol_yaw_deg: float = 15.0
+    tol_v: float = 0.25
+    execute_periods: int = 1
+    replan_time_budget_s: float = 10.0
+    max_replans: int = 50
+    max_stalls: int = 3
+    max_time_factor: float = 3.0
+
+
+_RUN_RANGES = {
+    "tol_xy": (float, 1e-3, 100.0),
+    "tol_yaw_deg": (float, 0.1, 180.0),
+    "tol_v": (float, 1e-3, 10.0),
+    "execute_periods": (int, 1, 1000),
+    "replan_time_budget_s": (float, 0.01, 86400.0),
+    "max_replans": (int, 0, 100000),
+    "max_stalls": (int, 0, 1000),
+    "max_time_factor": (float, 1.0, 1000.0),
+}
+TRIGGERS = ("tolerance", "every")
+
 # (key, type, low, high) of the numeric settings; low/high inclusive
 _SETTING_RANGES = {
     "branching": (int, 4, 256),
@@ -105,6 +144,7 @@ class Scenario:
     planner: PlannerSettings = field(default_factory=PlannerSettings)
     description: str = ""
     path: Path | None = None
+    run: RunSettings = field(default_factory=RunSettings)
 
     @property
     def base(self) -> Path:
@@ -201,6 +241,22 @@ def _terrain(spec, probs: _Problems):
     return {"default": default if isinstance(default, str) else "vinyl", "regions": regions}
 
 
+def _numeric_settings(spec: dict, ranges: dict, where: str, probs: _Problems) -> dict:
+    kw = {}
+    for key, (typ, lo, hi) in ranges.items():
+        if key not in spec:
+            continue
+        v = spec[key]
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi
+              and (typ is float or float(v).is_integer()))
+        if not ok:
+            kind = "an integer" if typ is int else "a number"
+            probs.add(f"{where}.{key}", f"{kind} in [{lo:g}, {hi:g}]", v)
+        else:
+            kw[key] = typ(v)
+    return kw
+
+
 def _planner(spec, probs: _Problems) -> PlannerSettings:
     if spec is None:
         return PlannerSettings()
@@ -209,18 +265,7 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
         return PlannerSettings()
     names = {f.name for f in fields(PlannerSettings)}
     _unknown(spec, names, "planner", probs)
-    kw = {}
-    for key, (typ, lo, hi) in _SETTING_RANGES.items():
-        if key not in spec:
-            continue
-        v = spec[key]
-        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi
-              and (typ is float or float(v).is_integer()))
-        if not ok:
-            kind = "an integer" if typ is int else "a number"
-            probs.add(f"planner.{key}", f"{kind} in [{lo:g}, {hi:g}]", v)
-        else:
-            kw[key] = typ(v)
+    kw = _numeric_settings(spec, _SETTING_RANGES, "planner", probs)
     if "wheel_speeds" in spec:
         v = spec["wheel_speeds"]
         if not (_numbers(v, 2) and v[0] < v[1]):
@@ -237,13 +282,29 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
     return PlannerSettings(**kw)
 
 
+def _run(spec, probs: _Problems) -> RunSettings:
+    if spec is None:
+        return RunSettings()
+    if not isinstance(spec, dict):
+        probs.add("run", "a mapping of run settings", spec)
+        return RunSettings()
+    _unknown(spec, {f.name for f in fields(RunSettings)}, "run", probs)
+    kw = _numeric_settings(spec, _RUN_RANGES, "run", probs)
+    if "trigger" in spec:
+        if spec["trigger"] not in TRIGGERS:
+            probs.add("run.trigger", "'tolerance' or 'every'", spec["trigger"])
+        else:
+            kw["trigger"] = spec["trigger"]
+    return RunSettings(**kw)
+
+
 def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     """A :class:`Scenario` from parsed YAML; raises InputError listing every problem."""
     probs = _Problems(src)
     if not isinstance(data, dict):
         raise InputError(f"{src}: expected a mapping of scenario keys (name, map, terrain, vehicle, start, goal), "
                          f"found {type(data).__name__}")
-    known = {"name", "description", "map", "terrain", "vehicle", "start", "goal", "cost", "planner"}
+    known = {"name", "description", "map", "terrain", "vehicle", "start", "goal", "cost", "planner", "run"}
     _unknown(data, known, "", probs)
     name = data.get("name", path.stem if path else "scenario")
     if not isinstance(name, str) or not name:
@@ -278,8 +339,9 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     if cost not in COSTS:
         probs.add("cost", "time or energy", cost)
     planner = _planner(data.get("planner"), probs)
+    run = _run(data.get("run"), probs)
     probs.raise_if_any()
-    return Scenario(name, map_spec, terrain, vehicle, start, goal, cost, planner, desc, path)
+    return Scenario(name, map_spec, terrain, vehicle, start, goal, cost, planner, desc, path, run)
 
 
 def load(path: Path | str) -> Scenario:

@@ -33,7 +33,7 @@ def test_replayed_controls_reproduce_the_plan_and_end_in_the_goal(plans, name):
     for cost, plan in ps.items():
         assert plan.found, (cost, plan.reason)
         every = round(PL.RECORD_EVERY / world.scenario.planner.dt)
-        traj, end, S = PL.replay(world, cost, plan.controls, every)
+        traj, end, S, _ = PL.replay(world, cost, plan.controls, every)
         for key in ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"):
             np.testing.assert_allclose(traj[key], plan.trajectory[key], atol=1e-9, err_msg=f"{cost} {key}")
         g = world.scenario.goal
@@ -81,9 +81,9 @@ def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
     slow = PL.World(replace(world.scenario, start=dict(world.scenario.start, x=6.5, v=0.7)),
                     world.emap, world.vehicle, world.terrains)
     w_slow = 0.7 / world.vehicle.wheel_radius
-    _, end, S = PL.replay(slow, "time", [(w_slow, w_slow, 20.0)])
+    _, end, S, _ = PL.replay(slow, "time", [(w_slow, w_slow, 20.0)])
     assert end == -PL.SS.STALL and S[K.S_X] < 9.0
-    _, end, S = PL.replay(world, "time", [(w0, w0, 12.0)])
+    _, end, S, _ = PL.replay(world, "time", [(w0, w0, 12.0)])
     assert end == PL.SS.IN_GOAL
 
 

@@ -1,0 +1,282 @@
+"""Receding-horizon execution: plan, apply the first inputs to a "true" vehicle, measure,
+plan again (``sbmpc run``).
+
+The planner plans with the world's vehicle. A simulated *truth* (by default the same
+model; or another vehicle, such as one with a flat tyre, or the extended vehicle that
+``sbmpc diagnose`` wrote) executes the plan one planning period at a time over the same
+map, with the same closed-loop model and integration step. After each period the
+measured state (pose and drive state: wheel speeds, PID references and integrals,
+currents) is compared with the state the plan predicted, and the planner re-plans from
+the measured state when
+
+* ``trigger: every``: every ``execute_periods`` periods;
+* ``trigger: tolerance``: the position, heading or speed left the tolerance around the
+  prediction, or the plan ended short of the goal;
+* always: the vehicle stalled (it is then re-planned from where it stopped, at most
+  ``max_stalls`` times).
+
+Warm start: a re-plan hands the rest of the previous plan to the search as an
+incumbent (:func:`sbmpc.plan.plan`): replayed from the measured state with the
+planner's model, when it still reaches the goal its cost bounds the search (no node
+that cannot beat it is opened), and it is kept when the search finds nothing cheaper
+within the re-plan budget. The cost-to-go grid of the heuristic is computed once per
+run (cached per world and cost). The searches themselves are not incremental (no
+LPA*): the start moves with the vehicle, which invalidates every g value of an A*
+tree rooted at the old start.
+
+The truth's ``delay`` extension (commands reaching the drive late) is executed: the
+previous command stays applied for the first ``delay`` seconds of each period. The
+planner's search does not model a delay.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from dynamics import kernels as K
+from dynamics.params import Vehicle
+
+from . import plan as PL
+from . import skidsteer as SS
+from .scenario import RunSettings
+
+
+@dataclass
+class Replan:
+    """One plan of a run: when and why it was made, what it predicted."""
+
+    t: float                 # run time at which it was made [s]
+    x: float
+    y: float
+    why: str
+    plan: PL.Plan
+    warm: bool               # an incumbent (the rest of the previous plan) was handed to the search
+    start: np.ndarray | None = None   # the planner state it started from
+
+    def to_json(self) -> dict:
+        p = self.plan
+        return {"t": self.t, "x": self.x, "y": self.y, "why": self.why, "status": p.status, "reason": p.reason,
+                "planning_time_s": p.planning_time_s, "nodes_expanded": p.nodes_expanded,
+                "predicted_travel_time_s": p.travel_time_s, "predicted_energy_J": p.energy_J,
+                "controls": len(p.controls), "warm_start": self.warm,
+                "found_by": p.found_by or ("search" if p.found else None)}
+
+
+@dataclass
+class RunResult:
+    """The outcome of a receding-horizon run (CONTRACTS.md ``sbmpc run`` JSON)."""
+
+    scenario: str
+    cost: str
+    vehicle: str
+    truth: str
+    settings: RunSettings
+    status: str = "failed"            # reached | failed
+    reason: str | None = None
+    trajectory: dict = field(default_factory=dict)
+    plans: list = field(default_factory=list)        # [Replan], the first plan first
+    stalls: int = 0
+    periods: int = 0
+
+    @property
+    def replans(self) -> int:
+        return max(0, len(self.plans) - 1)
+
+    @property
+    def planning_time_s(self) -> float:
+        return float(sum(r.plan.planning_time_s for r in self.plans))
+
+    def _span(self, key):
+        tr = self.trajectory
+        return float(tr[key][-1] - tr[key][0]) if len(tr.get(key, ())) else None
+
+    @property
+    def travel_time_s(self):
+        return self._span("t")
+
+    @property
+    def energy_J(self):
+        return self._span("energy_J")
+
+    @property
+    def length_m(self):
+        tr = self.trajectory
+        return float(np.sum(np.hypot(np.diff(tr["x"]), np.diff(tr["y"])))) if len(tr.get("x", ())) else None
+
+    @property
+    def predicted(self) -> dict:
+        """What the first plan predicted."""
+        p = self.plans[0].plan if self.plans else None
+        return {"travel_time_s": p.travel_time_s if p else None, "energy_J": p.energy_J if p else None}
+
+    def to_json(self) -> dict:
+        keys = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W",
+                "energy_J", "pitch", "i_l", "i_r")
+        pred = self.predicted
+        ex = {"travel_time_s": self.travel_time_s, "energy_J": self.energy_J, "length_m": self.length_m}
+
+        def err(k):
+            return (ex[k] - pred[k]) / pred[k] if pred[k] and ex[k] is not None else None
+        s = self.settings
+        return {
+            "schema": "sbmpc.run/1",
+            "scenario": self.scenario,
+            "cost": self.cost,
+            "vehicle": self.vehicle,
+            "truth": self.truth,
+            "status": self.status,
+            "reason": self.reason,
+            "replans": self.replans,
+            "planning_time_s": self.planning_time_s,
+            "first_planning_time_s": self.plans[0].plan.planning_time_s if self.plans else None,
+            "replan_time_s": [r.plan.planning_time_s for r in self.plans[1:]],
+            "travel_time_s": ex["travel_time_s"],
+            "energy_J": ex["energy_J"],
+            "predicted": pred,
+            "executed": ex,
+            "prediction_error": {"travel_time": err("travel_time_s"), "energy": err("energy_J")},
+            "stalls": self.stalls,
+            "periods": self.periods,
+            "trigger": s.trigger,
+            "tolerance": {"xy_m": s.tol_xy, "yaw_deg": s.tol_yaw_deg, "v_m_s": s.tol_v},
+            "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
+                           "(branch and bound, kept if nothing cheaper is found); the cost-to-go grid is reused"),
+            "plans": [r.to_json() for r in self.plans],
+            "trajectory": {k: [float(a) for a in self.trajectory[k]] for k in keys if k in self.trajectory},
+        }
+
+
+def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
+    """(position [m], heading [rad], speed [m/s]) differences of a measured state X from
+    a predicted state P (planner states, :mod:`sbmpc.skidsteer`)."""
+    dxy = math.hypot(X[K.S_X] - P[K.S_X], X[K.S_Y] - P[K.S_Y])
+    dyaw = abs(math.remainder(X[K.S_YAW] - P[K.S_YAW], 2.0 * math.pi))
+    dv = abs(X[SS.X_V] - P[SS.X_V])
+    return dxy, dyaw, dv
+
+
+class _Executor:
+    """Steps one world's closed-loop model through controls, period by period."""
+
+    def __init__(self, world: PL.World, cost: str, delay_s: float = 0.0):
+        self.Q, self.data = PL.pack_world(world, cost)
+        self.dt = world.scenario.planner.dt
+        self.lag = int(round(delay_s / self.dt))
+        self.prev = (0.0, 0.0)
+
+    def step(self, X: np.ndarray, control, record: bool = True) -> tuple:
+        """Apply (wl, wr, duration_s) from state X. Returns (recorded rows (n, NR) from X
+        on, end code, new state)."""
+        wl, wr, d = control
+        n = max(1, int(round(d / self.dt)))
+        if 0 < self.lag:
+            k = min(self.lag, n)
+            cl, cr, ns = [self.prev[0], wl], [self.prev[1], wr], [k, n - k]
+        else:
+            cl, cr, ns = [wl], [wr], [n]
+        self.prev = (wl, wr)
+        rec = np.zeros((n + 1 if record else 1, K.NR))
+        rows, S, end, _ = SS.replay(self.Q, self.data, np.ascontiguousarray(X), np.array(cl, float),
+                                    np.array(cr, float), np.array(ns, np.int64), rec)
+        return rec[:rows], int(end), S
+
+
+def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
+        settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
+    """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
+
+    ``truth``: the vehicle that really drives (default: the world's own); ``settings``
+    default to the scenario's ``run`` section; ``progress(label)`` may return a search
+    progress callback; ``warm=False`` plans every re-plan from scratch (for the
+    benchmark)."""
+    cost = cost or world.scenario.cost
+    rs = settings or world.scenario.run
+    ps = world.scenario.planner
+    twin = world if truth is None else replace(world, vehicle=truth)
+    out = RunResult(world.scenario.name, cost, world.vehicle.name, twin.vehicle.name, rs)
+    model = _Executor(world, cost)
+    real = _Executor(twin, cost, twin.vehicle.delay)
+    X = PL.start_state(twin)           # the measured state
+    pieces = []
+    every = max(1, round(PL.RECORD_EVERY / ps.dt))
+    tol_yaw = math.radians(rs.tol_yaw_deg)
+    why = "start"
+    current, k, P, since = None, 0, None, 0
+    t_limit = math.inf
+    stalls = []
+
+    def finish(status, reason):
+        out.status, out.reason = status, reason
+        rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
+        idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
+        out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
+        return out
+
+    while True:
+        if why is not None:
+            if len(out.plans) > rs.max_replans:
+                return finish("failed", f"re-plan limit of {rs.max_replans} reached ({why} at "
+                                        f"t = {X[K.S_T]:.1f} s)")
+            first = not out.plans
+            tail = current.controls[k:] if (current is not None and warm) else None
+            p = PL.plan(world, cost, progress=progress("first plan" if first else f"re-plan {len(out.plans)}")
+                        if progress else None, start=X, incumbent=tail,
+                        time_budget_s=None if first else rs.replan_time_budget_s)
+            out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail), X.copy()))
+            if p.found:
+                if first:
+                    t_limit = rs.max_time_factor * p.travel_time_s + 30.0
+                current, k, P, since, why = p, 0, X.copy(), 0, None
+            elif current is not None and k < len(current.controls) and not why.startswith("stalled"):
+                # like any MPC: when a re-plan fails, keep driving the previous plan and try
+                # again after the next period
+                why = None
+            else:
+                return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
+                                        f"({why}): {p.reason}")
+        control = current.controls[k]
+        if k == len(current.controls) - 1:
+            # the last control was cut where the prediction entered the goal: hold it
+            # for a full period (the rollout stops in the goal)
+            control = (control[0], control[1], max(control[2], ps.period_s))
+        _, _, P = model.step(P, control, record=False)
+        rec, end, X = real.step(X, control)
+        pieces.append(rec if not pieces else rec[1:])
+        k += 1
+        since += 1
+        out.periods += 1
+        if end == SS.IN_GOAL:
+            return finish("reached", None)
+        if end == -SS.STALL:
+            out.stalls += 1
+            stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
+            if out.stalls > rs.max_stalls:
+                where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
+                return finish("failed", f"the vehicle stalled {out.stalls} times, at {where}, where every plan "
+                                        f"predicted it would get through: it is weaker there than the planning "
+                                        f"model ({world.vehicle.name}); plan with a model of this vehicle "
+                                        f"(sbmpc diagnose on a run of it writes one)")
+            X[K.S_STALLT] = 0.0
+            X[K.S_STALLED] = 0.0
+            why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+        elif end < 0:
+            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                                    f"t = {X[K.S_T]:.1f} s")
+        elif X[K.S_T] - out.plans[0].t > t_limit:
+            return finish("failed", f"took longer than {t_limit:.0f} s ({rs.max_time_factor:g} x the first "
+                                    f"plan's travel time + 30 s) without reaching the goal")
+        elif k >= len(current.controls):
+            why = "the plan ended short of the goal"
+        elif rs.trigger == "every":
+            if since >= rs.execute_periods:
+                why = f"every {rs.execute_periods} period(s)"
+        else:
+            dxy, dyaw, dv = deviation(X, P)
+            off = [f"position off by {dxy:.2f} m"] if dxy > rs.tol_xy else []
+            off += [f"heading off by {math.degrees(dyaw):.1f} deg"] if dyaw > tol_yaw else []
+            off += [f"speed off by {dv:.2f} m/s"] if dv > rs.tol_v else []
+            if off:
+                why = ", ".join(off)

@@ -1,0 +1,85 @@
+"""``sbmpc run``: receding-horizon execution of a scenario by a simulated true vehicle."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+from .errors import InputError, NoResult
+from .plan_cmd import Progress, _out_file, _world
+
+
+def add_parsers(sub):
+    r = sub.add_parser("run", help="execute a scenario with receding-horizon SBMPC (plan, drive, re-plan)",
+                       description="Receding-horizon SBMPC: plan with the scenario's vehicle, let a simulated true "
+                       "vehicle (--truth, default the same) drive the plan period by period, and re-plan from the "
+                       "measured state when it leaves the tolerance around the prediction (or every period). "
+                       "Prints predicted vs executed time and energy and the re-plans. Exit code 1 when the run "
+                       "fails to reach the goal.")
+    r.add_argument("scenario", type=Path, help="scenario YAML file")
+    r.add_argument("--truth", help="the vehicle that really drives: a shipped name or a vehicle YAML "
+                   "(e.g. the extended vehicle of sbmpc diagnose); default: the planning vehicle")
+    r.add_argument("--vehicle", help="the vehicle the planner plans with (default: the scenario's)")
+    r.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
+    r.add_argument("--trigger", choices=("tolerance", "every"), help="when to re-plan (default: the scenario's "
+                   "run.trigger, else tolerance)")
+    r.add_argument("--json", type=Path, help="write the run JSON (schema sbmpc.run/1) here")
+    r.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
+    r.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
+    r.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    r.set_defaults(func=run_run)
+
+
+def _vehicle(spec: str, flag: str, base: Path):
+    from dynamics import ParameterError, load_vehicle
+    try:
+        return load_vehicle(spec, base)
+    except ParameterError as exc:
+        raise InputError(f"{flag}: {exc}") from None
+
+
+def summary(res) -> str:
+    d = res.to_json()
+    pred, ex = d["predicted"], d["executed"]
+    lines = [f"{res.scenario} [{res.cost}], planning with {res.vehicle}, driven by {res.truth}: {res.status}"
+             + (f": {res.reason}" if res.reason else "")]
+    if ex["travel_time_s"] is not None and pred["travel_time_s"] is not None:
+        lines.append(f"  {'':10}{'time [s]':>10}{'energy [J]':>12}")
+        lines.append(f"  {'predicted':10}{pred['travel_time_s']:10.2f}{pred['energy_J']:12.1f}")
+        lines.append(f"  {'executed':10}{ex['travel_time_s']:10.2f}{ex['energy_J']:12.1f}")
+    rt = d["replan_time_s"]
+    lines.append(f"  {d['replans']} re-plans ({d['trigger']} trigger), {d['stalls']} stalls, {d['periods']} periods; "
+                 f"planning {d['planning_time_s']:.2f} s (first {d['first_planning_time_s'] or 0:.2f} s"
+                 + (f", re-plans {sum(rt) / len(rt):.2f} s on average)" if rt else ")"))
+    for k, p in enumerate(d["plans"][1:], 1):
+        lines.append(f"  re-plan {k} at t = {p['t']:.1f} s: {p['why']}"
+                     + ("" if p["status"] == "found" else f" -> {p['reason']}")
+                     + (" (kept the previous plan)" if (p["found_by"] or "").startswith("previous") else ""))
+    return "\n".join(lines)
+
+
+def run_run(args) -> int:
+    from . import receding, recording
+    _out_file(args.json, "--json")
+    _out_file(args.rrd, "--rrd")
+    world = _world(args)
+    base = world.scenario.base
+    if args.vehicle:
+        world = replace(world, vehicle=_vehicle(args.vehicle, "--vehicle", Path(".")))
+    truth = _vehicle(args.truth, "--truth", Path(".")) if args.truth else None
+    settings = world.scenario.run
+    if args.trigger:
+        settings = replace(settings, trigger=args.trigger)
+    cost = args.cost or world.scenario.cost
+    if cost == "energy" and world.vehicle.regen:
+        raise InputError(f"{args.vehicle or base}: energy cost needs a planning vehicle without regeneration "
+                         "(regen: false), found regen: true")
+    res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet))
+    print(summary(res))
+    if args.json:
+        args.json.write_text(json.dumps(res.to_json(), indent=1))
+    if args.rrd:
+        recording.write_run(args.rrd, world.emap, res, app=f"sbmpc run {world.scenario.name}")
+    if res.status != "reached":
+        raise NoResult(f"failed: {res.reason}")
+    return 0

@@ -1,0 +1,139 @@
+"""Receding-horizon runs (``sbmpc run``, :mod:`sbmpc.receding`): plan, execute on a
+simulated true vehicle, re-plan from the measured state."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dynamics.discrepancy import diagnose
+from dynamics.params import vehicle_to_yaml
+from dynamics.synth import apply, synth_run
+from sbmpc import plan as PL
+from sbmpc import receding as R
+from sbmpc import scenario as SC
+from sbmpc.cli import main
+from sbmpc.recording import entities
+
+SCN = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+@pytest.fixture(scope="module")
+def flat():
+    return PL.resolve(SC.load(SCN / "flat.yaml"))
+
+
+@pytest.fixture(scope="module")
+def runup():
+    return PL.resolve(SC.load(SCN / "runup_ramp.yaml"))
+
+
+def _rel(a, b):
+    return abs(a - b) / abs(b)
+
+
+@pytest.mark.parametrize("cost", ["time", "energy"])
+def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost):
+    res = R.run(runup, cost)
+    first = res.plans[0].plan
+    assert res.status == "reached" and res.replans == 0 and res.stalls == 0
+    # the executed run is the first plan, sample for sample
+    assert res.travel_time_s == pytest.approx(first.travel_time_s, abs=1e-9)
+    assert res.energy_J == pytest.approx(first.energy_J, abs=1e-6)
+    for k in ("x", "y", "v"):
+        np.testing.assert_allclose(res.trajectory[k], first.trajectory[k], atol=1e-9)
+
+
+def test_replanning_every_period_with_a_perfect_model_never_does_worse_than_predicted(flat):
+    """Warm start: each re-plan gets the rest of the previous plan as incumbent, so with
+    a perfect model the executed cost cannot exceed the first prediction."""
+    res = R.run(flat, "time", settings=replace(flat.scenario.run, trigger="every"))
+    assert res.status == "reached"
+    assert res.replans >= res.periods - 2 >= 10
+    assert all(r.warm for r in res.plans[1:])
+    assert res.travel_time_s <= res.plans[0].plan.travel_time_s + 1e-9
+    kept = sum((r.plan.found_by or "").startswith("previous plan") for r in res.plans[1:])
+    assert kept >= 1          # some re-plans found nothing better and kept the rest of the plan
+
+
+def test_a_diagnosed_model_needs_fewer_replans_and_predicts_what_happens(flat):
+    """A flat tyre (right side 8 % smaller) hidden in the truth: the baseline model
+    re-plans several times and misses its predictions; the vehicle that the diagnosis
+    extracts from a measured run of the faulty vehicle does not."""
+    base_v, ground = flat.vehicle, flat.terrains[0]
+    prm = {"scale_left": 1.0, "scale_right": 0.92}
+    truth = apply(base_v, "wheel_radius", prm, ground)[0]
+    run, _ = synth_run("wheel_radius", 3, base_v, ground, duration=90.0, params=prm)
+    d = diagnose(run, base_v, ground, effects=("wheel_radius", "viscous_friction", "command_delay"))
+    assert d.cause == "wheel_radius"
+    baseline = R.run(flat, "time", truth)
+    fixed = R.run(replace(flat, vehicle=d.extended_vehicle), "time", truth)
+    assert baseline.status == fixed.status == "reached"
+    assert baseline.replans >= 3
+    miss = max(_rel(baseline.travel_time_s, baseline.predicted["travel_time_s"]),
+               _rel(baseline.energy_J, baseline.predicted["energy_J"]))
+    assert miss > 0.15
+    assert fixed.replans <= 1 < baseline.replans
+    assert _rel(fixed.travel_time_s, fixed.predicted["travel_time_s"]) < 0.03
+    assert _rel(fixed.energy_J, fixed.predicted["energy_J"]) < 0.03
+
+
+def test_a_slightly_weaker_truth_still_crosses_the_runup_ramp(runup):
+    truth = runup.vehicle.replace(current_limit=0.95 * runup.vehicle.current_limit)
+    res = R.run(runup, "time", truth)
+    assert res.status == "reached", res.reason
+    assert res.replans >= 1                      # it noticed
+    assert res.trajectory["x"].max() > 8.4       # over the ramp (8.0 - 8.4 m)
+
+
+def test_a_much_weaker_truth_fails_with_the_reason(runup):
+    truth = runup.vehicle.replace(current_limit=0.8 * runup.vehicle.current_limit)
+    res = R.run(runup, "time", truth)
+    assert res.status == "failed"
+    assert "stalled" in res.reason and "weaker" in res.reason
+    assert res.stalls == res.settings.max_stalls + 1
+
+
+def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
+    v = PL.resolve(SC.load(SCN / "flat.yaml")).vehicle.replace(radius_scale_right=0.92, name="p3at_flat_tyre")
+    truth = tmp_path / "flat_tyre.yaml"
+    truth.write_text(vehicle_to_yaml(v))
+    before = truth.read_text()
+    out, rrd = tmp_path / "run.json", tmp_path / "run.rrd"
+    assert main(["run", str(SCN / "flat.yaml"), "--truth", str(truth), "--json", str(out), "--rrd", str(rrd),
+                 "--quiet"]) == 0
+    assert truth.read_text() == before
+    text = capsys.readouterr().out
+    assert "predicted" in text and "executed" in text and "re-plan 1" in text
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "sbmpc.run/1" and doc["status"] == "reached" and doc["reason"] is None
+    assert doc["replans"] >= 1 and doc["planning_time_s"] > 0
+    for k in ("travel_time_s", "energy_J"):
+        assert doc["predicted"][k] > 0 and doc["executed"][k] > 0 and doc[k] == doc["executed"][k]
+    tr = doc["trajectory"]
+    assert len(tr["t"]) == len(tr["x"]) > 100 and max(np.diff(tr["t"])) <= 0.05 + 1e-9
+    g = SC.load(SCN / "flat.yaml").goal
+    assert np.hypot(tr["x"][-1] - g["x"], tr["y"][-1] - g["y"]) <= g["radius"] + 1e-9
+    ents = entities(rrd)
+    assert {"/terrain", "/paths/executed", "/vehicle/executed", "/plots/energy/executed", "/plans/0",
+            "/plans/1"} <= set(ents)
+    # a run that fails: exit 1 with the reason
+    weak = tmp_path / "weak.yaml"
+    weak.write_text(vehicle_to_yaml(v.replace(radius_scale_right=1.0, current_limit=0.8 * v.current_limit)))
+    assert main(["run", str(SCN / "runup_ramp.yaml"), "--truth", str(weak), "--quiet"]) == 1
+    assert "stalled" in capsys.readouterr().err
+    # bad input: exit 2, one line
+    assert main(["run", str(SCN / "flat.yaml"), "--truth", str(tmp_path / "missing.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--truth" in err and "missing.yaml" in err and len(err.splitlines()) == 1
+
+
+def test_run_settings_are_validated():
+    with pytest.raises(SC.InputError) as e:
+        SC.parse({"map": {"generate": {"size": [5, 5]}}, "start": {"x": 1, "y": 1}, "goal": {"x": 3, "y": 3},
+                  "run": {"trigger": "sometimes", "tol_xy": -1.0}})
+    msg = str(e.value)
+    assert "run.trigger" in msg and "run.tol_xy" in msg
