@@ -102,8 +102,8 @@ def main() -> int:
     OUT.write_text(json.dumps(res, indent=1))
     if figure_runs:
         w, runs = figure_runs
-        plot_runs(w.emap, runs, w.scenario, FIG, title="hill_tradeoff, energy: right tyres 8 % smaller in the true "
-                  "vehicle; dashed: first plan, solid: executed, dots: re-plans")
+        plot_runs(w.emap, runs, w.scenario, FIG, title="hill_tradeoff, energy cost: the true vehicle's right tyres "
+                  "are 8 % smaller")
     print(f"wrote {OUT}" + (f" and {FIG}" if figure_runs else ""))
     return 0
 

@@ -161,7 +161,9 @@ def plot_runs(emap, runs: dict, scenario, path, title: str = "") -> None:
         a.grid(alpha=0.3, axis="y")
     bars[0].legend(fontsize=8)
     ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
-    ax.set_title(title or "dashed: first plan; solid: executed; dots: re-plans")
+    ax.set_title("dashed: first plan; solid: executed; dots: re-plans", fontsize=9)
+    if title:
+        fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
