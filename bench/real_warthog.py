@@ -3,8 +3,9 @@ runs of Norlab DRIVE (../shared/data/real/drive; public originals: github.com/no
 
 For each terrain: read the run (windows joined into one timeline), calibrate what is not
 known of the vehicle (no-load speed through the torque constant, continuous current
-limit, reference acceleration) on the first 70 % in time, then diagnose on the
-calibrated vehicle: every candidate extension fitted on the same 70 % and scored on the
+limit, reference acceleration) on the first 70 % in time, and the terrain's kinematic
+alpha (eq. 1) from the ICP pose on the same part; then diagnose on the calibrated
+vehicle and terrain: every candidate extension fitted on the same 70 % and scored on the
 held-out last 30 %. Writes bench/results/warthog.json and docs/warthog.png.
 
     python bench/real_warthog.py [--terrains asphalt gravel sand]
@@ -33,7 +34,8 @@ def main(argv=None) -> int:
         print(f"real_warthog: expected the DRIVE CSVs in {DATA}, found none", file=sys.stderr)
         return 2
     from dynamics import load_terrain, load_vehicle
-    from dynamics.discrepancy import _error, calibrate, channels, diagnose, noise_scale, replay
+    from dynamics.discrepancy import calibrate, channels, diagnose, noise_scale, pose_error, replay
+    from dynamics.identify import fit_kinematics
     from sbmpc.realdata import read_drive_windows
     out = {}
     figs = []
@@ -48,12 +50,20 @@ def main(argv=None) -> int:
         base0 = replay(run, v0, ter)
         v1, cal = calibrate(run, v0, ter, FIELDS, train)
         base1 = replay(run, v1, ter)
-        d = diagnose(run, v1, ter)
+        # eq. 1 from the ICP pose on the training part: the ICR factor alpha of this terrain
+        kin = fit_kinematics(t, run["wl"], run["wr"], run["x"], run["y"], run["yaw"], v1.wheel_radius, v1.width,
+                             train, segment=run["segment"])
+        ter_a = ter.replace(alpha=kin["alpha"])
+        base_a = replay(run, v1, ter_a)
+        pose = {"nominal": pose_error(run, base0, ~train), "calibrated": pose_error(run, base1, ~train),
+                "calibrated_alpha": pose_error(run, base_a, ~train)}
+        d = diagnose(run, v1, ter_a)
         rms = lambda pred, m: {c: float(np.sqrt(np.nanmean((run[c] - pred[c])[m] ** 2))) for c in chans}
         held = ~train
-        ext = replay(run, d.extended_vehicle, d.extended_terrain or ter) if d.cause != "none" else base1
+        ext = replay(run, d.extended_vehicle, d.extended_terrain or ter_a) if d.cause != "none" else base_a
         res = {"samples": len(run), "segments": len(run.segments()), "noise_scales": scales,
-               "calibrated": cal,
+               "calibrated": cal, "kinematics": kin, "assumed_alpha": ter.alpha,
+               "heldout_pose_error": pose | {"extended": d.pose.get("extended")},
                "heldout_rmse_rad_s": {"nominal": rms(base0, held), "calibrated": rms(base1, held),
                                       "extended": rms(ext, held)},
                "candidates": [{"effect": c.effect, "params": c.params, "gain": c.gain, "bic_delta": c.bic_delta}
@@ -61,7 +71,8 @@ def main(argv=None) -> int:
                "cause": d.cause, "gain": d.gain, "where": d.where, "xcorr": d.xcorr,
                "time_s": time.perf_counter() - t0}
         out[name] = res
-        print(name, json.dumps({k: res[k] for k in ("calibrated", "heldout_rmse_rad_s", "cause", "gain")}), flush=True)
+        print(name, json.dumps({k: res[k] for k in ("calibrated", "kinematics", "heldout_rmse_rad_s",
+                                                     "heldout_pose_error", "cause", "gain")}), flush=True)
         figs.append((name, run, base0, base1, ext, d.cause))
     (ROOT / "bench" / "results").mkdir(parents=True, exist_ok=True)
     (ROOT / "bench" / "results" / "warthog.json").write_text(json.dumps(out, indent=1))

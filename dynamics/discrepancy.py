@@ -20,7 +20,11 @@ the training part, the parameters with standard errors (from the least-squares
 Jacobian), and the Ljung-Box whiteness statistic of the held-out residuals before and
 after. The diagnosis also reports the baseline's error by regime (steady or transient,
 straight or turning, early or late) and the peak cross-correlation of the residuals
-with the commands over lags.
+with the commands over lags, and, when the run logs a pose (x, y, yaw), the relative
+pose error of the baseline and of the extended model on the held-out part
+(:func:`pose_error`: the predicted motion over 2 s windows against the measured one;
+the replay starts each segment at its measured pose). The pose is reported, not fitted:
+dead-reckoned pose errors grow with time and would outweigh the drive's channels.
 """
 from __future__ import annotations
 
@@ -110,7 +114,8 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
     """Predicted channels at the run's times (NaN where no segment covers them)."""
     model = Model(vehicle, terrain, dt)
     n = len(run)
-    out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r")}
+    out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw")}
+    pose = all(c in run for c in ("x", "y", "yaw"))
     t_all = run.t
     for a, b in run.segments():
         t = t_all[a:b]
@@ -121,7 +126,8 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
         j = np.clip(np.searchsorted(t, tk + 1e-9, side="right") - 1, 0, len(t) - 1)
         w0l = run["wl"][a] if np.isfinite(run["wl"][a]) else cl[0]
         w0r = run["wr"][a] if np.isfinite(run["wr"][a]) else cr[0]
-        S = model.state(float(w0l), float(w0r), pitch)
+        p0 = [float(run[c][a]) if pose and np.isfinite(run[c][a]) else 0.0 for c in ("x", "y", "yaw")]
+        S = model.state(float(w0l), float(w0r), pitch, p0[0], p0[1], p0[2])
         tr = simulate(model, cl[j], cr[j], state=S, pitch=pitch, record_dt=dt, dt=dt)
         ts = t[0] + tr.t
         for c in out:
@@ -169,6 +175,7 @@ class Diagnosis:
     extended_vehicle: Vehicle | None = None
     extended_pitch_deg: float = 0.0
     extended_terrain: Terrain | None = None
+    pose: dict = field(default_factory=dict)     # {"baseline": RPE, "extended": RPE} on the held-out part
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -185,6 +192,7 @@ class Diagnosis:
             "noise_scales": self.scales,
             "extended_vehicle": extended_path,
             "extended_grade_deg": self.extended_pitch_deg,
+            "pose_error": self.pose,
             "extended_terrain": None if self.extended_terrain is None else
             {"name": self.extended_terrain.name, "mu_sa": self.extended_terrain.mu_sa,
              "mu_op": self.extended_terrain.mu_op},
@@ -208,6 +216,58 @@ def _error(run, pred, chans, scales, mask):
         r = r[np.isfinite(r)]
         errs.append(math.sqrt(float(np.mean(r * r))) if r.size else math.nan)
     return float(np.nanmean(errs))
+
+
+POSE_WINDOW_S = 2.0   # s: window of the relative pose error
+
+
+def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S) -> dict | None:
+    """Relative pose error (RPE, the odometry benchmarks' metric) of a replay over
+    windows of ``window_s`` [s] within segments: how far the predicted motion over a
+    window, seen from its start pose, differs from the measured one. Returns
+    {"window_s", "trans_rmse_m", "rot_rmse_rad", "trans_per_m"} (trans_per_m: the
+    translation error per metre driven), or None when the run has no pose or no window.
+    Windows start where ``mask`` is true. A pose held between updates (fewer than 90 %
+    of the samples change it) is compared only between update samples."""
+    if not all(c in run for c in ("x", "y", "yaw")):
+        return None
+    t = run.t
+    seg = np.zeros(len(t), int)
+    for k, (a, b) in enumerate(run.segments()):
+        seg[a:b] = k
+    x, y, yaw = run["x"], run["y"], run["yaw"]
+    fresh = np.r_[True, (np.diff(x) != 0) | (np.diff(y) != 0) | (np.diff(yaw) != 0)]
+    upd = np.maximum.accumulate(np.where(fresh, np.arange(len(t)), 0))
+    i = np.arange(len(t))
+    j = np.searchsorted(t, t + window_s - 1e-9)
+    ok = (j < len(t)) & (mask if mask is not None else True)
+    i, j = i[ok], j[ok]
+    if fresh.mean() < 0.9:
+        # a pose held between updates (scan matching): windows run between update samples
+        ok = fresh[i]
+        i, j = i[ok], upd[j[ok]]
+        ok = t[j] - t[i] >= 0.5 * window_s
+        i, j = i[ok], j[ok]
+    ok = seg[i] == seg[j]
+    i, j = i[ok], j[ok]
+    if i.size == 0:
+        return None
+
+    def rel(x, y, yaw):
+        dx, dy = x[j] - x[i], y[j] - y[i]
+        c, s_ = np.cos(yaw[i]), np.sin(yaw[i])
+        return c * dx + s_ * dy, -s_ * dx + c * dy, yaw[j] - yaw[i]
+    mx, my, myaw = rel(run["x"], run["y"], run["yaw"])
+    px, py, pyaw = rel(pred["x"], pred["y"], pred["yaw"])
+    et = np.hypot(mx - px, my - py)
+    er = np.abs(np.remainder(myaw - pyaw + np.pi, 2 * np.pi) - np.pi)
+    good = np.isfinite(et) & np.isfinite(er)
+    if not good.any():
+        return None
+    dist = np.hypot(mx, my)[good]
+    return {"window_s": window_s, "trans_rmse_m": float(np.sqrt(np.mean(et[good] ** 2))),
+            "rot_rmse_rad": float(np.sqrt(np.mean(er[good] ** 2))),
+            "trans_per_m": float(np.sum(et[good]) / max(float(np.sum(dist)), 1e-9))}
 
 
 def ljung_box(r: np.ndarray, lags: int = 20) -> float:
@@ -361,6 +421,12 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         ext_v, ext_t, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
                                      terrain, CANDIDATES[best.effect][0])
         ext_p = math.degrees(p)
+    pose = {}
+    pe = pose_error(run, base, held)
+    if pe is not None:
+        pose["baseline"] = pe
+        ext = replay(run, ext_v, ext_t, math.radians(ext_p) + pitch) if named else base
+        pose["extended"] = pose_error(run, ext, held)
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
                      best.gain if named else 0.0, _where(run, base, chans, scales), _xcorr(run, base, scales),
-                     ext_v, ext_p, ext_t)
+                     ext_v, ext_p, ext_t, pose)

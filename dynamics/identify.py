@@ -7,6 +7,7 @@ bounds) on the exact form of the resistance (eq. 22).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -87,3 +88,79 @@ def table_one_study(vehicle: Vehicle, truth: Terrain, noise: float = 0.05, seed:
         idx = np.unique(np.round(np.linspace(0, len(PAPER_RADII) - 1, n)).astype(int))
         rows.append((n, fit_terrain(vehicle, truth, PAPER_RADII[idx], tl[idx], tr[idx])))
     return rows
+
+
+def fit_kinematics(t, wl, wr, x, y, yaw, r: float, width: float, mask=None, span_s: float = 1.0,
+                   segment=None) -> dict:
+    """Eq. 1 identified from a measured pose: the ICR factor alpha and a forward scale s
+    in  v = s r (wl + wr) / 2,  yaw_rate = r (wr - wl) / (alpha B).
+
+    Integral form, robust to a pose that is updated irregularly (scan matching holds its
+    last value between updates, so differentiating it gives spikes; a held pose is
+    dated at its update): the run is cut into
+    spans of ``span_s`` [s] (aligned to t[0], within one ``segment``); over each span the
+    measured heading change is compared with the integral of r (wr - wl) / B, and, on
+    nearly straight spans (heading change < 0.1 rad), the distance between the span's end
+    poses with the integral of r (wl + wr) / 2. Both are least-squares slopes through the
+    origin, refitted without outliers (:func:`_trimmed_slope`). t [s], wheel speeds
+    [rad/s], x, y [m], yaw [rad] (continuous) are equal-length arrays; ``mask`` selects
+    the spans (by their first sample), e.g. the training part.
+
+    Returns {"alpha", "v_scale", "yaw_rmse" [rad] and "dist_rmse" [m] per span (kept
+    spans), "spans", "straight_spans", "kept" (fraction)}."""
+    t, wl, wr, x, y, yaw = (np.asarray(a, float) for a in (t, wl, wr, x, y, yaw))
+    seg = np.zeros(t.size) if segment is None else np.asarray(segment, float)
+    k = np.floor((t - t[0]) / span_s).astype(int)
+    dt = np.r_[np.diff(t), 0.0]
+    uw = r * (wr - wl) / width
+    uv = r * (wr + wl) / 2.0
+    # a pose held between updates belongs to the time of its update: integrate between those
+    changed = np.r_[True, (np.diff(x) != 0) | (np.diff(y) != 0) | (np.diff(yaw) != 0)]
+    upd = np.maximum.accumulate(np.where(changed, np.arange(t.size), 0))
+    dyaw, iw, dist, iv = [], [], [], []
+    starts = np.flatnonzero(np.r_[True, (np.diff(k) != 0) | (np.diff(seg) != 0)])
+    ends = np.r_[starts[1:], t.size]
+    for a, b in zip(starts, ends):
+        if b - a < 3 or (mask is not None and not mask[a]):
+            continue
+        sl = slice(upd[a], upd[b - 1])      # integrate over the times of the two poses
+        q = np.r_[yaw[a], yaw[b - 1], x[a], x[b - 1], y[a], y[b - 1]]
+        iu = float(np.sum(uw[sl] * dt[sl]))
+        iuv = float(np.sum(uv[sl] * dt[sl]))
+        if not (np.all(np.isfinite(q)) and np.isfinite(iu) and np.isfinite(iuv)):
+            continue
+        dyaw.append(yaw[b - 1] - yaw[a])
+        iw.append(iu)
+        if abs(yaw[b - 1] - yaw[a]) < 0.1:
+            dist.append(math.copysign(math.hypot(x[b - 1] - x[a], y[b - 1] - y[a]), iuv))
+            iv.append(iuv)
+    dyaw, iw, dist, iv = (np.array(a) for a in (dyaw, iw, dist, iv))
+    if dyaw.size < 10 or float(np.dot(iw, dyaw)) <= 0.0 or dist.size < 5:
+        raise ValueError(f"expected at least 10 spans with turning and 5 straight ones, found {dyaw.size} "
+                         f"and {dist.size}")
+    inv_alpha, kw = _trimmed_slope(iw, dyaw)
+    sv, kv = _trimmed_slope(iv, dist)
+    return {"alpha": 1.0 / inv_alpha, "v_scale": sv, "spans": int(dyaw.size), "straight_spans": int(dist.size),
+            "yaw_rmse": float(np.sqrt(np.mean((dyaw - inv_alpha * iw)[kw] ** 2))),
+            "dist_rmse": float(np.sqrt(np.mean((dist - sv * iv)[kv] ** 2))),
+            "kept": float(min(kw.mean(), kv.mean()))}
+
+
+def _trimmed_slope(u, y, rounds: int = 3, k: float = 4.0):
+    """Least-squares slope of y = a u through the origin over the samples where u is
+    not negligible, refitted without those beyond k robust standard deviations (1.4826
+    MAD) of the residual (never more than half). Returns (a, mask of the samples kept)."""
+    informative = np.abs(u) > 0.02 * float(np.max(np.abs(u)))      # spans with u ~ 0 say nothing of a
+    u, y = u[informative], y[informative]
+    keep = np.ones(u.size, bool)
+    a = float(np.dot(u, y) / np.dot(u, u))
+    for _ in range(rounds):
+        e = y - a * u
+        sd = max(1.4826 * float(np.median(np.abs(e - np.median(e)))), 1e-9 * float(np.sqrt(np.mean(y * y))), 1e-300)
+        keep = np.abs(e) <= k * sd
+        if keep.sum() < max(3, u.size // 2):        # never trim more than half
+            keep = np.abs(e) <= np.quantile(np.abs(e), 0.5)
+        a = float(np.dot(u[keep], y[keep]) / np.dot(u[keep], u[keep]))
+    out = np.zeros(informative.size, bool)
+    out[np.flatnonzero(informative)[keep]] = True
+    return a, out

@@ -98,6 +98,9 @@ def run_diagnose(args) -> int:
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}")
     print(f"cause: {d.cause}" + (f" (held-out gain {d.gain:.2f})" if d.cause != "none" else
                                  f" (no candidate gains {100 * MARGIN:.0f} % on held-out data)"))
+    pose_line = _pose_line(d.pose)
+    if pose_line:
+        print(pose_line)
     if out_vehicle is not None:
         note = f"extended by sbmpc diagnose from {args.run}: cause {d.cause}"
         if d.cause == "grade":
@@ -117,6 +120,18 @@ def run_diagnose(args) -> int:
         write_report(args.report, run, vehicle, terrain, pitch, d, doc, replay)
         print(f"wrote {args.report / 'report.md'}")
     return 0
+
+
+def _pose_line(pose: dict) -> str:
+    """One line on the held-out relative pose error, baseline -> extended (or '')."""
+    b, e = pose.get("baseline"), pose.get("extended")
+    if not b:
+        return ""
+    line = (f"pose (relative error over {b['window_s']:g} s windows, held-out): translation "
+            f"{b['trans_rmse_m']:.3f} m, heading {b['rot_rmse_rad']:.3f} rad")
+    if e and e is not b:
+        line += f" -> extended {e['trans_rmse_m']:.3f} m, {e['rot_rmse_rad']:.3f} rad"
+    return line
 
 
 def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> None:
@@ -165,6 +180,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
              "Where the baseline errs (noise units): " + ", ".join(f"{k} {v:.2f}" for k, v in d.where.items()), "",
              f"Peak cross-correlation of the residuals with the command changes: {d.xcorr['peak_rho']:.2f} at a lag "
              f"of {d.xcorr['lag_s']:.3f} s.", "",
+             *([_pose_line(d.pose).capitalize() + ".", ""] if d.pose else []),
              "| candidate | held-out error | gain | BIC change | parameters | whiteness Q |", "|---|---|---|---|---|---|"]
     for c in d.candidates:
         ps = ", ".join(f"{k} = {v:.4g} ± {c.stderr[k]:.2g}" for k, v in c.params.items())

@@ -86,18 +86,24 @@ def _relief(ax, emap):
     ax.set_aspect("equal")
 
 
-def plot_compare(emap, plans: dict, scenario, path, title: str = "") -> None:
-    """PNG comparing plans ({label: Plan}): the map with the paths, and speed, battery
-    power and cumulative energy along each path."""
-    import numpy as np
-    fig = plt.figure(figsize=(13, 7.2))
-    gs = fig.add_gridspec(3, 2, width_ratios=[1.25, 1.0])
+def _map_and_panels(emap, scenario, n: int, size, ratio: float):
+    """A figure with the map (relief, start, goal disc) on the left and ``n`` stacked
+    panels on the right: (fig, map axes, [panel axes])."""
+    fig = plt.figure(figsize=size)
+    gs = fig.add_gridspec(n, 2, width_ratios=[ratio, 1.0])
     ax = fig.add_subplot(gs[:, 0])
     _relief(ax, emap)
     s, g = scenario.start, scenario.goal
     ax.plot(s["x"], s["y"], "ko", ms=6)
     ax.add_patch(plt.Circle((g["x"], g["y"]), g["radius"], fill=False, ec="k", lw=1.5))
-    axes = [fig.add_subplot(gs[i, 1]) for i in range(3)]
+    return fig, ax, [fig.add_subplot(gs[i, 1]) for i in range(n)]
+
+
+def plot_compare(emap, plans: dict, scenario, path, title: str = "") -> None:
+    """PNG comparing plans ({label: Plan}): the map with the paths, and speed, battery
+    power and cumulative energy along each path."""
+    import numpy as np
+    fig, ax, axes = _map_and_panels(emap, scenario, 3, (13, 7.2), 1.25)
     for label, p in plans.items():
         if not p.found:
             continue
@@ -129,14 +135,7 @@ def plot_runs(emap, runs: dict, scenario, path, title: str = "") -> None:
     first plan (dashed), executed path (solid) and re-plan points (dots); and predicted
     vs executed travel time and energy of each run as bars."""
     import numpy as np
-    fig = plt.figure(figsize=(13, 6.4))
-    gs = fig.add_gridspec(2, 2, width_ratios=[1.35, 1.0])
-    ax = fig.add_subplot(gs[:, 0])
-    _relief(ax, emap)
-    s, g = scenario.start, scenario.goal
-    ax.plot(s["x"], s["y"], "ko", ms=6)
-    ax.add_patch(plt.Circle((g["x"], g["y"]), g["radius"], fill=False, ec="k", lw=1.5))
-    bars = [fig.add_subplot(gs[i, 1]) for i in range(2)]
+    fig, ax, bars = _map_and_panels(emap, scenario, 2, (13, 6.4), 1.35)
     labels = list(runs)
     for i, (label, r) in enumerate(runs.items()):
         c = RUN_COLOURS[i % len(RUN_COLOURS)]

@@ -364,6 +364,14 @@ def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
 
 
 # ---- the plan ------------------------------------------------------------------------
+TRAJECTORY_KEYS = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W",
+                   "energy_J", "pitch", "i_l", "i_r")
+
+
+def trajectory_json(traj: dict) -> dict:
+    """The JSON ``trajectory`` object (CONTRACTS.md keys plus pitch and currents)."""
+    return {k: [float(a) for a in traj[k]] for k in TRAJECTORY_KEYS if k in traj}
+
 @dataclass
 class Plan:
     """The result of planning one scenario for one cost (CONTRACTS.md plan JSON)."""
@@ -405,8 +413,6 @@ class Plan:
         return float(np.sum(np.hypot(np.diff(x), np.diff(y))))
 
     def to_json(self) -> dict:
-        keys = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W",
-                "energy_J", "pitch", "i_l", "i_r")
         return {
             "schema": "sbmpc.plan/1",
             "scenario": self.scenario,
@@ -420,7 +426,7 @@ class Plan:
             "nodes_expanded": self.nodes_expanded,
             "edges_simulated": self.edges_simulated,
             "controls": [{"wl": wl, "wr": wr, "duration_s": d} for wl, wr, d in self.controls],
-            "trajectory": {k: [float(a) for a in self.trajectory[k]] for k in keys if k in self.trajectory},
+            "trajectory": trajectory_json(self.trajectory),
             "nodes": self.nodes,
             "invalid_edges": self.invalid_edges,
             "found_by": self.found_by or f"{self.cost} search",

@@ -21,8 +21,9 @@ JUMP = 2.0     # rad/s: a wheel-speed jump across a window boundary that breaks 
 
 
 def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
-    """A DRIVE windows CSV as a run: t, wl_cmd, wr_cmd, wl, wr, x/y/yaw (ICP, relative to
-    each window's start), segment."""
+    """A DRIVE windows CSV as a run: t, wl_cmd, wr_cmd, wl, wr, x/y/yaw (the ICP pose,
+    given relative to each window's start, chained into one pose: see
+    :func:`_chain_windows`), segment."""
     path = Path(path)
     try:
         d = np.genfromtxt(path, delimiter=",", names=True)
@@ -40,8 +41,31 @@ def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     first = np.r_[True, win[1:] != win[:-1]]
     jump = np.r_[False, (np.abs(np.diff(wl)) > JUMP) | (np.abs(np.diff(wr)) > JUMP)]
     seg = np.cumsum(first & jump)
+    x, y, yaw = _chain_windows(win, d["icp_x"], d["icp_y"], d["icp_yaw"])
     cols = {"t": t, "wl_cmd": d["cmd_left"], "wr_cmd": d["cmd_right"], "wl": wl, "wr": wr,
-            "x": d["icp_x"], "y": d["icp_y"], "yaw": d["icp_yaw"], "segment": seg.astype(float)}
+            "x": x, "y": y, "yaw": yaw, "segment": seg.astype(float)}
     meta = {"vehicle": "warthog", "terrain": terrain, "slope_deg": "0",
             "note": f"Norlab DRIVE Warthog windows, {path.name}"}
     return Run(cols, meta, str(path))
+
+
+def _chain_windows(win, x, y, yaw):
+    """One continuous pose from poses relative to each window's start: a window starts
+    where the previous one's last sample ended (the windows are contiguous; the step
+    between the last sample and the next window's first, 0.05 s, is not covered, so the
+    chained pose drifts slowly; use it over short spans, as the relative pose error does)."""
+    X, Y, YAW = np.empty_like(x), np.empty_like(y), np.empty_like(yaw)
+    gx = gy = gyaw = 0.0
+    start = 0
+    n = len(win)
+    while start < n:
+        end = start
+        while end < n and win[end] == win[start]:
+            end += 1
+        c, s_ = np.cos(gyaw), np.sin(gyaw)
+        X[start:end] = gx + c * x[start:end] - s_ * y[start:end]
+        Y[start:end] = gy + s_ * x[start:end] + c * y[start:end]
+        YAW[start:end] = gyaw + yaw[start:end]
+        gx, gy, gyaw = X[end - 1], Y[end - 1], YAW[end - 1]
+        start = end
+    return X, Y, np.unwrap(YAW)

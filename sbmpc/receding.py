@@ -113,8 +113,6 @@ class RunResult:
         return {"travel_time_s": p.travel_time_s if p else None, "energy_J": p.energy_J if p else None}
 
     def to_json(self) -> dict:
-        keys = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W",
-                "energy_J", "pitch", "i_l", "i_r")
         pred = self.predicted
         ex = {"travel_time_s": self.travel_time_s, "energy_J": self.energy_J, "length_m": self.length_m}
 
@@ -145,7 +143,7 @@ class RunResult:
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
                            "(branch and bound, kept if nothing cheaper is found); the cost-to-go grid is reused"),
             "plans": [r.to_json() for r in self.plans],
-            "trajectory": {k: [float(a) for a in self.trajectory[k]] for k in keys if k in self.trajectory},
+            "trajectory": PL.trajectory_json(self.trajectory),
         }
 
 

@@ -125,3 +125,21 @@ def test_cli_synth_then_diagnose_writes_json_vehicle_and_report(tmp_path, capsys
         assert (rep / f).stat().st_size > 500
     # the extended vehicle is accepted by simulate
     assert main(["simulate", "--vehicle", doc["extended_vehicle"], "--v", "0.5", "--duration", "2"]) == 0
+
+
+def test_pose_error_is_reported_and_falls_with_the_extension():
+    """A flat tyre turns the vehicle: the relative pose error of the baseline shows it in
+    the heading, and the extended model removes most of it; a run without pose columns
+    has no pose error."""
+    from dynamics.discrepancy import pose_error
+    run, _ = synth_run("wheel_radius", 4, duration=DURATION)
+    d = diagnose(run, P3AT, VINYL, effects=("wheel_radius", "viscous_friction"))
+    b, e = d.pose["baseline"], d.pose["extended"]
+    assert d.cause == "wheel_radius"
+    assert e["rot_rmse_rad"] < 0.3 * b["rot_rmse_rad"] and e["trans_rmse_m"] < b["trans_rmse_m"]
+    assert d.to_json()["pose_error"]["baseline"]["window_s"] == 2.0
+    # the measured run against itself: no error at all
+    exact = {c: run[c] for c in ("x", "y", "yaw")}
+    assert pose_error(run, exact)["trans_rmse_m"] == 0.0
+    no_pose = Run({k: run[k] for k in ("t", "wl_cmd", "wr_cmd", "wl", "wr")})
+    assert pose_error(no_pose, exact) is None

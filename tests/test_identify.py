@@ -31,3 +31,36 @@ def test_table_one_study_settles_as_n_grows():
     assert full.mu_op == pytest.approx(truth.mu_op, rel=0.05)
     assert full.stderr[1] < rows[3].stderr[1] or rows[3].stderr[1] == np.inf
     assert full.rms == pytest.approx(0.05, rel=0.4)       # residual at the noise level
+
+
+def test_kinematic_alpha_and_forward_scale_recovered_from_a_jumpy_held_pose():
+    """Eq. 1 from pose: a pose generated with alpha = 1.7 and 85 % forward efficiency,
+    updated at only 5 Hz (held in between, as scan matching is) and with a few jumps,
+    gives back both numbers."""
+    from hypothesis import given, settings, strategies as st
+
+    from dynamics.identify import fit_kinematics
+
+    @settings(max_examples=15, deadline=None)
+    @given(st.integers(0, 10_000), st.floats(1.1, 3.0), st.floats(0.5, 1.0))
+    def check(seed, alpha, s):
+        rng = np.random.default_rng(seed)
+        dt, r, B = 0.05, 0.3, 1.0
+        n = 4000
+        hold = rng.uniform(1, 4, n // 40).repeat(40)
+        wl = np.where(rng.random(n // 40) < 0.3, 8.0, rng.uniform(-10, 12, n // 40)).repeat(40) + 0.1 * rng.normal(size=n)
+        wr = np.where(hold > 2.5, wl, np.r_[rng.uniform(-10, 12, n // 40)].repeat(40))
+        v = s * r * (wl + wr) / 2
+        w = r * (wr - wl) / (alpha * B)
+        yaw = np.r_[0.0, np.cumsum(w[:-1] * dt)]
+        x = np.r_[0.0, np.cumsum(v[:-1] * np.cos(yaw[:-1]) * dt)]
+        y = np.r_[0.0, np.cumsum(v[:-1] * np.sin(yaw[:-1]) * dt)]
+        held = (np.arange(n) // 4) * 4              # 5 Hz updates
+        x, y, yaw = x[held], y[held], yaw[held]
+        jumps = rng.choice(n, 10, replace=False)
+        x[jumps] += rng.normal(0, 2.0, 10)
+        t = dt * np.arange(n)
+        f = fit_kinematics(t, wl, wr, x, y, yaw, r, B, span_s=1.0)
+        assert f["alpha"] == pytest.approx(alpha, rel=0.03)
+        assert f["v_scale"] == pytest.approx(s, rel=0.05)
+    check()
