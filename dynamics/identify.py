@@ -164,3 +164,35 @@ def _trimmed_slope(u, y, rounds: int = 3, k: float = 4.0):
     out = np.zeros(informative.size, bool)
     out[np.flatnonzero(informative)[keep]] = True
     return a, out
+
+
+def fit_friction(vehicle: Vehicle, terrain: Terrain, wl, wr, tau_l, tau_r, magnitudes: bool = False) -> dict:
+    """Eq. 28 on steady samples at any wheel speeds: the terrain's mu_roll, mu_sa and
+    mu_op (shear modulus K and alpha kept) that minimise the squared differences between
+    the steady resistance torques of eq. 22 at wheel speeds (wl, wr) [rad/s] and the
+    measured torques tau_l, tau_r [N m]. With ``magnitudes`` the measurement is unsigned
+    (motor currents logged without sign) and |tau| is compared. Returns {"terrain",
+    "mu_roll", "mu_sa", "mu_op", "stderr", "rms" [N m], "n"}."""
+    from .resistance import steady_resistance_fast
+    wl, wr = np.asarray(wl, float), np.asarray(wr, float)
+    meas = np.concatenate([np.asarray(tau_l, float), np.asarray(tau_r, float)])
+
+    def model(p):
+        ter = terrain.replace(mu_roll=p[0], mu_sa=p[1], mu_op=p[2])
+        tl, tr = steady_resistance_fast(wl, wr, vehicle, ter)
+        out = np.concatenate([tl, tr])
+        return np.abs(out) if magnitudes else out
+
+    x0 = np.array([terrain.mu_roll, terrain.mu_sa, terrain.mu_op])
+    sol = least_squares(lambda p: model(p) - meas, x0, bounds=([0.0, 0.0, 0.0], [1.0, 5.0, 5.0]),
+                        x_scale=[0.02, 0.1, 0.1])
+    dof = max(1, len(meas) - 3)
+    s2 = float(sol.fun @ sol.fun) / dof
+    try:
+        se = np.sqrt(np.abs(np.diag(np.linalg.inv(sol.jac.T @ sol.jac) * s2)))
+    except np.linalg.LinAlgError:
+        se = np.full(3, np.inf)
+    p = sol.x
+    return {"terrain": terrain.replace(mu_roll=float(p[0]), mu_sa=float(p[1]), mu_op=float(p[2])),
+            "mu_roll": float(p[0]), "mu_sa": float(p[1]), "mu_op": float(p[2]),
+            "stderr": [float(a) for a in se], "rms": float(np.sqrt(np.mean(sol.fun ** 2))), "n": int(wl.size)}

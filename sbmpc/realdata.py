@@ -7,6 +7,11 @@
   are joined into one timeline (window w starts at 2 w seconds); a new segment starts
   only where the wheel speeds jump across a window boundary (the log is not continuous
   there).
+* BorealTC (github.com/norlab-ulaval/BorealTC, CC0): Clearpath Husky A200 on six
+  terrains, files ``pro_XX.csv`` with ``time, curL, curR, velL, velR``: motor currents
+  [A, unsigned] and wheel linear speeds [m/s, quantised to 1/127 m/s] at about 6.5 Hz;
+  no commands and no pose, so no replay: :func:`read_borealtc` and
+  :func:`steady_samples` feed the eq. 28 identification of the terrain's friction.
 """
 from __future__ import annotations
 
@@ -69,3 +74,42 @@ def _chain_windows(win, x, y, yaw):
         gx, gy, gyaw = X[end - 1], Y[end - 1], YAW[end - 1]
         start = end
     return X, Y, np.unwrap(YAW)
+
+
+BOREALTC_QUANTUM = 1.0 / 127.0     # m/s: resolution of the logged wheel speeds
+
+
+def read_borealtc(path: Path | str, wheel_radius: float = 0.13) -> dict:
+    """One BorealTC ``pro_XX.csv`` as arrays: t [s], wl, wr [rad/s] (the logged wheel
+    linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
+    path = Path(path)
+    try:
+        d = np.genfromtxt(path, delimiter=",", names=True)
+    except (OSError, ValueError) as exc:
+        raise RunError(f"{path}: expected a BorealTC CSV, found a file that cannot be read ({exc})") from None
+    need = ("time", "curL", "curR", "velL", "velR")
+    missing = [c for c in need if c not in (d.dtype.names or ())]
+    if missing:
+        raise RunError(f"{path}: expected the BorealTC columns {', '.join(need)}, found no {', '.join(missing)}")
+    return {"t": d["time"], "wl": d["velL"] / wheel_radius, "wr": d["velR"] / wheel_radius,
+            "i_l": d["curL"], "i_r": d["curR"]}
+
+
+def steady_samples(rec: dict, hold_s: float = 1.0, tol: float = 1.5 * BOREALTC_QUANTUM / 0.13) -> dict:
+    """Stretches where both wheel speeds stay within ``tol`` [rad/s] of their first value
+    for at least ``hold_s`` [s]: the steady state of eq. 22 (constant wheel speeds, the
+    currents balancing the resistance). Returns the mean wl, wr [rad/s] and i_l, i_r [A]
+    of each stretch, its duration [s] and its number of samples."""
+    t, wl, wr = rec["t"], rec["wl"], rec["wr"]
+    out = {k: [] for k in ("wl", "wr", "i_l", "i_r", "duration_s", "n")}
+    a = 0
+    n = len(t)
+    for b in range(1, n + 1):
+        if b == n or abs(wl[b] - wl[a]) > tol or abs(wr[b] - wr[a]) > tol:
+            if b - a >= 3 and t[b - 1] - t[a] >= hold_s:
+                for k in ("wl", "wr", "i_l", "i_r"):
+                    out[k].append(float(np.mean(rec[k][a:b])))
+                out["duration_s"].append(float(t[b - 1] - t[a]))
+                out["n"].append(b - a)
+            a = b
+    return {k: np.array(v) for k, v in out.items()}

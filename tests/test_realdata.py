@@ -42,3 +42,32 @@ def test_drive_pose_is_chained_and_gives_the_kinematic_alpha():
                            segment=run["segment"]) for m in (train, ~train)]
     assert 1.2 < fits[0]["alpha"] < 2.5
     assert fits[1]["alpha"] == pytest.approx(fits[0]["alpha"], rel=0.1)
+
+
+BOREALTC = DRIVE.parent / "borealtc"
+
+
+@pytest.mark.skipif(not BOREALTC.is_dir(), reason="../shared/data/real/borealtc absent")
+def test_borealtc_eq28_friction_ranks_the_terrains_and_beats_the_nominal_on_heldout_files():
+    """Eq. 28 on the Husky's steady stretches (unsigned currents): ice has far less
+    turning friction than indoor flooring, and each fitted terrain predicts the torques
+    of files it was not fitted on better than the nearest shipped terrain."""
+    import importlib.util
+    from dynamics import load_terrain, load_vehicle
+    from dynamics.identify import fit_friction
+    spec = importlib.util.spec_from_file_location("real_husky", Path(__file__).resolve().parents[1] / "bench" / "real_husky.py")
+    rh = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rh)
+    v = load_vehicle("husky")
+    mu = {}
+    for name in ("FLOORING", "ICE"):
+        files = sorted(p.name for p in (BOREALTC / name).glob("*.csv"))
+        k = int(round(0.7 * len(files)))
+        train = rh.terrain_samples(BOREALTC / name, files[:k], v.torque_constant)
+        held = rh.terrain_samples(BOREALTC / name, files[k:], v.torque_constant)
+        assert train["wl"].size > 100 and held["wl"].size >= 10
+        ter0 = load_terrain(rh.NOMINAL[name])
+        fit = fit_friction(v, ter0, train["wl"], train["wr"], train["tau_l"], train["tau_r"], magnitudes=True)
+        assert rh.rmse(v, fit["terrain"], held) < 0.8 * rh.rmse(v, ter0, held)
+        mu[name] = fit["mu_sa"]
+    assert mu["ICE"] < 0.5 * mu["FLOORING"]
