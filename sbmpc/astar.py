@@ -81,16 +81,16 @@ def cell_index(x, res):
     return int(math.floor(q + 0.5)) if q >= 0.0 else -int(math.floor(-q + 0.5))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _hash(key):
     h = np.uint64(1469598103934665603)
-    for k in key:
-        h = (h ^ np.uint64(k & 0xFFFFFFFFFFFF)) * np.uint64(1099511628211)
+    for d in range(key.shape[0]):
+        h = (h ^ np.uint64(key[d] & 0xFFFFFFFFFFFF)) * np.uint64(1099511628211)
         h ^= h >> np.uint64(29)
     return h
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _lookup(table, keys, key):
     """Slot of ``key`` in the open-addressing ``table`` (node ids, -1 empty): returns
     (slot, node id or -1)."""
@@ -120,19 +120,19 @@ def rehash(table, keys, n_nodes):
         table[slot] = n
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _less(hf, hs, a, b):
     return hf[a] < hf[b] or (hf[a] == hf[b] and hs[a] < hs[b])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _swap(hf, hs, hn, a, b):
     hf[a], hf[b] = hf[b], hf[a]
     hs[a], hs[b] = hs[b], hs[a]
     hn[a], hn[b] = hn[b], hn[a]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _push(hf, hs, hn, cnt, f, node):
     i = cnt[C_HEAP]
     hf[i] = f
@@ -149,7 +149,7 @@ def _push(hf, hs, hn, cnt, f, node):
             break
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pop(hf, hs, hn, cnt):
     top = hn[0]
     last = cnt[C_HEAP] - 1
@@ -172,7 +172,7 @@ def _pop(hf, hs, hn, cnt):
     return top
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _key_of(state, dims, res, key):
     for d in range(dims.shape[0]):
         key[d] = cell_index(state[dims[d]], res[d])
@@ -225,6 +225,8 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
     kd = dims.shape[0]
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
+    cur = np.empty(X.shape[1])
+    u = np.empty(controls.shape[1])
     m = controls.shape[0]
     cap = X.shape[0]
     done = 0
@@ -241,10 +243,12 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
         n = _pop(hf, hs, hn, cnt)
         if CLO[n]:
             continue
-        if best[0] < np.inf and G[n] + best[1] * heur(params, data, X[n]) >= best[0]:
+        for d in range(cur.shape[0]):
+            cur[d] = X[n, d]
+        if best[0] < np.inf and G[n] + best[1] * heur(params, data, cur) >= best[0]:
             CLO[n] = 1
             continue
-        if goal(params, data, X[n]):
+        if goal(params, data, cur):
             if G[n] < best[0]:
                 best[0] = G[n]
                 best[1] = 1.0
@@ -264,7 +268,9 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
         base = (cnt[C_ITERS] - 1) * (nbranch - nfixed) if rotate else 0
         for b in range(nbranch):
             c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
-            cost = prop(params, data, X[n], controls[c], child)
+            for d in range(u.shape[0]):
+                u[d] = controls[c, d]
+            cost = prop(params, data, cur, u, child)
             cnt[C_EDGES] += 1
             if cost < 0.0:
                 code = int(-cost)
@@ -288,8 +294,10 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
                 if g < best[0]:
                     j = cnt[C_NODES]
                     cnt[C_NODES] += 1
-                    KEYS[j, :] = key
-                    X[j, :] = child
+                    for d in range(kd):
+                        KEYS[j, d] = key[d]
+                    for d in range(child.shape[0]):
+                        X[j, d] = child[d]
                     G[j] = g
                     PAR[j] = n
                     CTL[j] = c
@@ -304,11 +312,13 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
                 j = cnt[C_NODES]
                 cnt[C_NODES] += 1
                 table[slot] = j
-                KEYS[j, :] = key
+                for d in range(kd):
+                    KEYS[j, d] = key[d]
                 CLO[j] = 0
             elif g >= G[j] or (CLO[j] and not snap):
                 continue
-            X[j, :] = child
+            for d in range(child.shape[0]):
+                X[j, d] = child[d]
             if snap:
                 for d in range(kd):
                     X[j, dims[d]] = key[d] * res[d]
@@ -317,7 +327,10 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
             CTL[j] = c
             DEP[j] = DEP[n] + 1
             if not CLO[j]:
-                h = heur(params, data, X[j])
+                if snap:
+                    for d in range(kd):
+                        child[dims[d]] = key[d] * res[d]
+                h = heur(params, data, child)
                 if g + best[1] * h < best[0]:
                     _push(hf, hs, hn, cnt, g + weight * h, j)
     return RUNNING

@@ -25,13 +25,13 @@ from .astar import GOAL, HEURISTIC, PROPAGATE, Problem, cell_index, search
 CODES = ("outside the map border", "inside an obstacle")
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _snap(x, res):
     """The centre of x's grid cell (the search's own rounding)."""
     return cell_index(x, res) * res
 
 
-@njit(PROPAGATE.signature, cache=True, error_model="numpy")
+@njit(PROPAGATE.signature, cache=True, error_model="numpy", _nrt=False)
 def propagate(params, data, state, control, out):
     """One edge in float32 as the C++ does; cost = xy distance between snapped states."""
     x = np.float32(state[0])
@@ -67,7 +67,7 @@ def propagate(params, data, state, control, out):
     return math.sqrt(sx * sx + sy * sy)
 
 
-@njit(HEURISTIC.signature, cache=True, error_model="numpy")
+@njit(HEURISTIC.signature, cache=True, error_model="numpy", _nrt=False)
 def heuristic(params, data, state):
     """Distance to the goal plus the wrapped bearing error (not admissible, as in the C++)."""
     dx = params[U_GX] - state[0]
@@ -77,7 +77,7 @@ def heuristic(params, data, state):
     return math.sqrt(dx * dx + dy * dy) + abs(e)
 
 
-@njit(GOAL.signature, cache=True, error_model="numpy")
+@njit(GOAL.signature, cache=True, error_model="numpy", _nrt=False)
 def is_goal(params, data, state):
     if heuristic(params, data, state) <= params[U_THR]:
         return True
