@@ -41,6 +41,7 @@ which checks the wall-clock budget, shows progress and grows the arrays when ask
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -360,33 +361,28 @@ class _Compiled(types.WrapperAddressProtocol):
         return self._sig
 
 
-_COMPILED: dict = {}
-
-
+@functools.lru_cache(maxsize=None)
 def _compiled(fn, ftype):
-    if isinstance(fn, types.WrapperAddressProtocol):
-        return fn
-    key = (id(fn), ftype)
-    c = _COMPILED.get(key)
-    if c is None or c.dispatcher is not fn:
-        c = _COMPILED[key] = _Compiled(fn, ftype)
-    return c
+    return fn if isinstance(fn, types.WrapperAddressProtocol) else _Compiled(fn, ftype)
 
 
-def _entry(dispatcher, sig):
-    """The compiled entry point of a function with an explicit signature: calling it
-    skips the dispatcher's typing of every argument (the search takes 31)."""
-    return dispatcher.overloads[tuple(sig.args)].entry_point
+@functools.lru_cache(maxsize=None)
+def _entries():
+    """The compiled entry points of run_search and start_search (explicit signatures):
+    calling them skips the dispatcher's typing of every argument (the search takes 31),
+    so :class:`Search` checks the problem's arrays itself (:func:`_check`)."""
+    return (run_search.overloads[tuple(_RUN_SIG.args)].entry_point,
+            start_search.overloads[tuple(_START_SIG.args)].entry_point)
 
 
-_ENTRIES: dict = {}
+def _check(p) -> None:
+    for name, dtype, ndim in (("params", np.float64, 1), ("data", np.float64, 1), ("start", np.float64, 1),
+                              ("controls", np.float64, 2), ("dims", np.int64, 1), ("res", np.float64, 1)):
+        a = getattr(p, name)
+        if not (isinstance(a, np.ndarray) and a.dtype == dtype and a.ndim == ndim and a.flags.c_contiguous):
+            raise TypeError(f"Problem.{name}: expected a C-contiguous {ndim}-D {np.dtype(dtype).name} array, "
+                            f"found {type(a).__name__} {getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}")
 
-
-def _run_entry():
-    if "run" not in _ENTRIES:
-        _ENTRIES["run"] = _entry(run_search, _RUN_SIG)
-        _ENTRIES["start"] = _entry(start_search, _START_SIG)
-    return _ENTRIES["run"], _ENTRIES["start"]
 
 @dataclass(frozen=True, eq=False)
 class Problem:
@@ -395,11 +391,12 @@ class Problem:
     ``start`` (state_dim,); ``controls`` (m, control_dim); ``dims``/``res``: which state
     entries form the grid cell and the cell size of each; ``branching``: controls tried
     per expansion: the first ``fixed_controls`` rows always, then the next rows (the same
-    ones at every expansion, or with ``rotate`` the next window of the remaining rows); ``max_depth``: edges from the start; ``settle_depth``: children of nodes less
-    than this many edges from the start that stay in their parent's cell are kept as
-    nodes of their own instead of dropped (for states whose hidden part, such as a
-    controller's, changes while the gridded part does not); ``codes``: names of the
-    invalid-edge codes (1-based) for the reason of a failure.
+    ones at every expansion, or with ``rotate`` the next window of the remaining rows);
+    ``max_depth``: edges from the start; ``settle_depth``: children of nodes less than
+    this many edges from the start that stay in their parent's cell are kept as nodes of
+    their own instead of dropped (for states whose hidden part, such as a controller's,
+    changes while the gridded part does not); ``codes``: names of the invalid-edge codes
+    (1-based) for the reason of a failure.
     """
 
     propagate: object
@@ -465,8 +462,9 @@ class Search:
         self.hn = np.empty(2 * cap, np.int64)
         self.cnt = np.zeros(NC, np.int64)
         self.best = np.zeros(2)      # [incumbent cost, weight of h in the pruning test]
+        _check(p)
         self._fns = (_compiled(p.propagate, PROPAGATE), _compiled(p.heuristic, HEURISTIC), _compiled(p.is_goal, GOAL))
-        self._run, start = _run_entry()
+        self._run, start = _entries()
         start(self._fns[1], float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
               self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
               self.hn, self.cnt, self.best)

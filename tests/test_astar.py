@@ -117,3 +117,15 @@ def test_unicycle_main_map_matches_the_reference_cpp():
     assert res.status == "found"
     assert res.cost == pytest.approx(8.2448, rel=0.01)
     assert abs(res.iterations - 410) <= 41
+
+
+def test_a_problem_with_arrays_of_the_wrong_kind_is_refused_with_its_field():
+    """The search calls its compiled entry points directly (no dispatcher typing), so it
+    checks the problem's arrays itself."""
+    from dataclasses import replace
+    p = grid_problem(np.zeros((4, 4), bool), (3, 3))
+    with pytest.raises(TypeError, match="Problem.params"):
+        search(replace(p, params=p.params.astype(np.float32)), 100)
+    with pytest.raises(TypeError, match="Problem.dims"):
+        search(replace(p, dims=p.dims.astype(np.int32)), 100)
+    assert search(p, 100).status == "found"
