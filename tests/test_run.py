@@ -137,3 +137,12 @@ def test_run_settings_are_validated():
                   "run": {"trigger": "sometimes", "tol_xy": -1.0}})
     msg = str(e.value)
     assert "run.trigger" in msg and "run.tol_xy" in msg
+
+
+def test_a_command_delay_in_the_truth_is_executed(flat):
+    """The truth's delay holds the previous command for its first 0.3 s of each period:
+    the vehicle starts late and arrives later than the plan predicted."""
+    res = R.run(flat, "time", flat.vehicle.replace(delay=0.3))
+    assert res.status == "reached"
+    assert res.travel_time_s > res.predicted["travel_time_s"] + 0.2
+    assert res.trajectory["v"][res.trajectory["t"] <= 0.3].max() < 1e-6       # nothing moves before the delay
