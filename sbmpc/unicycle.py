@@ -40,10 +40,18 @@ def propagate(params, data, state, control, out):
     v = np.float32(control[0])
     w = np.float32(control[1])
     dt = np.float32(params[U_DT])
+    # the heading of sub-step k is th + k w dt: its cosine and sine by the angle-addition
+    # recurrence (two sincos per edge instead of ten, in double precision, rounded to
+    # float32 where the C++ uses cosf/sinf of the float32 heading)
+    c = math.cos(float(th))
+    s = math.sin(float(th))
+    cw = math.cos(float(w * dt))
+    sw = math.sin(float(w * dt))
     for _ in range(int(params[U_NSUB])):
-        x = np.float32(x + np.cos(th) * v * dt)
-        y = np.float32(y + np.sin(th) * v * dt)
+        x = np.float32(x + np.float32(c) * v * dt)
+        y = np.float32(y + np.float32(s) * v * dt)
         th = np.float32(th + w * dt)
+        c, s = c * cw - s * sw, s * cw + c * sw
     pi = np.float32(math.pi)
     if th > pi:
         th = np.float32(th - np.float32(2.0) * pi)
