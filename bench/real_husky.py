@@ -32,7 +32,11 @@ TRAIN_FRACTION = 0.7
 def terrain_samples(folder: Path, files: list, torque_constant: float) -> dict:
     from sbmpc.realdata import read_borealtc, steady_samples
     parts = [steady_samples(read_borealtc(folder / f)) for f in files]
-    s = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return with_torques({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, torque_constant)
+
+
+def with_torques(s: dict, torque_constant: float) -> dict:
+    """Steady stretches with wheel torques [N m] from the (unsigned) motor currents."""
     s["tau_l"] = torque_constant * np.maximum(s["i_l"] - NO_LOAD_CURRENT, 0.0)
     s["tau_r"] = torque_constant * np.maximum(s["i_r"] - NO_LOAD_CURRENT, 0.0)
     return s
@@ -90,10 +94,7 @@ def _split_one(path: Path, torque_constant: float):
     cut = t[0] + TRAIN_FRACTION * (t[-1] - t[0])
     halves = []
     for m in (t < cut, t >= cut):
-        s = steady_samples({k: a[m] for k, a in rec.items()})
-        s["tau_l"] = torque_constant * np.maximum(s["i_l"] - NO_LOAD_CURRENT, 0.0)
-        s["tau_r"] = torque_constant * np.maximum(s["i_r"] - NO_LOAD_CURRENT, 0.0)
-        halves.append(s)
+        halves.append(with_torques(steady_samples({k: a[m] for k, a in rec.items()}), torque_constant))
     return halves
 
 

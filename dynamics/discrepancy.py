@@ -32,11 +32,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 from scipy.optimize import least_squares
 
 from .params import Terrain, Vehicle
-from .runs import Run
+from .runs import Run, pose_updates
 from .simulate import Model, simulate
 from .synth import apply
 
@@ -236,8 +235,7 @@ def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S)
     for k, (a, b) in enumerate(run.segments()):
         seg[a:b] = k
     x, y, yaw = run["x"], run["y"], run["yaw"]
-    fresh = np.r_[True, (np.diff(x) != 0) | (np.diff(y) != 0) | (np.diff(yaw) != 0)]
-    upd = np.maximum.accumulate(np.where(fresh, np.arange(len(t)), 0))
+    fresh, upd = pose_updates(x, y, yaw)
     i = np.arange(len(t))
     j = np.searchsorted(t, t + window_s - 1e-9)
     ok = (j < len(t)) & (mask if mask is not None else True)

@@ -16,6 +16,7 @@ from scipy.optimize import least_squares
 from .kinematics import wheel_speeds
 from .params import Terrain, Vehicle
 from .resistance import steady_resistance
+from .runs import pose_updates
 
 #: The paper's 31 commanded radii [m]: 0.2..1 by 0.1, 2..10 by 1, 10^1.2..10^2,
 #: 10^2.2..10^3.2 by 10^0.2, then 10^3.6 and 10^4.
@@ -115,8 +116,7 @@ def fit_kinematics(t, wl, wr, x, y, yaw, r: float, width: float, mask=None, span
     uw = r * (wr - wl) / width
     uv = r * (wr + wl) / 2.0
     # a pose held between updates belongs to the time of its update: integrate between those
-    changed = np.r_[True, (np.diff(x) != 0) | (np.diff(y) != 0) | (np.diff(yaw) != 0)]
-    upd = np.maximum.accumulate(np.where(changed, np.arange(t.size), 0))
+    _, upd = pose_updates(x, y, yaw)
     dyaw, iw, dist, iv = [], [], [], []
     starts = np.flatnonzero(np.r_[True, (np.diff(k) != 0) | (np.diff(seg) != 0)])
     ends = np.r_[starts[1:], t.size]

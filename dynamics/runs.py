@@ -158,3 +158,13 @@ def write_run(path: Path | str, run: Run) -> None:
         for row in data:
             w.writerow(["" if not np.isfinite(x) else (f"{int(x)}" if c == "segment" else f"{x:.6g}")
                         for c, x in zip(names, row)])
+
+
+def pose_updates(x, y, yaw) -> tuple:
+    """Where a logged pose was updated: (fresh, upd), ``fresh[i]`` true when sample i
+    changed the pose, ``upd[i]`` the index of the update that sample i still holds.
+    Scan-matched poses are logged at the sensor rate but updated irregularly and held in
+    between; a held pose belongs to the time of its update."""
+    x, y, yaw = (np.asarray(a, float) for a in (x, y, yaw))
+    fresh = np.r_[True, (np.diff(x) != 0) | (np.diff(y) != 0) | (np.diff(yaw) != 0)]
+    return fresh, np.maximum.accumulate(np.where(fresh, np.arange(fresh.size), 0))

@@ -152,6 +152,11 @@ def start_state(world: World) -> np.ndarray:
     return X
 
 
+def _start(world: World, start) -> np.ndarray:
+    """The planner state to start from: ``start`` (contiguous float64) or the scenario's."""
+    return start_state(world) if start is None else np.ascontiguousarray(start, float)
+
+
 def pack_world(world: World, cost: str) -> tuple:
     """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost."""
     scn, e, v = world.scenario, world.emap, world.vehicle
@@ -312,7 +317,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None) -> Problem
     Q, data = pack_world(world, cost)
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
-    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    X0 = _start(world, start)
     return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
@@ -445,7 +450,7 @@ def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray 
     cr = np.array([c[1] for c in controls], float)
     n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
     rec = np.zeros((int(n.sum()) + 1, K.NR))
-    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    X0 = _start(world, start)
     rows, S, end, early = SS.replay(Q, data, X0, cl, cr, n, rec)
     idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
     traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
@@ -484,7 +489,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     ps = world.scenario.planner
     budget = ps.time_budget_s if time_budget_s is None else time_budget_s
     t0 = time.perf_counter()
-    X0 = start_state(world) if start is None else np.ascontiguousarray(start, float)
+    X0 = _start(world, start)
     why = unreachable_reason(world, (float(X0[K.S_X]), float(X0[K.S_Y])))
     if why is not None:
         return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0)

@@ -77,9 +77,10 @@ def _chain_windows(win, x, y, yaw):
 
 
 BOREALTC_QUANTUM = 1.0 / 127.0     # m/s: resolution of the logged wheel speeds
+HUSKY_WHEEL_RADIUS = 0.13           # m, BorealTC's code
 
 
-def read_borealtc(path: Path | str, wheel_radius: float = 0.13) -> dict:
+def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) -> dict:
     """One BorealTC ``pro_XX.csv`` as arrays: t [s], wl, wr [rad/s] (the logged wheel
     linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
     path = Path(path)
@@ -95,7 +96,7 @@ def read_borealtc(path: Path | str, wheel_radius: float = 0.13) -> dict:
             "i_l": d["curL"], "i_r": d["curR"]}
 
 
-def steady_samples(rec: dict, hold_s: float = 1.0, tol: float = 1.5 * BOREALTC_QUANTUM / 0.13) -> dict:
+def steady_samples(rec: dict, hold_s: float = 1.0, tol: float = 1.5 * BOREALTC_QUANTUM / HUSKY_WHEEL_RADIUS) -> dict:
     """Stretches where both wheel speeds stay within ``tol`` [rad/s] of their first value
     for at least ``hold_s`` [s]: the steady state of eq. 22 (constant wheel speeds, the
     currents balancing the resistance). Returns the mean wl, wr [rad/s] and i_l, i_r [A]

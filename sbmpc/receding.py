@@ -31,7 +31,6 @@ planner's search does not model a delay.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -54,7 +53,6 @@ class Replan:
     why: str
     plan: PL.Plan
     warm: bool               # an incumbent (the rest of the previous plan) was handed to the search
-    start: np.ndarray | None = None   # the planner state it started from
 
     def to_json(self) -> dict:
         p = self.plan
@@ -223,7 +221,7 @@ def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
             p = PL.plan(world, cost, progress=progress("first plan" if first else f"re-plan {len(out.plans)}")
                         if progress else None, start=X, incumbent=tail,
                         time_budget_s=None if first else rs.replan_time_budget_s)
-            out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail), X.copy()))
+            out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail)))
             if p.found:
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
