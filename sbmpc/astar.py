@@ -2,17 +2,22 @@
 
 The search knows nothing of a particular robot (OMPL's split): a *problem* supplies
 
-* ``propagate(params, data, state, control, out) -> cost``: simulate one edge from
-  ``state`` under ``control`` into ``out``; returns the edge cost (>= 0) or a negative
-  code saying why the edge is invalid (the problem names its codes);
+* ``expand(params, data, work, state, controls, children, costs)``: simulate the edges
+  of one expansion, one from ``state`` under each row of ``controls`` (k, control_dim),
+  into the rows of ``children`` (k, state_dim), and put each edge's cost (>= 0) or a
+  negative code saying why it is invalid (the problem names its codes) into ``costs``
+  (k,). One call per expansion, not per edge: a model may share work between the edges
+  of a node (the unicycle's sub-steps run as vector lanes, one per control) and the
+  search pays one indirect call instead of k;
 * ``heuristic(params, data, state) -> float``: a lower bound of the cost to the goal
   (admissible for optimal plans);
 * ``is_goal(params, data, state) -> bool``;
 
-as numba functions compiled for the signatures :data:`PROPAGATE`, :data:`HEURISTIC`,
+as numba functions compiled for the signatures :data:`EXPAND`, :data:`HEURISTIC`,
 :data:`GOAL` (first-class function types, so the compiled search is cached on disk once
 for every problem), plus flat float arrays ``params`` and ``data`` that only the problem
-reads, and the control set, an (m, control_dim) array.
+reads, ``work``, scratch space the problem may write during an expansion, and the
+control set, an (m, control_dim) array.
 
 The implicit grid maps a state to the integer cell ``round(state[dims] / res)`` (half
 away from zero). A child that lands in its parent's cell is dropped; a child that lands
@@ -51,7 +56,8 @@ from numba import njit, types
 
 # ---- first-class function types of a problem -------------------------------------
 _ARR = types.float64[::1]
-PROPAGATE = types.FunctionType(types.float64(_ARR, _ARR, _ARR, _ARR, _ARR))
+_ARR2 = types.float64[:, ::1]
+EXPAND = types.FunctionType(types.void(_ARR, _ARR, _ARR, _ARR, _ARR2, _ARR2, _ARR))
 HEURISTIC = types.FunctionType(types.float64(_ARR, _ARR, _ARR))
 GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 
@@ -70,7 +76,7 @@ _EMPTY = -1
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _START_SIG = types.void(HEURISTIC, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
                         _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
-_RUN_SIG = types.int64(PROPAGATE, HEURISTIC, types.float64, GOAL, _F1, _F1, _F2, types.int64, types.int64,
+_RUN_SIG = types.int64(EXPAND, HEURISTIC, types.float64, GOAL, _F1, _F1, _F1, _F2, types.int64, types.int64,
                        types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
 
@@ -204,7 +210,7 @@ def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, 
 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
-def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed, rotate, dims, res,
+def run_search(expand, heur, weight, goal, params, data, work, controls, nbranch, nfixed, rotate, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
                hs, hn, cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
@@ -225,8 +231,14 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
     cur = np.empty(X.shape[1])
-    u = np.empty(controls.shape[1])
     m = controls.shape[0]
+    # the controls of one expansion (all rows in order when every row is tried), their
+    # rows in ``controls``, the children and edge costs
+    every = nbranch == m and not rotate
+    U = controls if every else np.empty((nbranch, controls.shape[1]))
+    crow = np.arange(nbranch)
+    CH = np.empty((nbranch, X.shape[1]))
+    CO = np.empty(nbranch)
     cap = X.shape[0]
     done = 0
     while done < chunk:
@@ -264,19 +276,26 @@ def run_search(prop, heur, weight, goal, params, data, controls, nbranch, nfixed
         if DEP[n] >= max_depth:
             cnt[C_DEPTHCUT] += 1
             continue
-        base = (cnt[C_ITERS] - 1) * (nbranch - nfixed) if rotate else 0
+        if not every:
+            base = (cnt[C_ITERS] - 1) * (nbranch - nfixed) if rotate else 0
+            for b in range(nbranch):
+                c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
+                crow[b] = c
+                for d in range(U.shape[1]):
+                    U[b, d] = controls[c, d]
+        expand(params, data, work, cur, U, CH, CO)
+        cnt[C_EDGES] += nbranch
         for b in range(nbranch):
-            c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
-            for d in range(u.shape[0]):
-                u[d] = controls[c, d]
-            cost = prop(params, data, cur, u, child)
-            cnt[C_EDGES] += 1
+            c = crow[b]
+            cost = CO[b]
             if cost < 0.0:
                 code = int(-cost)
                 if code > MAX_CODE:
                     code = MAX_CODE
                 cnt[C_INVALID + code] += 1
                 continue
+            for d in range(child.shape[0]):
+                child[d] = CH[b, d]
             _key_of(child, dims, res, key)
             g = G[n] + cost
             same = True
@@ -394,10 +413,11 @@ class Problem:
     this many edges from the start that stay in their parent's cell are kept as nodes of
     their own instead of dropped (for states whose hidden part, such as a controller's,
     changes while the gridded part does not); ``codes``: names of the invalid-edge codes
-    (1-based) for the reason of a failure.
+    (1-based) for the reason of a failure; ``work_size``: length of the ``work`` array
+    each search gives ``expand``.
     """
 
-    propagate: object
+    expand: object
     heuristic: object
     is_goal: object
     params: np.ndarray
@@ -415,6 +435,7 @@ class Problem:
     codes: tuple = ()
     weight: float = 1.0
     refine: float = 0.0
+    work_size: int = 0
 
 
 @dataclass
@@ -460,8 +481,9 @@ class Search:
         self.hn = np.empty(2 * cap, np.int64)
         self.cnt = np.zeros(NC, np.int64)
         self.best = np.zeros(2)      # [incumbent cost, weight of h in the pruning test]
+        self.work = np.zeros(max(int(p.work_size), 1))
         _check(p)
-        self._fns = (_compiled(p.propagate, PROPAGATE), _compiled(p.heuristic, HEURISTIC), _compiled(p.is_goal, GOAL))
+        self._fns = (_compiled(p.expand, EXPAND), _compiled(p.heuristic, HEURISTIC), _compiled(p.is_goal, GOAL))
         self._run, start = _entries()
         start(self._fns[1], float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
               self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
@@ -503,8 +525,8 @@ class Search:
         p = self.problem
         t0 = time.perf_counter()
         while True:
-            prop, heur, goal = self._fns
-            st = self._run(prop, heur, float(p.weight), goal, p.params, p.data, p.controls,
+            expand, heur, goal = self._fns
+            st = self._run(expand, heur, float(p.weight), goal, p.params, p.data, self.work, p.controls,
                             int(p.branching), int(p.fixed_controls), bool(p.rotate), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)

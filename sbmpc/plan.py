@@ -318,7 +318,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None) -> Problem
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
-    return Problem(SS.propagate, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
+    return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine)

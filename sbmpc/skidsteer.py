@@ -43,7 +43,7 @@ from numba import njit
 from dynamics import kernels as K
 from maps.grid import cell_value, height_at, pitch_roll_at
 
-from .astar import GOAL, HEURISTIC, PROPAGATE
+from .astar import EXPAND, GOAL, HEURISTIC
 
 # ---- extra state entries after the model's ------------------------------------------
 X_YAWW = K.NS          # heading wrapped to (-pi, pi] [rad]
@@ -126,7 +126,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
     return end, rows
 
 
-@njit(PROPAGATE.signature, cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def propagate(params, data, state, control, out):
     """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
     out[:] = state
@@ -137,6 +137,13 @@ def propagate(params, data, state, control, out):
     if params[Q_COST] == COST_TIME:
         return out[K.S_T] - state[K.S_T]
     return out[K.S_E] - state[K.S_E]
+
+
+@njit(EXPAND.signature, cache=True, error_model="numpy")
+def expand(params, data, work, state, controls, children, costs):
+    """The edges of one expansion (:mod:`sbmpc.astar`), one :func:`propagate` per control."""
+    for b in range(controls.shape[0]):
+        costs[b] = propagate(params, data, state, controls[b], children[b])
 
 
 @njit(HEURISTIC.signature, cache=True, error_model="numpy")

@@ -9,24 +9,26 @@ from hypothesis import given, settings, strategies as st
 from numba import njit
 from scipy.sparse.csgraph import shortest_path
 
-from sbmpc.astar import GOAL, HEURISTIC, PROPAGATE, Problem, search
+from sbmpc.astar import EXPAND, GOAL, HEURISTIC, Problem, search
 
 # ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
 # params: [n, goal_i, goal_j]; data: blocked flags, row-major n x n
 
 
-@njit(PROPAGATE.signature, cache=True)
-def walk(params, data, state, control, out):
+@njit(EXPAND.signature, cache=True)
+def walk(params, data, work, state, controls, children, costs):
     n = int(params[0])
-    i = state[0] + control[0]
-    j = state[1] + control[1]
-    out[0] = i
-    out[1] = j
-    if i < 0 or j < 0 or i >= n or j >= n:
-        return -1.0
-    if data[int(i) * n + int(j)] > 0:
-        return -2.0
-    return 1.0
+    for b in range(controls.shape[0]):
+        i = state[0] + controls[b, 0]
+        j = state[1] + controls[b, 1]
+        children[b, 0] = i
+        children[b, 1] = j
+        if i < 0 or j < 0 or i >= n or j >= n:
+            costs[b] = -1.0
+        elif data[int(i) * n + int(j)] > 0:
+            costs[b] = -2.0
+        else:
+            costs[b] = 1.0
 
 
 @njit(HEURISTIC.signature, cache=True)
