@@ -83,9 +83,11 @@ _RUN_SIG = types.int64(EXPAND, HEURISTIC, types.float64, GOAL, _F1, _F1, _F1, _F
 
 @njit(cache=True, error_model="numpy")
 def cell_index(x, res):
-    """round(x / res), half away from zero."""
+    """round(x / res), half away from zero (without a branch on the sign, which the
+    processor cannot predict for states around zero)."""
     q = x / res
-    return int(math.floor(q + 0.5)) if q >= 0.0 else -int(math.floor(-q + 0.5))
+    c = int(math.floor(abs(q) + 0.5))
+    return c if q >= 0.0 else -c
 
 
 @njit(cache=True, error_model="numpy", inline="always")

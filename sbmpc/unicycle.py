@@ -136,7 +136,11 @@ def heuristic(params, data, state):
 
 @njit(GOAL.signature, cache=True, error_model="numpy", _nrt=False)
 def is_goal(params, data, state):
-    if heuristic(params, data, state) <= params[U_THR]:
+    """The heuristic within the threshold, or the goal's cell. The heuristic is at least
+    the distance, so its arctangent is only needed within the threshold's distance."""
+    dx = params[U_GX] - state[0]
+    dy = params[U_GY] - state[1]
+    if dx * dx + dy * dy <= params[U_THR] * params[U_THR] and heuristic(params, data, state) <= params[U_THR]:
         return True
     for d in range(3):
         if _snap(state[d], params[U_RX + d]) != _snap(params[U_GX + d], params[U_RX + d]):
