@@ -52,7 +52,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from llvmlite import ir
 from numba import njit, types
+from numba.core import cgutils
+from numba.core.ccallback import CFunc
+from numba.extending import intrinsic
 
 # ---- first-class function types of a problem -------------------------------------
 _ARR = types.float64[::1]
@@ -74,11 +78,35 @@ _EMPTY = -1
 # explicit signatures: the model functions arrive as first-class function values, so the
 # compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
-_START_SIG = types.void(HEURISTIC, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
+_START_SIG = types.void(_I1, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
                         _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
-_RUN_SIG = types.int64(EXPAND, HEURISTIC, types.float64, GOAL, _F1, _F1, _F1, _F2, types.int64, types.int64,
+_RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64,
                        types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
+
+
+def _function_value(ftype):
+    """An intrinsic that makes a first-class function value of type ``ftype`` from the
+    addresses of its C wrapper and of its compiled body (0 if none): the search gets a
+    problem's functions as integers (:func:`_addresses`), because numba unboxes a function
+    object argument by calling two Python functions (3.5 us per argument and call), and
+    calls the compiled body directly, without the wrapper, when it has its address."""
+    @intrinsic
+    def make(typingctx, c_addr, jit_addr):
+        def codegen(context, builder, signature, args):
+            f = cgutils.create_struct_proxy(ftype)(context, builder)
+            vp = context.get_value_type(types.voidptr)
+            f.c_addr = builder.inttoptr(args[0], vp)
+            f.py_addr = ir.Constant(vp, None)
+            f.jit_addr = builder.inttoptr(args[1], vp)
+            return f._getvalue()
+        return ftype(types.int64, types.int64), codegen
+    return make
+
+
+_expand_fn = _function_value(EXPAND)
+_heuristic_fn = _function_value(HEURISTIC)
+_goal_fn = _function_value(GOAL)
 
 
 @njit(cache=True, error_model="numpy")
@@ -186,9 +214,10 @@ def _key_of(state, dims, res, key):
 
 
 @njit(_START_SIG, cache=True, error_model="numpy")
-def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
+def start_search(fa, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
                  table, hf, hs, hn, cnt, best):
-    """Put the start node into empty search arrays."""
+    """Put the start node into empty search arrays (``fa``: :func:`_addresses`)."""
+    heur = _heuristic_fn(fa[2], fa[3])
     cnt[:] = 0
     cnt[C_GOAL] = -1
     cnt[C_FIRST] = -1
@@ -212,7 +241,7 @@ def start_search(heur, weight, params, data, start, dims, res, snap, X, G, PAR, 
 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
-def run_search(expand, heur, weight, goal, params, data, work, controls, nbranch, nfixed, rotate, dims, res,
+def run_search(fa, weight, params, data, work, controls, nbranch, nfixed, rotate, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
                hs, hn, cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
@@ -229,6 +258,9 @@ def run_search(expand, heur, weight, goal, params, data, work, controls, nbranch
     weight of h in the pruning test, see :meth:`Search.bound`): nodes with
     g + best[1] h >= best[0] are never opened; the first goal reached (necessarily
     cheaper) resets the weight to 1."""
+    expand = _expand_fn(fa[0], fa[1])
+    heur = _heuristic_fn(fa[2], fa[3])
+    goal = _goal_fn(fa[4], fa[5])
     kd = dims.shape[0]
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
@@ -357,32 +389,31 @@ def run_search(expand, heur, weight, goal, params, data, work, controls, nbranch
 
 
 # ---- Python side -----------------------------------------------------------------
-class _Compiled(types.WrapperAddressProtocol):
-    """A problem's compiled function as a first-class function value whose address is
-    looked up once. Handing numba a dispatcher instead costs about 60 us per argument
-    and call (it looks up the compile result and the wrapper's address every time),
-    which made the fixed cost of a search 0.3 ms."""
-
-    def __init__(self, dispatcher, ftype):
-        sig = ftype.signature
-        cres = dispatcher.get_compile_result(sig)
-        if cres is None:
-            dispatcher.compile(sig.args)
-            cres = dispatcher.get_compile_result(sig)
-        self._addr = cres.library.get_pointer_to_function(cres.fndesc.llvm_cfunc_wrapper_name)
-        self._sig = sig
-        self.dispatcher = dispatcher            # keeps the compiled code alive
-
-    def __wrapper_address__(self):
-        return self._addr
-
-    def signature(self):
-        return self._sig
-
-
 @functools.lru_cache(maxsize=None)
-def _compiled(fn, ftype):
-    return fn if isinstance(fn, types.WrapperAddressProtocol) else _Compiled(fn, ftype)
+def _address_pair(fn, ftype) -> tuple[int, int]:
+    """(C wrapper, compiled body) addresses of a problem's function for ``ftype``; a
+    numba dispatcher is compiled for the signature if needed (the dispatcher, kept by
+    the cache, keeps the code alive); any other wrapper-address object (a cfunc) gives
+    its wrapper only."""
+    sig = ftype.signature
+    if isinstance(fn, types.WrapperAddressProtocol):
+        return fn.__wrapper_address__(), 0
+    if isinstance(fn, CFunc):
+        return fn.address, 0
+    cres = fn.get_compile_result(sig)
+    if cres is None:
+        fn.compile(sig.args)
+        cres = fn.get_compile_result(sig)
+    lib = cres.library
+    return (lib.get_pointer_to_function(cres.fndesc.llvm_cfunc_wrapper_name),
+            lib.get_pointer_to_function(cres.fndesc.llvm_func_name))
+
+
+def _addresses(p) -> np.ndarray:
+    """The addresses of a problem's expand, heuristic and goal test, as the compiled
+    search takes them (int64 array of 6: wrapper and body of each)."""
+    return np.array(_address_pair(p.expand, EXPAND) + _address_pair(p.heuristic, HEURISTIC)
+                    + _address_pair(p.is_goal, GOAL), np.int64)
 
 
 @functools.lru_cache(maxsize=None)
@@ -485,9 +516,9 @@ class Search:
         self.best = np.zeros(2)      # [incumbent cost, weight of h in the pruning test]
         self.work = np.zeros(max(int(p.work_size), 1))
         _check(p)
-        self._fns = (_compiled(p.expand, EXPAND), _compiled(p.heuristic, HEURISTIC), _compiled(p.is_goal, GOAL))
+        self._fa = _addresses(p)
         self._run, start = _entries()
-        start(self._fns[1], float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
+        start(self._fa, float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
               self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
               self.hn, self.cnt, self.best)
 
@@ -527,8 +558,7 @@ class Search:
         p = self.problem
         t0 = time.perf_counter()
         while True:
-            expand, heur, goal = self._fns
-            st = self._run(expand, heur, float(p.weight), goal, p.params, p.data, self.work, p.controls,
+            st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.controls,
                             int(p.branching), int(p.fixed_controls), bool(p.rotate), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)

@@ -12,6 +12,7 @@ node is in the goal's cell. It shares :mod:`sbmpc.astar` with the skid-steer pla
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,11 +23,13 @@ from numba import njit
 from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
-# sub-steps, sub-step dt, obstacle count, offset of the sub-step rotations in data, reach
+# sub-steps, sub-step dt, obstacle count, offset of the obstacles in data (after the
+# sub-step rotations), reach
 # of an edge (its longest length, plus 10 % for float32 rounding)
-(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_TOFF, U_REACH) = range(14)
+(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH) = range(14)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = 16          # the most controls a problem may have (columns of the rotation table)
+_DIMS = np.arange(3, dtype=np.int64)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -42,15 +45,15 @@ def expand(params, data, work, state, controls, children, costs):
 
     The heading of sub-step k, th + k omega dt, has its cosine and sine by one rotation
     of the node heading's (two trig calls per expansion, not per edge) by the control's
-    k omega dt, tabulated in ``data`` (per sub-step a row of cosines and one of sines, a
-    column per control): no trig in the edges. Equal to ten float32 cosf/sinf per edge
+    k omega dt, tabulated at the start of ``data`` (per sub-step a row of cosines and one
+    of sines, a column per control; the obstacles follow): no trig in the edges. Equal to ten float32 cosf/sinf per edge
     in iterations, nodes and costs on all 101 benchmark maps. Only the obstacles within
     reach of the node (the longest edge, ``params[U_REACH]``) are tested against the
     children; the others cannot touch them."""
     m = controls.shape[0]
     L = LANES
     nsub = int(params[U_NSUB])
-    toff = int(params[U_TOFF])
+    oof = int(params[U_OOFF])
     dt = np.float32(params[U_DT])
     th0 = np.float32(state[2])
     c0 = math.cos(np.float64(th0))
@@ -68,8 +71,8 @@ def expand(params, data, work, state, controls, children, costs):
         y = y0
         th = th0
         for k in range(nsub):
-            ck = data[toff + 2 * k * L + b]
-            sk = data[toff + (2 * k + 1) * L + b]
+            ck = data[2 * k * L + b]
+            sk = data[(2 * k + 1) * L + b]
             x = np.float32(x + np.float32(c0 * ck - s0 * sk) * v * dt)
             y = np.float32(y + np.float32(s0 * ck + c0 * sk) * v * dt)
             th = np.float32(th + wd)
@@ -79,9 +82,9 @@ def expand(params, data, work, state, controls, children, costs):
         costs[b] = 0.0
     body = params[U_BODY]
     for j in range(int(params[U_NOBS])):
-        ox = data[3 * j]
-        oy = data[3 * j + 1]
-        r = data[3 * j + 2]
+        ox = data[oof + 3 * j]
+        oy = data[oof + 3 * j + 1]
+        r = data[oof + 3 * j + 2]
         far = params[U_REACH] + r + body
         if (state[0] - ox) ** 2 + (state[1] - oy) ** 2 > far * far:
             continue
@@ -168,7 +171,33 @@ class Benchmark:
         goal = row[4 + 2 * nx:4 + 3 * nx]
         m = int(row[4 + 3 * nx])
         controls = row[5 + 3 * nx:5 + 3 * nx + m * nu].reshape(m, nu)
-        return cls(int(row[0]), int(row[1]), res, start, goal, controls)
+        if nx != 3 or nu != 2:
+            raise ValueError(f"{path}: expected a unicycle (3 state and 2 control dimensions), found {nx} and {nu}")
+        if not 0 < m <= LANES:
+            raise ValueError(f"{path}: expected 1 to {LANES} controls, found {m}")
+        return cls(int(row[0]), int(row[1]), np.ascontiguousarray(res), np.ascontiguousarray(start),
+                   np.ascontiguousarray(goal), np.ascontiguousarray(controls))
+
+    @functools.cached_property
+    def _tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """The parameter vector (all but the obstacle count) and the sub-step rotations:
+        sub-step k of control b turns the heading by k (omega_b dt), omega dt in float32
+        as the C++ adds it; rows cos, sin per sub-step, a column per control."""
+        nsub, dt = 10, 0.05
+        params = np.zeros(14)
+        params[U_RX:U_RT + 1] = self.res
+        params[U_GX:U_GT + 1] = self.goal
+        params[U_THR] = 0.5
+        params[U_BODY] = 0.125
+        params[U_BORDER] = 10.0
+        params[U_NSUB] = nsub
+        params[U_DT] = dt
+        params[U_REACH] = 1.1 * np.abs(self.controls[:, 0]).max() * nsub * dt
+        params[U_OOFF] = 2 * nsub * LANES
+        wdt = np.zeros(LANES)
+        wdt[:self.controls.shape[0]] = np.float32(self.controls[:, 1]) * np.float32(dt)
+        turn = np.arange(nsub)[:, None] * wdt[None, :]
+        return params, np.stack([np.cos(turn), np.sin(turn)], axis=1).ravel()
 
 
 def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
@@ -185,32 +214,14 @@ def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
 
 def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
     """The benchmark on one obstacle map ((n, 3) array of x, y, r)."""
-    nsub, dt = 10, 0.05
-    obstacles = np.ascontiguousarray(obstacles, float).reshape(-1, 3)
-    m = bench.controls.shape[0]
-    params = np.zeros(14)
-    params[U_RX:U_RT + 1] = bench.res
-    params[U_GX:U_GT + 1] = bench.goal
-    params[U_THR] = 0.5
-    params[U_BODY] = 0.125
-    params[U_BORDER] = 10.0
-    params[U_NSUB] = nsub
-    params[U_DT] = dt
+    params, rot = bench._tables
+    obstacles = np.asarray(obstacles, float).reshape(-1, 3)
+    params = params.copy()
     params[U_NOBS] = obstacles.shape[0]
-    params[U_TOFF] = obstacles.size
-    params[U_REACH] = 1.1 * np.abs(bench.controls[:, 0]).max() * nsub * dt
-    # sub-step k of control b turns the heading by k (omega_b dt), omega dt in float32 as
-    # the C++ adds it: rows cos, sin per sub-step, a column per control
-    if m > LANES:
-        raise ValueError(f"config: at most {LANES} controls, found {m}")
-    wdt = np.zeros(LANES)
-    wdt[:m] = np.float32(bench.controls[:, 1]) * np.float32(dt)
-    turn = np.arange(nsub)[:, None] * wdt[None, :]
-    rot = np.stack([np.cos(turn), np.sin(turn)], axis=1).ravel()
-    return Problem(expand, heuristic, is_goal, params, np.concatenate([obstacles.ravel(), rot]),
-                   np.array(bench.start, float), np.ascontiguousarray(bench.controls, float),
-                   np.arange(3, dtype=np.int64), np.array(bench.res, float), m,
-                   rotate=False, snap=True, max_depth=bench.max_generations, codes=CODES, work_size=2 * LANES)
+    m = bench.controls.shape[0]
+    return Problem(expand, heuristic, is_goal, params, np.concatenate((rot, obstacles.ravel())),
+                   bench.start, bench.controls, _DIMS, bench.res, m, rotate=False, snap=True,
+                   max_depth=bench.max_generations, codes=CODES, work_size=2 * LANES)
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):
