@@ -24,9 +24,9 @@ from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt, obstacle count, offset of the obstacles in data (after the
-# sub-step rotations), reach
-# of an edge (its longest length, plus 10 % for float32 rounding)
-(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH) = range(14)
+# sub-step rotations and the heading table), reach of an edge (its longest length, plus
+# 10 % for float32 rounding), offset of the heading table, heading cells either side of 0
+(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH, U_HOFF, U_NHEAD) = range(16)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = 16          # the most controls a problem may have (columns of the rotation table)
 _DIMS = np.arange(3, dtype=np.int64)
@@ -38,32 +38,56 @@ def _snap(x, res):
     return cell_index(x, res) * res
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _turned(c0, s0, rot, nsub, out):
+    """float32 cosines and sines of a heading (c0, s0) turned by each control's k omega dt
+    (the rotations ``rot``: per sub-step k a row of cosines and one of sines, a column per
+    control), into ``out`` in the same layout. In double, rounded once."""
+    for j in range(nsub * LANES):
+        k = j // LANES
+        b = j - k * LANES
+        ck = rot[2 * k * LANES + b]
+        sk = rot[(2 * k + 1) * LANES + b]
+        out[2 * k * LANES + b] = np.float32(c0 * ck - s0 * sk)
+        out[(2 * k + 1) * LANES + b] = np.float32(s0 * ck + c0 * sk)
+
+
 @njit(EXPAND.signature, cache=True, error_model="numpy", _nrt=False)
 def expand(params, data, work, state, controls, children, costs):
     """The edges of one expansion, in float32 as the C++ does; cost = xy distance
     between the snapped states.
 
     The heading of sub-step k, th + k omega dt, has its cosine and sine by one rotation
-    of the node heading's (two trig calls per expansion, not per edge) by the control's
-    k omega dt, tabulated at the start of ``data`` (per sub-step a row of cosines and one
-    of sines, a column per control; the obstacles follow): no trig in the edges. Equal to ten float32 cosf/sinf per edge
-    in iterations, nodes and costs on all 101 benchmark maps. Only the obstacles within
-    reach of the node (the longest edge, ``params[U_REACH]``) are tested against the
-    children; the others cannot touch them."""
+    of the node heading's by the control's k omega dt (:func:`_turned`; no trig in the
+    edges). A node's heading is a cell centre (the search snaps), one of 73, so these
+    float32 cosines and sines are tabulated per heading cell in ``data`` (a 58 kB table
+    read instead of two sincos and four products per sub-step); a heading off the grid
+    has them computed. Equal to ten float32 cosf/sinf per edge in iterations, nodes and
+    costs on all 101 benchmark maps. Only the obstacles within reach of the node (the
+    longest edge, ``params[U_REACH]``) are tested against the children; the others
+    cannot touch them."""
     m = controls.shape[0]
     L = LANES
     nsub = int(params[U_NSUB])
     oof = int(params[U_OOFF])
     dt = np.float32(params[U_DT])
     th0 = np.float32(state[2])
-    c0 = math.cos(np.float64(th0))
-    s0 = math.sin(np.float64(th0))
     x0 = np.float32(state[0])
     y0 = np.float32(state[1])
     W = work.view(np.float32)            # the children's x, y and heading in float32
     X = W[0:L]
     Y = W[L:2 * L]
     TH = W[2 * L:3 * L]
+    block = 2 * nsub * L                 # the cosines and sines of one node heading
+    hres = params[U_RT]
+    i = math.floor(abs(state[2] / hres) + 0.5)
+    i = i if state[2] >= 0.0 else -i
+    if i * hres == state[2] and abs(i) <= params[U_NHEAD]:
+        a = 2 * int(params[U_HOFF]) + int(i + params[U_NHEAD]) * block
+        T = data.view(np.float32)[a:a + block]
+    else:
+        T = W[3 * L:3 * L + block]
+        _turned(math.cos(np.float64(th0)), math.sin(np.float64(th0)), data, nsub, T)
     for b in range(m):
         v = np.float32(controls[b, 0])
         wd = np.float32(np.float32(controls[b, 1]) * dt)
@@ -71,10 +95,8 @@ def expand(params, data, work, state, controls, children, costs):
         y = y0
         th = th0
         for k in range(nsub):
-            ck = data[2 * k * L + b]
-            sk = data[(2 * k + 1) * L + b]
-            x = np.float32(x + np.float32(c0 * ck - s0 * sk) * v * dt)
-            y = np.float32(y + np.float32(s0 * ck + c0 * sk) * v * dt)
+            x = np.float32(x + T[2 * k * L + b] * v * dt)
+            y = np.float32(y + T[(2 * k + 1) * L + b] * v * dt)
             th = np.float32(th + wd)
         X[b] = x
         Y[b] = y
@@ -180,11 +202,14 @@ class Benchmark:
 
     @functools.cached_property
     def _tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """The parameter vector (all but the obstacle count) and the sub-step rotations:
-        sub-step k of control b turns the heading by k (omega_b dt), omega dt in float32
-        as the C++ adds it; rows cos, sin per sub-step, a column per control."""
+        """The parameter vector (all but the obstacle count) and the data before the
+        obstacles: the sub-step rotations (sub-step k of control b turns the heading by
+        k (omega_b dt), omega dt in float32 as the C++ adds it; per sub-step a row of
+        cosines and one of sines, a column per control) and, for every heading cell, the
+        float32 cosines and sines of the turned headings (:func:`_turned`; float32 pairs
+        packed in float64)."""
         nsub, dt = 10, 0.05
-        params = np.zeros(14)
+        params = np.zeros(16)
         params[U_RX:U_RT + 1] = self.res
         params[U_GX:U_GT + 1] = self.goal
         params[U_THR] = 0.5
@@ -193,11 +218,19 @@ class Benchmark:
         params[U_NSUB] = nsub
         params[U_DT] = dt
         params[U_REACH] = 1.1 * np.abs(self.controls[:, 0]).max() * nsub * dt
-        params[U_OOFF] = 2 * nsub * LANES
         wdt = np.zeros(LANES)
         wdt[:self.controls.shape[0]] = np.float32(self.controls[:, 1]) * np.float32(dt)
         turn = np.arange(nsub)[:, None] * wdt[None, :]
-        return params, np.stack([np.cos(turn), np.sin(turn)], axis=1).ravel()
+        rot = np.stack([np.cos(turn), np.sin(turn)], axis=1).ravel()
+        nh = int(math.ceil(math.pi / self.res[2]))
+        heads = np.empty((2 * nh + 1, 2 * nsub * LANES), np.float32)
+        for i in range(-nh, nh + 1):
+            th = np.float64(np.float32(i * self.res[2]))
+            _turned(math.cos(th), math.sin(th), rot, nsub, heads[i + nh])
+        params[U_HOFF] = rot.size
+        params[U_NHEAD] = nh
+        params[U_OOFF] = rot.size + heads.size // 2
+        return params, np.concatenate((rot, heads.ravel().view(np.float64)))
 
 
 def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
@@ -221,7 +254,7 @@ def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
     m = bench.controls.shape[0]
     return Problem(expand, heuristic, is_goal, params, np.concatenate((rot, obstacles.ravel())),
                    bench.start, bench.controls, _DIMS, bench.res, m, rotate=False, snap=True,
-                   max_depth=bench.max_generations, codes=CODES, work_size=2 * LANES)
+                   max_depth=bench.max_generations, codes=CODES, work_size=(3 + 2 * int(params[U_NSUB])) * LANES // 2 + 1)
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):

@@ -158,17 +158,18 @@ def _edge_float32(state, v, w, obstacles, nsub=10, dt=0.05):
 
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmark inputs ../shared/data/bench absent")
 @settings(max_examples=200, deadline=None)
-@given(st.integers(-95, 95), st.integers(-95, 95), st.integers(-35, 36))
-def test_unicycle_expansion_equals_the_straightforward_float32_edges(i, j, k):
+@given(st.integers(-95, 95), st.integers(-95, 95), st.integers(-35, 36), st.sampled_from([0.0, 0.0123]))
+def test_unicycle_expansion_equals_the_straightforward_float32_edges(i, j, k, off):
     """The expansion's rotation tables and obstacle culling against ten float32 sub-steps
     with their own cos/sin per control: the same headings bit for bit, positions within
     float32 rounding (2e-6 m), the same validity, and the cost is the distance between
-    snapped cells."""
+    snapped cells. Headings on the grid (nodes) read tabulated sines and cosines, others
+    (``off``) compute them."""
     from sbmpc.unicycle import Benchmark, problem, read_obstacle_maps
     bench = Benchmark.read(BENCH / "config.csv")
     obstacles = read_obstacle_maps(BENCH / "obstacles_main.csv")[0]
     p = problem(bench, obstacles)
-    state = np.array([i * 0.1, j * 0.1, k * math.pi / 36])
+    state = np.array([i * 0.1, j * 0.1, k * math.pi / 36 + off])
     m = p.controls.shape[0]
     children, costs = np.empty((m, 3)), np.empty(m)
     p.expand(p.params, p.data, np.zeros(p.work_size), state, p.controls, children, costs)
