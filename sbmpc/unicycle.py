@@ -3,8 +3,8 @@
 Specified in ``BENCH-SBMPO-UNICYCLE.md`` (the lab's public C++ SBMPO "steering" benchmark):
 state (x, y, theta), control (v, omega); one edge is 10 explicit Euler sub-steps of
 0.05 s in single precision, theta wrapped to (-pi, pi] at the end (the sub-steps'
-cosines and sines by the angle-addition recurrence: the same iterations, nodes and
-costs as ten float32 sincos calls on all 101 benchmark maps, at a fifth of the trig); grid (0.1, 0.1,
+cosines and sines tabulated per heading cell, see :func:`expand`: the same iterations,
+nodes and costs as ten float32 sincos calls on all 101 benchmark maps); grid (0.1, 0.1,
 pi/36) with snapping; validity of the raw end state against the map border and the
 obstacles (body radius 0.125 m); edge cost the xy distance between snapped states;
 heuristic distance plus wrapped bearing error; goal when the heuristic is <= 0.5 or the
