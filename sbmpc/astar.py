@@ -7,15 +7,16 @@ The search knows nothing of a particular robot (OMPL's split): a *problem* suppl
   into the rows of ``children`` (k, state_dim), and put each edge's cost (>= 0) or a
   negative code saying why it is invalid (the problem names its codes) into ``costs``
   (k,). One call per expansion, not per edge: a model may share work between the edges
-  of a node (the unicycle's sub-steps run as vector lanes, one per control) and the
-  search pays one indirect call instead of k;
+  of a node (the unicycle reads the sub-step headings of all its controls from one
+  table row per node heading) and the search pays one indirect call instead of k;
 * ``heuristic(params, data, state) -> float``: a lower bound of the cost to the goal
   (admissible for optimal plans);
 * ``is_goal(params, data, state) -> bool``;
 
 as numba functions compiled for the signatures :data:`EXPAND`, :data:`HEURISTIC`,
-:data:`GOAL` (first-class function types, so the compiled search is cached on disk once
-for every problem), plus flat float arrays ``params`` and ``data`` that only the problem
+:data:`GOAL` (first-class function types: the search gets their addresses and makes
+the function values inside, so it is compiled and cached on disk once for every
+problem), plus flat float arrays ``params`` and ``data`` that only the problem
 reads, ``work``, scratch space the problem may write during an expansion, and the
 control set, an (m, control_dim) array.
 
