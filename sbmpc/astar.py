@@ -76,8 +76,8 @@ NC = C_INVALID + MAX_CODE + 1
 
 _EMPTY = -1
 
-# explicit signatures: the model functions arrive as first-class function values, so the
-# compiled search is the same (and cached on disk) whatever the problem
+# explicit signatures: the model functions arrive as addresses (an int64 array, see
+# _addresses), so the compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _START_SIG = types.void(_I1, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
                         _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
