@@ -126,10 +126,8 @@ def expand(params, data, work, state, controls, children, costs):
         x = np.float64(X[b])
         y = np.float64(Y[b])
         # the distance between the snapped states (cell centres, the search's rounding)
-        ax = math.floor(abs(x / rx) + 0.5) * rx
-        ay = math.floor(abs(y / ry) + 0.5) * ry
-        sx = (ax if x >= 0.0 else -ax) - state[0]
-        sy = (ay if y >= 0.0 else -ay) - state[1]
+        sx = _snap(x, rx) - state[0]
+        sy = _snap(y, ry) - state[1]
         c = math.sqrt(sx * sx + sy * sy) if costs[b] == 0.0 else costs[b]
         costs[b] = -1.0 if x < -lim or x > lim or y < -lim or y > lim else c
         th = TH[b]
