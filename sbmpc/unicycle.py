@@ -65,7 +65,9 @@ def expand(params, data, work, state, controls, children, costs):
     has them computed. Equal to ten float32 cosf/sinf per edge in iterations, nodes and
     costs on all 101 benchmark maps. Only the obstacles within reach of the node (the
     longest edge, ``params[U_REACH]``) are tested against the children; the others
-    cannot touch them."""
+    cannot touch them. Row b of ``controls`` must be control b of the benchmark (the
+    table's column b): every control at every expansion, in order, as :func:`problem`
+    sets it up."""
     m = controls.shape[0]
     L = LANES
     nsub = int(params[U_NSUB])
@@ -80,8 +82,7 @@ def expand(params, data, work, state, controls, children, costs):
     TH = W[2 * L:3 * L]
     block = 2 * nsub * L                 # the cosines and sines of one node heading
     hres = params[U_RT]
-    i = math.floor(abs(state[2] / hres) + 0.5)
-    i = i if state[2] >= 0.0 else -i
+    i = cell_index(state[2], hres)
     if i * hres == state[2] and abs(i) <= params[U_NHEAD]:
         a = 2 * int(params[U_HOFF]) + int(i + params[U_NHEAD]) * block
         T = data.view(np.float32)[a:a + block]
@@ -245,12 +246,12 @@ def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
 
 def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
     """The benchmark on one obstacle map ((n, 3) array of x, y, r)."""
-    params, rot = bench._tables
+    params, tables = bench._tables
     obstacles = np.asarray(obstacles, float).reshape(-1, 3)
     params = params.copy()
     params[U_NOBS] = obstacles.shape[0]
     m = bench.controls.shape[0]
-    return Problem(expand, heuristic, is_goal, params, np.concatenate((rot, obstacles.ravel())),
+    return Problem(expand, heuristic, is_goal, params, np.concatenate((tables, obstacles.ravel())),
                    bench.start, bench.controls, _DIMS, bench.res, m, rotate=False, snap=True,
                    max_depth=bench.max_generations, codes=CODES, work_size=(3 + 2 * int(params[U_NSUB])) * LANES // 2 + 1)
 
