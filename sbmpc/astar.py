@@ -422,7 +422,7 @@ def _addresses(p) -> np.ndarray:
 @functools.lru_cache(maxsize=None)
 def _entries():
     """The compiled entry points of run_search and start_search (explicit signatures):
-    calling them skips the dispatcher's typing of every argument (the search takes 29),
+    calling them skips the dispatcher's typing of every argument (the search takes 30),
     so :class:`Search` checks the problem's arrays itself (:func:`_check`)."""
     return (run_search.overloads[tuple(_RUN_SIG.args)].entry_point,
             start_search.overloads[tuple(_START_SIG.args)].entry_point)
