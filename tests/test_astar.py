@@ -186,3 +186,15 @@ def test_unicycle_expansion_equals_the_straightforward_float32_edges(i, j, k, of
         if costs[b] >= 0:
             snapped = np.floor(np.abs(children[b, :2]) / 0.1 + 0.5) * 0.1 * np.sign(children[b, :2])
             assert costs[b] == pytest.approx(np.hypot(*(snapped - state[:2])), abs=1e-9)
+
+
+def test_a_problem_function_given_as_a_cfunc_is_called_through_its_wrapper():
+    """The search takes a problem's functions as addresses: a numba dispatcher gives its
+    compiled body, a cfunc only its C wrapper; both reach the same answer."""
+    from dataclasses import replace
+    from numba import cfunc
+    p = grid_problem(np.zeros((6, 6), bool), (5, 5))
+    wrapped = cfunc(HEURISTIC.signature, cache=False)(manhattan.py_func)
+    a, b = search(p, 1000), search(replace(p, heuristic=wrapped), 1000)
+    assert a.status == b.status == "found"
+    assert a.cost == b.cost == 10 and a.iterations == b.iterations
