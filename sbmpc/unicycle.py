@@ -20,15 +20,18 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
+from . import lanes
 from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt, obstacle count, offset of the obstacles in data (after the
 # sub-step rotations and the heading table), reach of an edge (its longest length, plus
-# 10 % for float32 rounding), offset of the heading table, heading cells either side of 0
-(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH, U_HOFF, U_NHEAD) = range(16)
+# 10 % for float32 rounding), offset of the heading table, heading cells either side of
+# 0, offset of the lanes' speeds and turns (offsets in float64 words)
+(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH, U_HOFF, U_NHEAD,
+ U_COFF) = range(17)
 CODES = ("outside the map border", "inside an obstacle")
-LANES = 16          # the most controls a problem may have (columns of the rotation table)
+LANES = lanes.WIDTH  # the most controls a problem may have (the tables' columns)
 _DIMS = np.arange(3, dtype=np.int64)
 
 
@@ -57,53 +60,48 @@ def expand(params, data, work, state, controls, children, costs):
     """The edges of one expansion, in float32 as the C++ does; cost = xy distance
     between the snapped states.
 
-    The heading of sub-step k, th + k omega dt, has its cosine and sine by one rotation
-    of the node heading's by the control's k omega dt (:func:`_turned`; no trig in the
-    edges). A node's heading is a cell centre (the search snaps), one of 73, so these
-    float32 cosines and sines are tabulated per heading cell in ``data`` (a 58 kB table
-    read instead of two sincos and four products per sub-step); a heading off the grid
-    has them computed. Equal to ten float32 cosf/sinf per edge in iterations, nodes and
-    costs on all 101 benchmark maps. Only the obstacles within reach of the node (the
-    longest edge, ``params[U_REACH]``) are tested against the children; the others
-    cannot touch them. Row b of ``controls`` must be control b of the benchmark (the
-    table's column b): every control at every expansion, in order, as :func:`problem`
-    sets it up."""
+    All edges at once, edge b in lane b of 16 float32 lanes (:mod:`sbmpc.lanes`; each
+    operation rounded to float32 as the scalar code rounds it). The heading of sub-step
+    k, th + k omega dt, has its cosine and sine by one rotation of the node heading's by
+    the control's k omega dt (:func:`_turned`; no trig in the edges). A node's heading
+    is a cell centre (the search snaps), one of 73, so these float32 cosines and sines
+    are tabulated per heading cell in ``data`` (a 58 kB table read instead of two sincos
+    and four products per sub-step); a heading off the grid has them computed. Equal to
+    ten float32 cosf/sinf per edge in iterations, nodes and costs on all 101 benchmark
+    maps. Only the obstacles within reach of the node (the longest edge,
+    ``params[U_REACH]``) are tested against the children; the others cannot touch them.
+    Row b of ``controls`` must be control b of the benchmark (the tables' column b, the
+    speeds and turns of the lanes are read from ``data``): every control at every
+    expansion, in order, as :func:`problem` sets it up."""
     m = controls.shape[0]
     L = LANES
     nsub = int(params[U_NSUB])
-    oof = int(params[U_OOFF])
     dt = np.float32(params[U_DT])
     th0 = np.float32(state[2])
-    x0 = np.float32(state[0])
-    y0 = np.float32(state[1])
+    D = data.view(np.float32)
     W = work.view(np.float32)            # the children's x, y and heading in float32
-    X = W[0:L]
-    Y = W[L:2 * L]
-    TH = W[2 * L:3 * L]
     block = 2 * nsub * L                 # the cosines and sines of one node heading
     hres = params[U_RT]
     i = cell_index(state[2], hres)
     if i * hres == state[2] and abs(i) <= params[U_NHEAD]:
-        a = 2 * int(params[U_HOFF]) + int(i + params[U_NHEAD]) * block
-        T = data.view(np.float32)[a:a + block]
+        T = D[2 * int(params[U_HOFF]) + int(i + params[U_NHEAD]) * block:]
     else:
         T = W[3 * L:3 * L + block]
         _turned(math.cos(np.float64(th0)), math.sin(np.float64(th0)), data, nsub, T)
-    for b in range(m):
-        v = np.float32(controls[b, 0])
-        wd = np.float32(np.float32(controls[b, 1]) * dt)
-        x = x0
-        y = y0
-        th = th0
-        for k in range(nsub):
-            x = np.float32(x + T[2 * k * L + b] * v * dt)
-            y = np.float32(y + T[(2 * k + 1) * L + b] * v * dt)
-            th = np.float32(th + wd)
-        X[b] = x
-        Y[b] = y
-        TH[b] = th
-        costs[b] = 0.0
+    c = 2 * int(params[U_COFF])
+    v = lanes.load(D, c)                 # v and omega dt of each lane, float32
+    wd = lanes.load(D, c + L)
+    vdt = lanes.splat(dt)
+    x = lanes.splat(np.float32(state[0]))
+    y = lanes.splat(np.float32(state[1]))
+    th = lanes.splat(th0)
+    for k in range(nsub):
+        x = lanes.add(x, lanes.mul(lanes.mul(lanes.load(T, 2 * k * L), v), vdt))
+        y = lanes.add(y, lanes.mul(lanes.mul(lanes.load(T, (2 * k + 1) * L), v), vdt))
+        th = lanes.add(th, wd)
+    hit = 0                              # lanes inside an obstacle
     body = params[U_BODY]
+    oof = int(params[U_OOFF])
     for j in range(int(params[U_NOBS])):
         ox = data[oof + 3 * j]
         oy = data[oof + 3 * j + 1]
@@ -111,34 +109,37 @@ def expand(params, data, work, state, controls, children, costs):
         far = params[U_REACH] + r + body
         if (state[0] - ox) ** 2 + (state[1] - oy) ** 2 > far * far:
             continue
-        ox32 = np.float32(ox)
-        oy32 = np.float32(oy)
         rr = np.float32(np.float32(r) + np.float32(body))
-        for b in range(m):
-            dx = np.float32(X[b] - ox32)
-            dy = np.float32(Y[b] - oy32)
-            if dx * dx + dy * dy < rr * rr:
-                costs[b] = -2.0
+        dx = lanes.sub(x, lanes.splat(np.float32(ox)))
+        dy = lanes.sub(y, lanes.splat(np.float32(oy)))
+        hit |= lanes.less(lanes.add(lanes.mul(dx, dx), lanes.mul(dy, dy)), lanes.splat(np.float32(rr * rr)))
+    lanes.store(W, 0, x)
+    lanes.store(W, L, y)
+    lanes.store(W, 2 * L, th)
     lim = params[U_BORDER] - body
     rx = params[U_RX]
     ry = params[U_RY]
     pi = np.float32(math.pi)
     for b in range(m):
-        x = np.float64(X[b])
-        y = np.float64(Y[b])
+        xb = np.float64(W[b])
+        yb = np.float64(W[L + b])
         # the distance between the snapped states (cell centres, the search's rounding)
-        sx = _snap(x, rx) - state[0]
-        sy = _snap(y, ry) - state[1]
-        c = math.sqrt(sx * sx + sy * sy) if costs[b] == 0.0 else costs[b]
-        costs[b] = -1.0 if x < -lim or x > lim or y < -lim or y > lim else c
-        th = TH[b]
-        if th > pi:
-            th = np.float32(th - np.float32(2.0) * pi)
-        elif th <= -pi:
-            th = np.float32(th + np.float32(2.0) * pi)
-        children[b, 0] = x
-        children[b, 1] = y
-        children[b, 2] = th
+        sx = _snap(xb, rx) - state[0]
+        sy = _snap(yb, ry) - state[1]
+        if xb < -lim or xb > lim or yb < -lim or yb > lim:
+            costs[b] = -1.0
+        elif (hit >> b) & 1:
+            costs[b] = -2.0
+        else:
+            costs[b] = math.sqrt(sx * sx + sy * sy)
+        t = W[2 * L + b]
+        if t > pi:
+            t = np.float32(t - np.float32(2.0) * pi)
+        elif t <= -pi:
+            t = np.float32(t + np.float32(2.0) * pi)
+        children[b, 0] = xb
+        children[b, 1] = yb
+        children[b, 2] = t
 
 
 @njit(HEURISTIC.signature, cache=True, error_model="numpy", _nrt=False)
@@ -205,10 +206,10 @@ class Benchmark:
         obstacles: the sub-step rotations (sub-step k of control b turns the heading by
         k (omega_b dt), omega dt in float32 as the C++ adds it; per sub-step a row of
         cosines and one of sines, a column per control) and, for every heading cell, the
-        float32 cosines and sines of the turned headings (:func:`_turned`; float32 pairs
-        packed in float64)."""
+        float32 cosines and sines of the turned headings (:func:`_turned`), then the
+        lanes' v and omega dt (float32 pairs packed in float64)."""
         nsub, dt = 10, 0.05
-        params = np.zeros(16)
+        params = np.zeros(17)
         params[U_RX:U_RT + 1] = self.res
         params[U_GX:U_GT + 1] = self.goal
         params[U_THR] = 0.5
@@ -226,10 +227,14 @@ class Benchmark:
         for i in range(-nh, nh + 1):
             th = np.float64(np.float32(i * self.res[2]))
             _turned(math.cos(th), math.sin(th), rot, nsub, heads[i + nh])
+        lane = np.zeros((2, LANES), np.float32)          # v and omega dt of each lane
+        lane[0, :self.controls.shape[0]] = self.controls[:, 0]
+        lane[1] = wdt
         params[U_HOFF] = rot.size
         params[U_NHEAD] = nh
-        params[U_OOFF] = rot.size + heads.size // 2
-        return params, np.concatenate((rot, heads.ravel().view(np.float64)))
+        params[U_COFF] = rot.size + heads.size // 2
+        params[U_OOFF] = params[U_COFF] + lane.size // 2
+        return params, np.concatenate((rot, heads.ravel().view(np.float64), lane.ravel().view(np.float64)))
 
 
 def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
