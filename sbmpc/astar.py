@@ -79,9 +79,7 @@ _EMPTY = -1
 # explicit signatures: the model functions arrive as addresses (an int64 array, see
 # _addresses), so the compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
-_START_SIG = types.void(_I1, types.float64, _F1, _F1, _F1, _I1, _F1, types.boolean, _F2, _F1, _I1, _I1,
-                        _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
-_RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64,
+_RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64, types.int64,
                        types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
 
@@ -216,16 +214,10 @@ def _key_of(state, dims, res, key):
         key[d] = cell_index(state[dims[d]], res[d])
 
 
-@njit(_START_SIG, cache=True, error_model="numpy")
-def start_search(fa, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
-                 table, hf, hs, hn, cnt, best):
-    """Put the start node into empty search arrays (``fa``: :func:`_addresses`)."""
-    heur = _heuristic_fn(fa[2], fa[3])
-    cnt[:] = 0
-    cnt[C_GOAL] = -1
-    cnt[C_FIRST] = -1
-    best[0] = np.inf
-    best[1] = 1.0
+@njit(cache=True, error_model="numpy", inline="always")
+def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf, hs,
+           hn, cnt):
+    """Put the start node into empty search arrays (cnt zero but C_GOAL and C_FIRST -1)."""
     table[:] = _EMPTY
     _key_of(start, dims, res, KEYS[0])
     X[0, :] = start
@@ -244,12 +236,13 @@ def start_search(fa, weight, params, data, start, dims, res, snap, X, G, PAR, CT
 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
-def run_search(fa, weight, params, data, work, controls, nbranch, nfixed, rotate, dims, res,
+def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
                hs, hn, cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
     cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
-    arrays are too small for the next expansion) or RUNNING (chunk done).
+    arrays are too small for the next expansion) or RUNNING (chunk done). The first call
+    (no node yet) puts the start node in.
 
     With ``refine`` > 0 the search is anytime (AWA*): a goal reached becomes the
     incumbent (cost in best[0]) and the search goes on, pruning every node whose g + h
@@ -264,6 +257,9 @@ def run_search(fa, weight, params, data, work, controls, nbranch, nfixed, rotate
     expand = _expand_fn(fa[0], fa[1])
     heur = _heuristic_fn(fa[2], fa[3])
     goal = _goal_fn(fa[4], fa[5])
+    if cnt[C_NODES] == 0:
+        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
+               hs, hn, cnt)
     kd = dims.shape[0]
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
@@ -412,28 +408,34 @@ def _address_pair(fn, ftype) -> tuple[int, int]:
             lib.get_pointer_to_function(cres.fndesc.llvm_func_name))
 
 
-def _addresses(p) -> np.ndarray:
+@functools.lru_cache(maxsize=None)
+def _addresses(expand, heuristic, is_goal) -> np.ndarray:
     """The addresses of a problem's expand, heuristic and goal test, as the compiled
-    search takes them (int64 array of 6: wrapper and body of each)."""
-    return np.array(_address_pair(p.expand, EXPAND) + _address_pair(p.heuristic, HEURISTIC)
-                    + _address_pair(p.is_goal, GOAL), np.int64)
+    search takes them (read-only int64 array of 6: wrapper and body of each)."""
+    fa = np.array(_address_pair(expand, EXPAND) + _address_pair(heuristic, HEURISTIC)
+                  + _address_pair(is_goal, GOAL), np.int64)
+    fa.flags.writeable = False
+    return fa
 
 
 @functools.lru_cache(maxsize=None)
-def _entries():
-    """The compiled entry points of run_search and start_search (explicit signatures):
-    calling them skips the dispatcher's typing of every argument (the search takes 30),
-    so :class:`Search` checks the problem's arrays itself (:func:`_check`)."""
-    return (run_search.overloads[tuple(_RUN_SIG.args)].entry_point,
-            start_search.overloads[tuple(_START_SIG.args)].entry_point)
+def _entry():
+    """The compiled entry point of run_search (explicit signature): calling it skips the
+    dispatcher's typing of every argument (the search takes 31), so :class:`Search`
+    checks the problem's arrays itself (:func:`_check`)."""
+    return run_search.overloads[tuple(_RUN_SIG.args)].entry_point
+
+
+_F64, _I64 = np.dtype(np.float64), np.dtype(np.int64)
+_KINDS = (("params", _F64, 1), ("data", _F64, 1), ("start", _F64, 1), ("controls", _F64, 2), ("dims", _I64, 1),
+          ("res", _F64, 1))
 
 
 def _check(p) -> None:
-    for name, dtype, ndim in (("params", np.float64, 1), ("data", np.float64, 1), ("start", np.float64, 1),
-                              ("controls", np.float64, 2), ("dims", np.int64, 1), ("res", np.float64, 1)):
+    for name, dtype, ndim in _KINDS:
         a = getattr(p, name)
-        if not (isinstance(a, np.ndarray) and a.dtype == dtype and a.ndim == ndim and a.flags.c_contiguous):
-            raise TypeError(f"Problem.{name}: expected a C-contiguous {ndim}-D {np.dtype(dtype).name} array, "
+        if not (type(a) is np.ndarray and a.dtype == dtype and a.ndim == ndim and a.flags.c_contiguous):
+            raise TypeError(f"Problem.{name}: expected a C-contiguous {ndim}-D {dtype.name} array, "
                             f"found {type(a).__name__} {getattr(a, 'dtype', '')} {getattr(a, 'shape', '')}")
 
 
@@ -515,15 +517,14 @@ class Search:
         self.hf = np.empty(2 * cap)
         self.hs = np.empty(2 * cap, np.int64)
         self.hn = np.empty(2 * cap, np.int64)
-        self.cnt = np.zeros(NC, np.int64)
-        self.best = np.zeros(2)      # [incumbent cost, weight of h in the pruning test]
+        self.cnt = np.zeros(NC, np.int64)       # no node: the first run puts the start in
+        self.cnt[C_GOAL] = -1
+        self.cnt[C_FIRST] = -1
+        self.best = np.array([np.inf, 1.0])     # [incumbent cost, weight of h in the pruning test]
         self.work = np.zeros(max(int(p.work_size), 1))
         _check(p)
-        self._fa = _addresses(p)
-        self._run, start = _entries()
-        start(self._fa, float(p.weight), p.params, p.data, p.start, p.dims, p.res, bool(p.snap), self.X, self.G,
-              self.PAR, self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.hf, self.hs,
-              self.hn, self.cnt, self.best)
+        self._fa = _addresses(p.expand, p.heuristic, p.is_goal)
+        self._run = _entry()
 
     def bound(self, cost: float, weight: float | None = None) -> None:
         """Start with an incumbent of ``cost`` found elsewhere (a warm start): nodes
@@ -561,7 +562,7 @@ class Search:
         p = self.problem
         t0 = time.perf_counter()
         while True:
-            st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.controls,
+            st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.start, p.controls,
                             int(p.branching), int(p.fixed_controls), bool(p.rotate), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)

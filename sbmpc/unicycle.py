@@ -24,12 +24,12 @@ from . import lanes
 from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
-# sub-steps, sub-step dt, obstacle count, offset of the obstacles in data (after the
-# sub-step rotations and the heading table), reach of an edge (its longest length, plus
-# 10 % for float32 rounding), offset of the heading table, heading cells either side of
-# 0, offset of the lanes' speeds and turns (offsets in float64 words)
-(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_OOFF, U_REACH, U_HOFF, U_NHEAD,
- U_COFF) = range(17)
+# sub-steps, sub-step dt, obstacle count, reach of an edge (its longest length, plus 10 %
+# for float32 rounding), offset of the heading table in data, heading cells either side
+# of 0, offset of the lanes' speeds and turns in data (offsets in float64 words); then
+# the obstacles (x, y, r)
+(U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_REACH, U_HOFF, U_NHEAD,
+ U_COFF, U_OBST) = range(17)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = lanes.WIDTH  # the most controls a problem may have (the tables' columns)
 _DIMS = np.arange(3, dtype=np.int64)
@@ -101,11 +101,10 @@ def expand(params, data, work, state, controls, children, costs):
         th = lanes.add(th, wd)
     hit = 0                              # lanes inside an obstacle
     body = params[U_BODY]
-    oof = int(params[U_OOFF])
     for j in range(int(params[U_NOBS])):
-        ox = data[oof + 3 * j]
-        oy = data[oof + 3 * j + 1]
-        r = data[oof + 3 * j + 2]
+        ox = params[U_OBST + 3 * j]
+        oy = params[U_OBST + 3 * j + 1]
+        r = params[U_OBST + 3 * j + 2]
         far = params[U_REACH] + r + body
         if (state[0] - ox) ** 2 + (state[1] - oy) ** 2 > far * far:
             continue
@@ -202,14 +201,13 @@ class Benchmark:
 
     @functools.cached_property
     def _tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """The parameter vector (all but the obstacle count) and the data before the
-        obstacles: the sub-step rotations (sub-step k of control b turns the heading by
+        """The parameter vector (all but the obstacles) and the data: the sub-step rotations (sub-step k of control b turns the heading by
         k (omega_b dt), omega dt in float32 as the C++ adds it; per sub-step a row of
         cosines and one of sines, a column per control) and, for every heading cell, the
         float32 cosines and sines of the turned headings (:func:`_turned`), then the
         lanes' v and omega dt (float32 pairs packed in float64)."""
         nsub, dt = 10, 0.05
-        params = np.zeros(17)
+        params = np.zeros(U_OBST)
         params[U_RX:U_RT + 1] = self.res
         params[U_GX:U_GT + 1] = self.goal
         params[U_THR] = 0.5
@@ -233,7 +231,6 @@ class Benchmark:
         params[U_HOFF] = rot.size
         params[U_NHEAD] = nh
         params[U_COFF] = rot.size + heads.size // 2
-        params[U_OOFF] = params[U_COFF] + lane.size // 2
         return params, np.concatenate((rot, heads.ravel().view(np.float64), lane.ravel().view(np.float64)))
 
 
@@ -250,15 +247,15 @@ def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
 
 
 def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
-    """The benchmark on one obstacle map ((n, 3) array of x, y, r)."""
+    """The benchmark on one obstacle map ((n, 3) array of x, y, r): the obstacles follow
+    the parameters; ``data`` holds the configuration's tables, shared by every map."""
     params, tables = bench._tables
     obstacles = np.asarray(obstacles, float).reshape(-1, 3)
-    params = params.copy()
+    params = np.concatenate((params, obstacles.ravel()))
     params[U_NOBS] = obstacles.shape[0]
-    m = bench.controls.shape[0]
-    return Problem(expand, heuristic, is_goal, params, np.concatenate((tables, obstacles.ravel())),
-                   bench.start, bench.controls, _DIMS, bench.res, m, rotate=False, snap=True,
-                   max_depth=bench.max_generations, codes=CODES, work_size=(3 + 2 * int(params[U_NSUB])) * LANES // 2 + 1)
+    return Problem(expand, heuristic, is_goal, params, tables, bench.start, bench.controls, _DIMS, bench.res,
+                   bench.controls.shape[0], snap=True, max_depth=bench.max_generations, codes=CODES,
+                   work_size=(3 + 2 * int(params[U_NSUB])) * LANES // 2 + 1)
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):
