@@ -117,43 +117,84 @@ def cell_index(x, res):
     return c if q >= 0.0 else -c
 
 
+# The cell table: open addressing with linear probing, a slot per pair of int64 (the
+# cell's code, its node id or -1 if empty), so that a probe reads one cache line and a
+# hit needs no look at the node's key. A key of up to 3 cells of magnitude < 2^20 packs
+# exactly into a non-negative code (21 bits each); any other key's code is its 64-bit
+# hash with the top bit set (negative), and an equal code is confirmed on the keys.
+_PACK = 1 << 20
+
+
 @njit(cache=True, error_model="numpy", inline="always")
-def _hash(key):
+def _code(key):
+    kd = key.shape[0]
+    if kd <= 3:
+        c = np.int64(0)
+        exact = True
+        for d in range(kd):
+            k = key[d]
+            exact &= -_PACK <= k < _PACK
+            c = (c << 21) | (k & (2 * _PACK - 1))
+        if exact:
+            return c
     h = np.uint64(1469598103934665603)
-    for d in range(key.shape[0]):
+    for d in range(kd):
         h = (h ^ np.uint64(key[d] & 0xFFFFFFFFFFFF)) * np.uint64(1099511628211)
         h ^= h >> np.uint64(29)
-    return h
+    return np.int64(h | np.uint64(1 << 63))
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _lookup(table, keys, key):
-    """Slot of ``key`` in the open-addressing ``table`` (node ids, -1 empty): returns
-    (slot, node id or -1)."""
-    mask = np.int64(table.shape[0] - 1)
-    i = np.int64(_hash(key) >> np.uint64(1)) & mask
-    kd = key.shape[0]
+def _shift(table):
+    """64 - log2(slots of the cell table): the home slot is the top bits of the code's
+    Fibonacci hash (Knuth's multiplicative hashing; its low bits cluster the codes of
+    neighbouring cells)."""
+    n = table.shape[0] >> 1
+    s = 64
+    while n > 1:
+        n >>= 1
+        s -= 1
+    return np.uint64(s)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _lookup(table, shift, keys, key, code):
+    """Slot of ``key`` (with its :func:`_code`) in the cell ``table`` (``shift``:
+    :func:`_shift`): returns (slot, node id or -1)."""
+    mask = np.int64((table.shape[0] >> 1) - 1)
+    i = np.int64((np.uint64(code) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
     while True:
-        n = table[i]
+        n = table[2 * i + 1]
         if n == _EMPTY:
             return i, -1
-        same = True
-        for d in range(kd):
-            if keys[n, d] != key[d]:
-                same = False
-                break
-        if same:
-            return i, n
+        if table[2 * i] == code:
+            if code >= 0:
+                return i, n
+            same = True
+            for d in range(key.shape[0]):
+                if keys[n, d] != key[d]:
+                    same = False
+                    break
+            if same:
+                return i, n
         i = (i + 1) & mask
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _insert(table, slot, code, node):
+    table[2 * slot] = code
+    table[2 * slot + 1] = node
 
 
 @njit(cache=True, error_model="numpy")
 def rehash(table, keys, n_nodes):
-    """Rebuild a hash table for the first n_nodes keys (after growing)."""
+    """Rebuild a cell table for the first n_nodes keys (after growing)."""
     table[:] = _EMPTY
+    shift = _shift(table)
     for n in range(n_nodes):
-        slot, _ = _lookup(table, keys, keys[n])
-        table[slot] = n
+        code = _code(keys[n])
+        slot, _ = _lookup(table, shift, keys, keys[n], code)
+        _insert(table, slot, code, n)
 
 
 # The heap's helpers compare and swap in place, with no calls of their own, and are
@@ -229,8 +270,9 @@ def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, D
     CTL[0] = -1
     DEP[0] = 0
     CLO[0] = 0
-    slot, _ = _lookup(table, KEYS, KEYS[0])
-    table[slot] = 0
+    code = _code(KEYS[0])
+    slot, _ = _lookup(table, _shift(table), KEYS, KEYS[0], code)
+    _insert(table, slot, code, 0)
     cnt[C_NODES] = 1
     _push(hf, hs, hn, cnt, weight * heur(params, data, X[0]), 0)
 
@@ -261,6 +303,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
         _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
                hs, hn, cnt)
     kd = dims.shape[0]
+    shift = _shift(table)
     key = np.empty(kd, dtype=np.int64)
     child = np.empty(X.shape[1])
     cur = np.empty(X.shape[1])
@@ -282,7 +325,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
         if cnt[C_FIRST] >= 0 and cnt[C_ITERS] >= cnt[C_FIRST] * (1.0 + refine):
             return FOUND
         if (cnt[C_NODES] + nbranch > cap or cnt[C_HEAP] + nbranch > hf.shape[0]
-                or 2 * (cnt[C_NODES] + nbranch) > table.shape[0]):
+                or 4 * (cnt[C_NODES] + nbranch) > table.shape[0]):
             return GROW
         n = _pop(hf, hs, hn, cnt)
         if CLO[n]:
@@ -317,6 +360,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                 for d in range(U.shape[1]):
                     U[b, d] = controls[c, d]
         expand(params, data, work, cur, U, CH, CO)
+        pcode = _code(KEYS[n])
         cnt[C_EDGES] += nbranch
         for b in range(nbranch):
             c = crow[b]
@@ -330,12 +374,14 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
             for d in range(child.shape[0]):
                 child[d] = CH[b, d]
             _key_of(child, dims, res, key)
+            code = _code(key)
             g = G[n] + cost
-            same = True
-            for d in range(kd):
-                if key[d] != KEYS[n, d]:
-                    same = False
-                    break
+            same = code == pcode
+            if same and code < 0:
+                for d in range(kd):
+                    if key[d] != KEYS[n, d]:
+                        same = False
+                        break
             terminal = not snap and goal(params, data, child)
             if terminal or (same and DEP[n] < settle):
                 # a node of its own, outside the grid: a goal state is terminal (the goal
@@ -358,11 +404,11 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                 continue
             if same:
                 continue
-            slot, j = _lookup(table, KEYS, key)
+            slot, j = _lookup(table, shift, KEYS, key, code)
             if j < 0:
                 j = cnt[C_NODES]
                 cnt[C_NODES] += 1
-                table[slot] = j
+                _insert(table, slot, code, j)
                 for d in range(kd):
                     KEYS[j, d] = key[d]
                 CLO[j] = 0
@@ -513,7 +559,7 @@ class Search:
         self.DEP = np.empty(cap, np.int64)
         self.CLO = np.empty(cap, np.uint8)
         self.KEYS = np.empty((cap, kd), np.int64)
-        self.table = np.empty(_pow2(4 * cap), np.int64)
+        self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
         self.hf = np.empty(2 * cap)
         self.hs = np.empty(2 * cap, np.int64)
         self.hn = np.empty(2 * cap, np.int64)
@@ -537,14 +583,14 @@ class Search:
 
     def _grow(self):
         n = self.cnt[C_NODES]
-        if n + self.problem.branching > self.X.shape[0] or 2 * (n + self.problem.branching) > self.table.shape[0]:
+        if n + self.problem.branching > self.X.shape[0] or 4 * (n + self.problem.branching) > self.table.shape[0]:
             cap = 2 * self.X.shape[0]
             for name in ("X", "G", "PAR", "CTL", "DEP", "CLO", "KEYS"):
                 a = getattr(self, name)
                 b = np.empty((cap,) + a.shape[1:], a.dtype)
                 b[:n] = a[:n]
                 setattr(self, name, b)
-            self.table = np.empty(_pow2(4 * cap), np.int64)
+            self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
             rehash(self.table, self.KEYS, n)
         h = self.cnt[C_HEAP]
         if h + self.problem.branching > self.hf.shape[0]:
