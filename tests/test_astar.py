@@ -9,6 +9,7 @@ from hypothesis import given, settings, strategies as st
 from numba import njit
 from scipy.sparse.csgraph import shortest_path
 
+from sbmpc import astar
 from sbmpc.astar import EXPAND, GOAL, HEURISTIC, Problem, search
 
 # ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
@@ -198,3 +199,41 @@ def test_a_problem_function_given_as_a_cfunc_is_called_through_its_wrapper():
     a, b = search(p, 1000), search(replace(p, heuristic=wrapped), 1000)
     assert a.status == b.status == "found"
     assert a.cost == b.cost == 10 and a.iterations == b.iterations
+
+
+@njit(cache=True)
+def _table_ids(keys, slots):
+    """Node id of each key row through the search's cell table (new keys get the next id)."""
+    table = np.empty(2 * slots, np.int64)
+    table[:] = -1
+    shift = astar._shift(table)
+    ids = np.empty(keys.shape[0], np.int64)
+    stored = np.empty_like(keys)
+    n = 0
+    for r in range(keys.shape[0]):
+        code = astar._code(keys[r])
+        slot, j = astar._lookup(table, shift, stored, keys[r], code)
+        if j < 0:
+            j = n
+            stored[n] = keys[r]
+            astar._insert(table, slot, code, j)
+            n += 1
+        ids[r] = j
+    return ids
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 5), st.sampled_from([3, 1 << 19, 1 << 21, 1 << 40]), st.integers(0, 2**32 - 1))
+def test_cell_table_finds_each_key_again_packed_or_hashed(kd, span, seed):
+    """Keys of up to 3 cells within +-2^20 are packed into the code, the others hashed
+    (confirmed on the keys): either way equal keys get the same node and others not."""
+    rng = np.random.default_rng(seed)
+    keys = rng.integers(-span, span, size=(300, kd))
+    keys = keys[rng.integers(0, 300, size=600)]          # every key seen several times
+    ids = _table_ids(keys, 1024)
+    first = {}
+    want = np.array([first.setdefault(tuple(k), len(first)) for k in keys.tolist()])
+    np.testing.assert_array_equal(ids, want)
+    for k in keys[:50]:
+        packed = kd <= 3 and all(-(1 << 20) <= x < 1 << 20 for x in k)
+        assert (astar._code(k) >= 0) == packed
