@@ -81,7 +81,7 @@ _EMPTY = -1
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64, types.int64,
                        types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
-                       types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _F1, _I1, _I1, _I1, _F1)
+                       types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1)
 
 
 def _function_value(ftype):
@@ -197,55 +197,77 @@ def rehash(table, keys, n_nodes):
         _insert(table, slot, code, n)
 
 
-# The heap's helpers compare and swap in place, with no calls of their own, and are
-# compiled without reference counting (_nrt=False): a numba function increments and
-# decrements the count of every array it is handed, with atomic operations, and a call
-# per heap level made that 30 % of the unicycle benchmark; after that, the counts of
-# one push and one pop per expansion were still 5 %.
+@intrinsic
+def _bits(typingctx, x):
+    """The bits of a float64 as an int64."""
+    if x == types.float64:
+        def codegen(context, builder, sig, args):
+            return builder.bitcast(args[0], ir.IntType(64))
+        return types.int64(x), codegen
+
+
+# The open set: a binary heap of (f, push counter, node) entries, two int64 per entry in
+# one array (a level's compare reads one cache line instead of three): the bits of f made
+# monotone (a float64's bits order like its value for f >= 0; negative ones are flipped),
+# then the push counter (high 32 bits, so up to 2^31 pushes) and the node id (low 32
+# bits). Ties of f go to the entry pushed first. The helpers compare and swap in place, with no calls of their
+# own, and are compiled without reference counting (_nrt=False): a numba function
+# increments and decrements the count of every array it is handed, with atomic
+# operations, and a call per heap level made that 30 % of the unicycle benchmark; after
+# that, the counts of one push and one pop per expansion were still 5 %.
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _push(hf, hs, hn, cnt, f, node):
+def _push(H, cnt, f, node):
     i = cnt[C_HEAP]
-    seq = cnt[C_SEQ]
+    b = _bits(f + 0.0)                 # (-0.0 + 0.0 is +0.0: the zeros tie)
+    k1 = b ^ ((b >> 63) & 0x7FFFFFFFFFFFFFFF)
+    k2 = (cnt[C_SEQ] << 32) | node
     cnt[C_HEAP] += 1
     cnt[C_SEQ] += 1
     while i > 0:                       # sift up: move larger parents down
         p = (i - 1) >> 1
-        if f < hf[p] or (f == hf[p] and seq < hs[p]):
-            hf[i] = hf[p]
-            hs[i] = hs[p]
-            hn[i] = hn[p]
+        p1 = H[2 * p]
+        p2 = H[2 * p + 1]
+        if k1 < p1 or (k1 == p1 and k2 < p2):
+            H[2 * i] = p1
+            H[2 * i + 1] = p2
             i = p
         else:
             break
-    hf[i] = f
-    hs[i] = seq
-    hn[i] = node
+    H[2 * i] = k1
+    H[2 * i + 1] = k2
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def _pop(hf, hs, hn, cnt):
-    top = hn[0]
+def _pop(H, cnt):
+    """Take the entry of least f (the first pushed among equals); its node id."""
+    top = H[1] & 0xFFFFFFFF
     last = cnt[C_HEAP] - 1
     cnt[C_HEAP] = last
     if last > 0:
-        f, seq, node = hf[last], hs[last], hn[last]
+        k1 = H[2 * last]
+        k2 = H[2 * last + 1]
         i = 0
         while True:                    # sift down: move smaller children up
             c = 2 * i + 1
             if c >= last:
                 break
-            if c + 1 < last and (hf[c + 1] < hf[c] or (hf[c + 1] == hf[c] and hs[c + 1] < hs[c])):
-                c += 1
-            if hf[c] < f or (hf[c] == f and hs[c] < seq):
-                hf[i] = hf[c]
-                hs[i] = hs[c]
-                hn[i] = hn[c]
+            c1 = H[2 * c]
+            c2 = H[2 * c + 1]
+            if c + 1 < last:
+                d1 = H[2 * c + 2]
+                d2 = H[2 * c + 3]
+                if d1 < c1 or (d1 == c1 and d2 < c2):
+                    c += 1
+                    c1 = d1
+                    c2 = d2
+            if c1 < k1 or (c1 == k1 and c2 < k2):
+                H[2 * i] = c1
+                H[2 * i + 1] = c2
                 i = c
             else:
                 break
-        hf[i] = f
-        hs[i] = seq
-        hn[i] = node
+        H[2 * i] = k1
+        H[2 * i + 1] = k2
     return top
 
 
@@ -256,8 +278,7 @@ def _key_of(state, dims, res, key):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf, hs,
-           hn, cnt):
+def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt):
     """Put the start node into empty search arrays (cnt zero but C_GOAL and C_FIRST -1)."""
     table[:] = _EMPTY
     _key_of(start, dims, res, KEYS[0])
@@ -274,13 +295,13 @@ def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, D
     slot, _ = _lookup(table, _shift(table), KEYS, KEYS[0], code)
     _insert(table, slot, code, 0)
     cnt[C_NODES] = 1
-    _push(hf, hs, hn, cnt, weight * heur(params, data, X[0]), 0)
+    _push(H, cnt, weight * heur(params, data, X[0]), 0)
 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
 def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, dims, res,
-               snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
-               hs, hn, cnt, best):
+               snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, H,
+               cnt, best):
     """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
     cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
     arrays are too small for the next expansion) or RUNNING (chunk done). The first call
@@ -300,8 +321,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
     heur = _heuristic_fn(fa[2], fa[3])
     goal = _goal_fn(fa[4], fa[5])
     if cnt[C_NODES] == 0:
-        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, hf,
-               hs, hn, cnt)
+        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
     kd = dims.shape[0]
     shift = _shift(table)
     key = np.empty(kd, dtype=np.int64)
@@ -324,10 +344,10 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
             return FOUND if cnt[C_GOAL] >= 0 else ITERATIONS
         if cnt[C_FIRST] >= 0 and cnt[C_ITERS] >= cnt[C_FIRST] * (1.0 + refine):
             return FOUND
-        if (cnt[C_NODES] + nbranch > cap or cnt[C_HEAP] + nbranch > hf.shape[0]
+        if (cnt[C_NODES] + nbranch > cap or 2 * (cnt[C_HEAP] + nbranch) > H.shape[0]
                 or 4 * (cnt[C_NODES] + nbranch) > table.shape[0]):
             return GROW
-        n = _pop(hf, hs, hn, cnt)
+        n = _pop(H, cnt)
         if CLO[n]:
             continue
         for d in range(cur.shape[0]):
@@ -400,7 +420,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                     CTL[j] = c
                     DEP[j] = DEP[n] + 1
                     CLO[j] = 0
-                    _push(hf, hs, hn, cnt, g + weight * heur(params, data, child), j)
+                    _push(H, cnt, g + weight * heur(params, data, child), j)
                 continue
             if same:
                 continue
@@ -429,7 +449,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                         child[dims[d]] = key[d] * res[d]
                 h = heur(params, data, child)
                 if g + best[1] * h < best[0]:
-                    _push(hf, hs, hn, cnt, g + weight * h, j)
+                    _push(H, cnt, g + weight * h, j)
     return RUNNING
 
 
@@ -467,7 +487,7 @@ def _addresses(expand, heuristic, is_goal) -> np.ndarray:
 @functools.lru_cache(maxsize=None)
 def _entry():
     """The compiled entry point of run_search (explicit signature): calling it skips the
-    dispatcher's typing of every argument (the search takes 31), so :class:`Search`
+    dispatcher's typing of every argument (the search takes 29), so :class:`Search`
     checks the problem's arrays itself (:func:`_check`)."""
     return run_search.overloads[tuple(_RUN_SIG.args)].entry_point
 
@@ -560,9 +580,7 @@ class Search:
         self.CLO = np.empty(cap, np.uint8)
         self.KEYS = np.empty((cap, kd), np.int64)
         self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
-        self.hf = np.empty(2 * cap)
-        self.hs = np.empty(2 * cap, np.int64)
-        self.hn = np.empty(2 * cap, np.int64)
+        self.H = np.empty(4 * cap, np.int64)    # the open set: 2 int64 per entry
         self.cnt = np.zeros(NC, np.int64)       # no node: the first run puts the start in
         self.cnt[C_GOAL] = -1
         self.cnt[C_FIRST] = -1
@@ -593,12 +611,10 @@ class Search:
             self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
             rehash(self.table, self.KEYS, n)
         h = self.cnt[C_HEAP]
-        if h + self.problem.branching > self.hf.shape[0]:
-            for name in ("hf", "hs", "hn"):
-                a = getattr(self, name)
-                b = np.empty(2 * a.shape[0], a.dtype)
-                b[:h] = a[:h]
-                setattr(self, name, b)
+        if 2 * (h + self.problem.branching) > self.H.shape[0]:
+            H = np.empty(2 * self.H.shape[0], np.int64)
+            H[:2 * h] = self.H[:2 * h]
+            self.H = H
 
     def run(self, max_iterations: int, time_budget_s: float = math.inf, chunk: int = 256,
             progress=None) -> SearchResult:
@@ -611,7 +627,7 @@ class Search:
             st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.start, p.controls,
                             int(p.branching), int(p.fixed_controls), bool(p.rotate), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
-                            self.CLO, self.KEYS, self.table, self.hf, self.hs, self.hn, self.cnt, self.best)
+                            self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best)
             if st == GROW:
                 self._grow()
                 continue

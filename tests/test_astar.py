@@ -237,3 +237,27 @@ def test_cell_table_finds_each_key_again_packed_or_hashed(kd, span, seed):
     for k in keys[:50]:
         packed = kd <= 3 and all(-(1 << 20) <= x < 1 << 20 for x in k)
         assert (astar._code(k) >= 0) == packed
+
+
+@njit(cache=True)
+def _heap_order(f):
+    H = np.empty(4 * f.shape[0] + 4, np.int64)
+    cnt = np.zeros(astar.NC, np.int64)
+    for i in range(f.shape[0]):
+        astar._push(H, cnt, f[i], i)
+    out = np.empty(f.shape[0], np.int64)
+    for i in range(f.shape[0]):
+        out[i] = astar._pop(H, cnt)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.sampled_from([0.0, -0.0, -0.5, 1.0, 2.5, 1e300, np.inf, -np.inf]) | st.floats(-1e6, 1e6),
+                min_size=1, max_size=200))
+def test_open_set_pops_by_f_then_push_order(fs):
+    """The heap's monotone bits of f order like the floats (negative ones too), and
+    entries of equal f come out in the order they were pushed."""
+    f = np.array(fs, float)
+    got = _heap_order(f)
+    want = sorted(range(len(fs)), key=lambda i: (fs[i], i))
+    np.testing.assert_array_equal(got, want)
