@@ -26,10 +26,11 @@ from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt, obstacle count, reach of an edge (its longest length, plus 10 %
 # for float32 rounding), offset of the heading table in data, heading cells either side
-# of 0, offset of the lanes' speeds and turns in data (offsets in float64 words); then
-# the obstacles (x, y, r)
+# of 0, offset of the lanes' speeds and turns in data, offset of the goal bearing table,
+# its cells either side of 0, 1 / res x, 1 / res y (offsets in float64 words); then the
+# obstacles (x, y, r)
 (U_RX, U_RY, U_RT, U_GX, U_GY, U_GT, U_THR, U_BODY, U_BORDER, U_NSUB, U_DT, U_NOBS, U_REACH, U_HOFF, U_NHEAD,
- U_COFF, U_OBST) = range(17)
+ U_COFF, U_BOFF, U_NB, U_IRX, U_IRY, U_OBST) = range(21)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = lanes.WIDTH  # the most controls a problem may have (the tables' columns)
 _DIMS = np.arange(3, dtype=np.int64)
@@ -141,12 +142,36 @@ def expand(params, data, work, state, controls, children, costs):
         children[b, 2] = t
 
 
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _bearings(params, n, out):
+    """atan2(dy, dx) from every cell centre (i rx, j ry), |i|, |j| <= n, to the goal:
+    out[(i + n) (2 n + 1) + j + n], computed as :func:`heuristic` computes it."""
+    for i in range(-n, n + 1):
+        for j in range(-n, n + 1):
+            out[(i + n) * (2 * n + 1) + j + n] = math.atan2(params[U_GY] - j * params[U_RY],
+                                                            params[U_GX] - i * params[U_RX])
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _bearing(params, data, x, y, dx, dy):
+    """atan2(dy, dx), the bearing of the goal (dx, dy) from (x, y): from the table of
+    :func:`_bearings` when (x, y) is a cell centre within it (a snapped node), else by
+    atan2. The cell is found by a multiplication with 1/res, not cell_index's division:
+    a state whose cell centre is not exactly reproduced just takes the atan2."""
+    n = int(params[U_NB])
+    i = int(round(x * params[U_IRX]))
+    j = int(round(y * params[U_IRY]))
+    if abs(i) <= n and abs(j) <= n and i * params[U_RX] == x and j * params[U_RY] == y:
+        return data[int(params[U_BOFF]) + (i + n) * (2 * n + 1) + j + n]
+    return math.atan2(dy, dx)
+
+
 @njit(HEURISTIC.signature, cache=True, error_model="numpy", _nrt=False)
 def heuristic(params, data, state):
     """Distance to the goal plus the wrapped bearing error (not admissible, as in the C++)."""
     dx = params[U_GX] - state[0]
     dy = params[U_GY] - state[1]
-    e = math.atan2(dy, dx) - state[2] + math.pi
+    e = _bearing(params, data, state[0], state[1], dx, dy) - state[2] + math.pi
     # (e + pi) mod 2 pi - pi, with e in (-2 pi, 2 pi]: one correction, bit for bit what
     # Python's float modulo gives here (fmod is exact, and so is a - 2 pi for a in
     # [2 pi, 3 pi]), without its out-of-line helper call
@@ -205,7 +230,8 @@ class Benchmark:
         k (omega_b dt), omega dt in float32 as the C++ adds it; per sub-step a row of
         cosines and one of sines, a column per control) and, for every heading cell, the
         float32 cosines and sines of the turned headings (:func:`_turned`), then the
-        lanes' v and omega dt (float32 pairs packed in float64)."""
+        lanes' v and omega dt (float32 pairs packed in float64), then the goal's bearing
+        from every cell centre within the border (:func:`_bearings`, 323 kB)."""
         nsub, dt = 10, 0.05
         params = np.zeros(U_OBST)
         params[U_RX:U_RT + 1] = self.res
@@ -231,7 +257,14 @@ class Benchmark:
         params[U_HOFF] = rot.size
         params[U_NHEAD] = nh
         params[U_COFF] = rot.size + heads.size // 2
-        return params, np.concatenate((rot, heads.ravel().view(np.float64), lane.ravel().view(np.float64)))
+        # the goal's bearing from every cell centre within the border
+        params[U_NB] = nb = int(math.ceil(params[U_BORDER] / min(self.res[0], self.res[1])))
+        params[U_IRX], params[U_IRY] = 1.0 / self.res[0], 1.0 / self.res[1]
+        params[U_BOFF] = params[U_COFF] + lane.size // 2
+        bearings = np.empty((2 * nb + 1) ** 2)
+        _bearings(params, nb, bearings)
+        return params, np.concatenate((rot, heads.ravel().view(np.float64), lane.ravel().view(np.float64),
+                                       bearings))
 
 
 def read_obstacle_maps(path: Path | str) -> list[np.ndarray]:
