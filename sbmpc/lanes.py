@@ -1,19 +1,23 @@
-"""Sixteen float32 lanes as one value in numba code: explicit SIMD for a model's edges.
+"""Sixteen float lanes as one value in numba code: explicit SIMD for a model's edges.
 
 A node's edges are independent and do the same arithmetic, so a model can compute up
 to 16 of them at once, lane b holding edge b. LLVM's auto-vectoriser does not do this
 for numba code (the arrays may alias, and a 16-trip loop is unrolled to scalars before
-the vectoriser sees it), so :data:`f32x16` is a numba type lowered to LLVM's
-``<16 x float>``, with a handful of operations (intrinsics):
+the vectoriser sees it), so :data:`f32x16` and :data:`f64x16` are numba types lowered to
+LLVM's ``<16 x float>`` and ``<16 x double>``, with a handful of operations
+(intrinsics):
 
-* :func:`load` / :func:`store`: 16 consecutive float32 of a contiguous array from index i;
-* :func:`splat`: a float32 in every lane;
-* :func:`add`, :func:`sub`, :func:`mul`: lane-wise IEEE single-precision arithmetic, each
-  result rounded to float32 as scalar float32 code rounds it (no fused multiply-add:
-  the instructions carry no fast-math flags, so LLVM may not contract them);
+* :func:`load` / :func:`store`: 16 consecutive elements of a contiguous float32 or
+  float64 array from index i (no bounds check);
+* :func:`splat`: a float32 or float64 in every lane;
+* :func:`widen`: float32 lanes to float64 (exact);
+* :func:`add`, :func:`sub`, :func:`mul`, :func:`div`, :func:`sqrt`, :func:`absolute`,
+  :func:`floor`, :func:`copysign`: lane-wise IEEE arithmetic, each result rounded as the
+  scalar code of the same precision rounds it (no fused multiply-add: the instructions
+  carry no fast-math flags, so LLVM may not contract them);
 * :func:`less`: the lanes where a < b, as a bit mask (int64, bit b for lane b).
 
-On AVX-512 a value is one register; with AVX2 LLVM splits it into two.
+On AVX-512 a float32 value is one register; with AVX2 LLVM splits it into two.
 """
 from __future__ import annotations
 
@@ -22,88 +26,150 @@ from numba import types
 from numba.extending import intrinsic, models, register_model
 
 WIDTH = 16
-_VEC = ir.VectorType(ir.FloatType(), WIDTH)
 
 
-class F32x16(types.Type):
-    """Numba type of 16 float32 lanes."""
+class Lanes(types.Type):
+    """Numba type of 16 lanes of ``dtype`` (float32 or float64)."""
 
-    def __init__(self):
-        super().__init__(name="f32x16")
-
-
-f32x16 = F32x16()
+    def __init__(self, dtype):
+        self.dtype = dtype
+        super().__init__(name=f"{dtype}x{WIDTH}")
 
 
-@register_model(F32x16)
-class _F32x16Model(models.PrimitiveModel):
+f32x16 = Lanes(types.float32)
+f64x16 = Lanes(types.float64)
+_OF = {types.float32: f32x16, types.float64: f64x16}
+
+
+def _vector(lanes: Lanes) -> ir.VectorType:
+    return ir.VectorType(ir.FloatType() if lanes.dtype == types.float32 else ir.DoubleType(), WIDTH)
+
+
+@register_model(Lanes)
+class _LanesModel(models.PrimitiveModel):
     def __init__(self, dmm, fe_type):
-        super().__init__(dmm, fe_type, _VEC)
+        super().__init__(dmm, fe_type, _vector(fe_type))
 
 
-def _float32_array(a) -> bool:
-    return isinstance(a, types.Array) and a.dtype == types.float32 and a.layout == "C"
+def _lanes_of_array(a):
+    if isinstance(a, types.Array) and a.layout == "C" and a.dtype in _OF:
+        return _OF[a.dtype]
+    return None
 
 
 def _lane_pointer(context, builder, aty, arr, i):
     data = context.make_array(aty)(context, builder, arr).data
-    return builder.bitcast(builder.gep(data, [i]), _VEC.as_pointer())
+    return builder.bitcast(builder.gep(data, [i]), _vector(_OF[aty.dtype]).as_pointer())
 
 
 @intrinsic
 def load(typingctx, a, i):
-    """a[i:i + 16] of a C-contiguous float32 array (no bounds check)."""
-    if _float32_array(a) and isinstance(i, types.Integer):
+    """a[i:i + 16] of a C-contiguous float32 or float64 array (no bounds check)."""
+    t = _lanes_of_array(a)
+    if t is not None and isinstance(i, types.Integer):
         def codegen(context, builder, sig, args):
-            return builder.load(_lane_pointer(context, builder, sig.args[0], args[0], args[1]), align=4)
-        return f32x16(a, i), codegen
+            return builder.load(_lane_pointer(context, builder, sig.args[0], args[0], args[1]),
+                                align=sig.args[0].dtype.bitwidth // 8)
+        return t(a, i), codegen
 
 
 @intrinsic
 def store(typingctx, a, i, v):
     """a[i:i + 16] = v (no bounds check)."""
-    if _float32_array(a) and isinstance(i, types.Integer) and v == f32x16:
+    if _lanes_of_array(a) == v and isinstance(i, types.Integer):
         def codegen(context, builder, sig, args):
-            builder.store(args[2], _lane_pointer(context, builder, sig.args[0], args[0], args[1]), align=4)
+            builder.store(args[2], _lane_pointer(context, builder, sig.args[0], args[0], args[1]),
+                          align=sig.args[0].dtype.bitwidth // 8)
             return context.get_dummy_value()
         return types.none(a, i, v), codegen
 
 
 @intrinsic
 def splat(typingctx, x):
-    """x (a float32) in all 16 lanes."""
-    if x == types.float32:
+    """x (a float32 or float64) in all 16 lanes."""
+    if x in _OF:
+        t = _OF[x]
+
         def codegen(context, builder, sig, args):
-            one = builder.insert_element(ir.Constant(_VEC, ir.Undefined), args[0], ir.Constant(ir.IntType(32), 0))
-            return builder.shuffle_vector(one, ir.Constant(_VEC, ir.Undefined),
+            vec = _vector(t)
+            one = builder.insert_element(ir.Constant(vec, ir.Undefined), args[0], ir.Constant(ir.IntType(32), 0))
+            return builder.shuffle_vector(one, ir.Constant(vec, ir.Undefined),
                                           ir.Constant(ir.VectorType(ir.IntType(32), WIDTH), [0] * WIDTH))
-        return f32x16(x), codegen
+        return t(x), codegen
 
 
-def _binary(op):
+@intrinsic
+def widen(typingctx, v):
+    """float32 lanes as float64 lanes (exact)."""
+    if v == f32x16:
+        def codegen(context, builder, sig, args):
+            return builder.fpext(args[0], _vector(f64x16))
+        return f64x16(v), codegen
+
+
+def _binary(op, doc):
     @intrinsic
     def fn(typingctx, a, b):
-        if a == f32x16 and b == f32x16:
+        if isinstance(a, Lanes) and a == b:
             def codegen(context, builder, sig, args):
                 return getattr(builder, op)(args[0], args[1])
-            return f32x16(a, b), codegen
+            return a(a, b), codegen
+    fn.__doc__ = doc
     return fn
 
 
-add = _binary("fadd")
-sub = _binary("fsub")
-mul = _binary("fmul")
-add.__doc__, sub.__doc__, mul.__doc__ = "a + b, lane-wise.", "a - b, lane-wise.", "a * b, lane-wise."
+add = _binary("fadd", "a + b, lane-wise.")
+sub = _binary("fsub", "a - b, lane-wise.")
+mul = _binary("fmul", "a * b, lane-wise.")
+div = _binary("fdiv", "a / b, lane-wise.")
+
+
+def _call(builder, name, t, args):
+    vec = _vector(t)
+    suffix = f"v{WIDTH}f{t.dtype.bitwidth}"          # llvmlite names no vector type itself
+    fnty = ir.FunctionType(vec, [vec] * len(args))
+    f = builder.module.globals.get(f"llvm.{name}.{suffix}") or ir.Function(builder.module, fnty,
+                                                                           f"llvm.{name}.{suffix}")
+    return builder.call(f, args)
+
+
+def _llvm_unary(name, doc):
+    @intrinsic
+    def fn(typingctx, a):
+        if isinstance(a, Lanes):
+            def codegen(context, builder, sig, args):
+                return _call(builder, name, a, args)
+            return a(a), codegen
+    fn.__doc__ = doc
+    return fn
+
+
+def _llvm_binary(name, doc):
+    @intrinsic
+    def fn(typingctx, a, b):
+        if isinstance(a, Lanes) and a == b:
+            def codegen(context, builder, sig, args):
+                return _call(builder, name, a, args)
+            return a(a, b), codegen
+    fn.__doc__ = doc
+    return fn
+
+
+sqrt = _llvm_unary("sqrt", "Square root, lane-wise (correctly rounded, as math.sqrt).")
+absolute = _llvm_unary("fabs", "|a|, lane-wise.")
+floor = _llvm_unary("floor", "floor(a), lane-wise.")
+copysign = _llvm_binary("copysign", "|a| with the sign of b, lane-wise.")
 
 
 @intrinsic
 def less(typingctx, a, b):
     """Bit mask (int64) of the lanes where a < b (ordered: false for NaN)."""
-    if a == f32x16 and b == f32x16:
+    if isinstance(a, Lanes) and a == b:
         def codegen(context, builder, sig, args):
             bits = builder.bitcast(builder.fcmp_ordered("<", args[0], args[1]), ir.IntType(WIDTH))
             return builder.zext(bits, ir.IntType(64))
         return types.int64(a, b), codegen
 
 
-__all__ = ["WIDTH", "f32x16", "load", "store", "splat", "add", "sub", "mul", "less"]
+__all__ = ["WIDTH", "Lanes", "f32x16", "f64x16", "load", "store", "splat", "widen", "add", "sub", "mul", "div",
+           "sqrt", "absolute", "floor", "copysign", "less"]

@@ -33,6 +33,8 @@ from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
  U_COFF, U_BOFF, U_NB, U_IRX, U_IRY, U_OBST) = range(21)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = lanes.WIDTH  # the most controls a problem may have (the tables' columns)
+_NSUB = 10           # sub-steps of an edge
+_DIST = 3 + 2 * _NSUB  # where the edges' float64 distances start in ``work`` (in float32 words / L)
 _DIMS = np.arange(3, dtype=np.int64)
 
 
@@ -54,6 +56,15 @@ def _turned(c0, s0, rot, nsub, out):
         sk = rot[(2 * k + 1) * LANES + b]
         out[2 * k * LANES + b] = np.float32(c0 * ck - s0 * sk)
         out[(2 * k + 1) * LANES + b] = np.float32(s0 * ck + c0 * sk)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def _snapped(v, res):
+    """The cell centres of float64 lanes v: round(v / res) half away from zero, times res
+    (as :func:`_snap`, up to the sign of a zero)."""
+    q = lanes.div(v, lanes.splat(res))
+    return lanes.mul(lanes.copysign(lanes.floor(lanes.add(lanes.absolute(q), lanes.splat(0.5))), q),
+                     lanes.splat(res))
 
 
 @njit(EXPAND.signature, cache=True, error_model="numpy", _nrt=False)
@@ -80,7 +91,8 @@ def expand(params, data, work, state, controls, children, costs):
     dt = np.float32(params[U_DT])
     th0 = np.float32(state[2])
     D = data.view(np.float32)
-    W = work.view(np.float32)            # the children's x, y and heading in float32
+    W = work.view(np.float32)            # the children's x, y and heading in float32, then
+    #                                      the sub-step table of a heading off the grid
     block = 2 * nsub * L                 # the cosines and sines of one node heading
     hres = params[U_RT]
     i = cell_index(state[2], hres)
@@ -113,32 +125,35 @@ def expand(params, data, work, state, controls, children, costs):
         dx = lanes.sub(x, lanes.splat(np.float32(ox)))
         dy = lanes.sub(y, lanes.splat(np.float32(oy)))
         hit |= lanes.less(lanes.add(lanes.mul(dx, dx), lanes.mul(dy, dy)), lanes.splat(np.float32(rr * rr)))
+    # the distance between the snapped states (cell centres, the search's rounding:
+    # round(x / res) half away from zero, as cell_index), and the border, in float64
+    xd = lanes.widen(x)
+    yd = lanes.widen(y)
+    lim = params[U_BORDER] - body
+    out = (lanes.less(xd, lanes.splat(-lim)) | lanes.less(lanes.splat(lim), xd)
+           | lanes.less(yd, lanes.splat(-lim)) | lanes.less(lanes.splat(lim), yd))
+    sx = lanes.sub(_snapped(xd, params[U_RX]), lanes.splat(state[0]))
+    sy = lanes.sub(_snapped(yd, params[U_RY]), lanes.splat(state[1]))
+    dist = work[_DIST * L // 2:]
+    lanes.store(dist, 0, lanes.sqrt(lanes.add(lanes.mul(sx, sx), lanes.mul(sy, sy))))
     lanes.store(W, 0, x)
     lanes.store(W, L, y)
     lanes.store(W, 2 * L, th)
-    lim = params[U_BORDER] - body
-    rx = params[U_RX]
-    ry = params[U_RY]
     pi = np.float32(math.pi)
     for b in range(m):
-        xb = np.float64(W[b])
-        yb = np.float64(W[L + b])
-        # the distance between the snapped states (cell centres, the search's rounding)
-        sx = _snap(xb, rx) - state[0]
-        sy = _snap(yb, ry) - state[1]
-        if xb < -lim or xb > lim or yb < -lim or yb > lim:
+        if (out >> b) & 1:
             costs[b] = -1.0
         elif (hit >> b) & 1:
             costs[b] = -2.0
         else:
-            costs[b] = math.sqrt(sx * sx + sy * sy)
+            costs[b] = dist[b]
         t = W[2 * L + b]
         if t > pi:
             t = np.float32(t - np.float32(2.0) * pi)
         elif t <= -pi:
             t = np.float32(t + np.float32(2.0) * pi)
-        children[b, 0] = xb
-        children[b, 1] = yb
+        children[b, 0] = W[b]
+        children[b, 1] = W[L + b]
         children[b, 2] = t
 
 
@@ -232,7 +247,7 @@ class Benchmark:
         float32 cosines and sines of the turned headings (:func:`_turned`), then the
         lanes' v and omega dt (float32 pairs packed in float64), then the goal's bearing
         from every cell centre within the border (:func:`_bearings`, 323 kB)."""
-        nsub, dt = 10, 0.05
+        nsub, dt = _NSUB, 0.05
         params = np.zeros(U_OBST)
         params[U_RX:U_RT + 1] = self.res
         params[U_GX:U_GT + 1] = self.goal
@@ -288,7 +303,7 @@ def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
     params[U_NOBS] = obstacles.shape[0]
     return Problem(expand, heuristic, is_goal, params, tables, bench.start, bench.controls, _DIMS, bench.res,
                    bench.controls.shape[0], snap=True, max_depth=bench.max_generations, codes=CODES,
-                   work_size=(3 + 2 * int(params[U_NSUB])) * LANES // 2 + 1)
+                   work_size=(_DIST + 2) * LANES // 2)
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):
