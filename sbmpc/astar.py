@@ -209,8 +209,8 @@ def _bits(typingctx, x):
 # The open set: a binary heap of (f, push counter, node) entries, two int64 per entry in
 # one array (a level's compare reads one cache line instead of three): the bits of f made
 # monotone (a float64's bits order like its value for f >= 0; negative ones are flipped),
-# then the push counter (high 32 bits, so up to 2^31 pushes) and the node id (low 32
-# bits). Ties of f go to the entry pushed first. The helpers compare and swap in place, with no calls of their
+# then the push counter (high 32 bits, below SEQ_LIMIT: see _renumber) and the node id
+# (low 32 bits). Ties of f go to the entry pushed first. The helpers compare and swap in place, with no calls of their
 # own, and are compiled without reference counting (_nrt=False): a numba function
 # increments and decrements the count of every array it is handed, with atomic
 # operations, and a call per heap level made that 30 % of the unicycle benchmark; after
@@ -235,6 +235,25 @@ def _push(H, cnt, f, node):
             break
     H[2 * i] = k1
     H[2 * i + 1] = k2
+
+
+SEQ_LIMIT = 1 << 31      # push counters fit in 31 bits; near it the heap is renumbered
+
+
+@njit(cache=True, error_model="numpy")
+def _renumber(H, cnt):
+    """Give the heap's entries the push counters 0, 1, ... in their order (their order and
+    so the heap are unchanged) and restart the counter after them: a search may push more
+    than SEQ_LIMIT entries in all, never that many at once."""
+    h = cnt[C_HEAP]
+    seq = np.empty(h, np.int64)
+    for i in range(h):
+        seq[i] = H[2 * i + 1] >> 32
+    order = np.argsort(seq)
+    for r in range(h):
+        i = order[r]
+        H[2 * i + 1] = (r << 32) | (H[2 * i + 1] & 0xFFFFFFFF)
+    cnt[C_SEQ] = h
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -347,6 +366,8 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
         if (cnt[C_NODES] + nbranch > cap or 2 * (cnt[C_HEAP] + nbranch) > H.shape[0]
                 or 4 * (cnt[C_NODES] + nbranch) > table.shape[0]):
             return GROW
+        if cnt[C_SEQ] > SEQ_LIMIT - 1 - nbranch:
+            _renumber(H, cnt)
         n = _pop(H, cnt)
         if CLO[n]:
             continue

@@ -170,10 +170,13 @@ def test_cell_table_finds_each_key_again_packed_or_hashed(kd, span, seed):
 
 
 @njit(cache=True)
-def _heap_order(f):
+def _heap_order(f, renumber_at):
     H = np.empty(4 * f.shape[0] + 4, np.int64)
     cnt = np.zeros(astar.NC, np.int64)
     for i in range(f.shape[0]):
+        if i == renumber_at:                  # as if 2^31 entries had been pushed before
+            cnt[astar.C_SEQ] = astar.SEQ_LIMIT - 1
+            astar._renumber(H, cnt)
         astar._push(H, cnt, f[i], i)
     out = np.empty(f.shape[0], np.int64)
     for i in range(f.shape[0]):
@@ -183,11 +186,12 @@ def _heap_order(f):
 
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.sampled_from([0.0, -0.0, -0.5, 1.0, 2.5, 1e300, np.inf, -np.inf]) | st.floats(-1e6, 1e6),
-                min_size=1, max_size=200))
-def test_open_set_pops_by_f_then_push_order(fs):
+                min_size=1, max_size=200), st.integers(0, 200))
+def test_open_set_pops_by_f_then_push_order(fs, renumber_at):
     """The heap's monotone bits of f order like the floats (negative ones too), and
-    entries of equal f come out in the order they were pushed."""
+    entries of equal f come out in the order they were pushed, also when the push
+    counter is renumbered on the way (near its 31 bits)."""
     f = np.array(fs, float)
-    got = _heap_order(f)
+    got = _heap_order(f, renumber_at)
     want = sorted(range(len(fs)), key=lambda i: (fs[i], i))
     np.testing.assert_array_equal(got, want)
