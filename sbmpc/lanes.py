@@ -107,24 +107,8 @@ def widen(typingctx, v):
         return f64x16(v), codegen
 
 
-def _binary(op, doc):
-    @intrinsic
-    def fn(typingctx, a, b):
-        if isinstance(a, Lanes) and a == b:
-            def codegen(context, builder, sig, args):
-                return getattr(builder, op)(args[0], args[1])
-            return a(a, b), codegen
-    fn.__doc__ = doc
-    return fn
-
-
-add = _binary("fadd", "a + b, lane-wise.")
-sub = _binary("fsub", "a - b, lane-wise.")
-mul = _binary("fmul", "a * b, lane-wise.")
-div = _binary("fdiv", "a / b, lane-wise.")
-
-
 def _call(builder, name, t, args):
+    """Call LLVM's intrinsic ``llvm.<name>`` on lanes of type t."""
     vec = _vector(t)
     suffix = f"v{WIDTH}f{t.dtype.bitwidth}"          # llvmlite names no vector type itself
     fnty = ir.FunctionType(vec, [vec] * len(args))
@@ -133,7 +117,20 @@ def _call(builder, name, t, args):
     return builder.call(f, args)
 
 
-def _llvm_unary(name, doc):
+def _binary(emit, doc):
+    """An operation of two lanes of one type; ``emit(builder, type, args)`` builds it."""
+    @intrinsic
+    def fn(typingctx, a, b):
+        if isinstance(a, Lanes) and a == b:
+            def codegen(context, builder, sig, args):
+                return emit(builder, a, args)
+            return a(a, b), codegen
+    fn.__doc__ = doc
+    return fn
+
+
+def _unary(name, doc):
+    """LLVM's intrinsic ``llvm.<name>`` on one lanes value."""
     @intrinsic
     def fn(typingctx, a):
         if isinstance(a, Lanes):
@@ -144,21 +141,14 @@ def _llvm_unary(name, doc):
     return fn
 
 
-def _llvm_binary(name, doc):
-    @intrinsic
-    def fn(typingctx, a, b):
-        if isinstance(a, Lanes) and a == b:
-            def codegen(context, builder, sig, args):
-                return _call(builder, name, a, args)
-            return a(a, b), codegen
-    fn.__doc__ = doc
-    return fn
-
-
-sqrt = _llvm_unary("sqrt", "Square root, lane-wise (correctly rounded, as math.sqrt).")
-absolute = _llvm_unary("fabs", "|a|, lane-wise.")
-floor = _llvm_unary("floor", "floor(a), lane-wise.")
-copysign = _llvm_binary("copysign", "|a| with the sign of b, lane-wise.")
+add = _binary(lambda b, t, args: b.fadd(*args), "a + b, lane-wise.")
+sub = _binary(lambda b, t, args: b.fsub(*args), "a - b, lane-wise.")
+mul = _binary(lambda b, t, args: b.fmul(*args), "a * b, lane-wise.")
+div = _binary(lambda b, t, args: b.fdiv(*args), "a / b, lane-wise.")
+copysign = _binary(lambda b, t, args: _call(b, "copysign", t, args), "|a| with the sign of b, lane-wise.")
+sqrt = _unary("sqrt", "Square root, lane-wise (correctly rounded, as math.sqrt).")
+absolute = _unary("fabs", "|a|, lane-wise.")
+floor = _unary("floor", "floor(a), lane-wise.")
 
 
 @intrinsic
