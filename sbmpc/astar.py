@@ -158,6 +158,15 @@ def _shift(table):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _is_key(keys, n, key):
+    """Whether node n's key (row n of ``keys``) is ``key``."""
+    for d in range(key.shape[0]):
+        if keys[n, d] != key[d]:
+            return False
+    return True
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _lookup(table, shift, keys, key, code):
     """Slot of ``key`` (with its :func:`_code`) in the cell ``table`` (``shift``:
     :func:`_shift`): returns (slot, node id or -1)."""
@@ -167,16 +176,8 @@ def _lookup(table, shift, keys, key, code):
         n = table[2 * i + 1]
         if n == _EMPTY:
             return i, -1
-        if table[2 * i] == code:
-            if code >= 0:
-                return i, n
-            same = True
-            for d in range(key.shape[0]):
-                if keys[n, d] != key[d]:
-                    same = False
-                    break
-            if same:
-                return i, n
+        if table[2 * i] == code and (code >= 0 or _is_key(keys, n, key)):
+            return i, n
         i = (i + 1) & mask
 
 
@@ -210,11 +211,12 @@ def _bits(typingctx, x):
 # one array (a level's compare reads one cache line instead of three): the bits of f made
 # monotone (a float64's bits order like its value for f >= 0; negative ones are flipped),
 # then the push counter (high 32 bits, below SEQ_LIMIT: see _renumber) and the node id
-# (low 32 bits). Ties of f go to the entry pushed first. The helpers compare and swap in place, with no calls of their
-# own, and are compiled without reference counting (_nrt=False): a numba function
-# increments and decrements the count of every array it is handed, with atomic
-# operations, and a call per heap level made that 30 % of the unicycle benchmark; after
-# that, the counts of one push and one pop per expansion were still 5 %.
+# (low 32 bits). Ties of f go to the entry pushed first. The helpers compare and swap in
+# place, with no calls of their own, and are compiled without reference counting
+# (_nrt=False): a numba function increments and decrements the count of every array it
+# is handed, with atomic operations, and a call per heap level made that 30 % of the
+# unicycle benchmark; after that, the counts of one push and one pop per expansion were
+# still 5 %.
 @njit(cache=True, error_model="numpy", _nrt=False)
 def _push(H, cnt, f, node):
     i = cnt[C_HEAP]
@@ -297,14 +299,20 @@ def _key_of(state, dims, res, key):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _centre(state, dims, res, key):
+    """Snap ``state`` to the centre of its cell ``key``."""
+    for d in range(dims.shape[0]):
+        state[dims[d]] = key[d] * res[d]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt):
     """Put the start node into empty search arrays (cnt zero but C_GOAL and C_FIRST -1)."""
     table[:] = _EMPTY
     _key_of(start, dims, res, KEYS[0])
     X[0, :] = start
     if snap:
-        for d in range(dims.shape[0]):
-            X[0, dims[d]] = KEYS[0, d] * res[d]
+        _centre(X[0], dims, res, KEYS[0])
     G[0] = 0.0
     PAR[0] = -1
     CTL[0] = -1
@@ -417,12 +425,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
             _key_of(child, dims, res, key)
             code = _code(key)
             g = G[n] + cost
-            same = code == pcode
-            if same and code < 0:
-                for d in range(kd):
-                    if key[d] != KEYS[n, d]:
-                        same = False
-                        break
+            same = code == pcode and (code >= 0 or _is_key(KEYS, n, key))
             terminal = not snap and goal(params, data, child)
             if terminal or (same and DEP[n] < settle):
                 # a node of its own, outside the grid: a goal state is terminal (the goal
@@ -455,19 +458,15 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                 CLO[j] = 0
             elif g >= G[j] or (CLO[j] and not snap):
                 continue
+            if snap:
+                _centre(child, dims, res, key)
             for d in range(child.shape[0]):
                 X[j, d] = child[d]
-            if snap:
-                for d in range(kd):
-                    X[j, dims[d]] = key[d] * res[d]
             G[j] = g
             PAR[j] = n
             CTL[j] = c
             DEP[j] = DEP[n] + 1
             if not CLO[j]:
-                if snap:
-                    for d in range(kd):
-                        child[dims[d]] = key[d] * res[d]
                 h = heur(params, data, child)
                 if g + best[1] * h < best[0]:
                     _push(H, cnt, g + weight * h, j)
@@ -600,7 +599,7 @@ class Search:
         self.DEP = np.empty(cap, np.int64)
         self.CLO = np.empty(cap, np.uint8)
         self.KEYS = np.empty((cap, kd), np.int64)
-        self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
+        self.table = _cell_table(cap)
         self.H = np.empty(4 * cap, np.int64)    # the open set: 2 int64 per entry
         self.cnt = np.zeros(NC, np.int64)       # no node: the first run puts the start in
         self.cnt[C_GOAL] = -1
@@ -629,7 +628,7 @@ class Search:
                 b = np.empty((cap,) + a.shape[1:], a.dtype)
                 b[:n] = a[:n]
                 setattr(self, name, b)
-            self.table = np.empty(2 * _pow2(2 * cap), np.int64)    # at most half full
+            self.table = _cell_table(cap)
             rehash(self.table, self.KEYS, n)
         h = self.cnt[C_HEAP]
         if 2 * (h + self.problem.branching) > self.H.shape[0]:
@@ -698,6 +697,12 @@ class Search:
 
 def _pow2(n: int) -> int:
     return 1 << max(4, int(n - 1).bit_length())
+
+
+def _cell_table(capacity: int) -> np.ndarray:
+    """An (unfilled) cell table for up to ``capacity`` nodes, at most half full: two
+    int64 per slot."""
+    return np.empty(2 * _pow2(2 * capacity), np.int64)
 
 
 def search(problem: Problem, max_iterations: int, time_budget_s: float = math.inf,
