@@ -33,8 +33,6 @@ from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
  U_COFF, U_BOFF, U_NB, U_IRX, U_IRY, U_OBST) = range(21)
 CODES = ("outside the map border", "inside an obstacle")
 LANES = lanes.WIDTH  # the most controls a problem may have (the tables' columns)
-_NSUB = 10           # sub-steps of an edge
-_DIST = 3 + 2 * _NSUB  # where the edges' float64 distances start in ``work`` (in float32 words / L)
 _DIMS = np.arange(3, dtype=np.int64)
 
 
@@ -91,8 +89,9 @@ def expand(params, data, work, state, controls, children, costs):
     dt = np.float32(params[U_DT])
     th0 = np.float32(state[2])
     D = data.view(np.float32)
-    W = work.view(np.float32)            # the children's x, y and heading in float32, then
-    #                                      the sub-step table of a heading off the grid
+    # work: the children's x, y and heading in float32, the sub-step table of a heading
+    # off the grid (float32), the edge distances (float64): (5 + 2 nsub) L / 2 words
+    W = work.view(np.float32)
     block = 2 * nsub * L                 # the cosines and sines of one node heading
     hres = params[U_RT]
     i = cell_index(state[2], hres)
@@ -134,7 +133,7 @@ def expand(params, data, work, state, controls, children, costs):
            | lanes.less(yd, lanes.splat(-lim)) | lanes.less(lanes.splat(lim), yd))
     sx = lanes.sub(_snapped(xd, params[U_RX]), lanes.splat(state[0]))
     sy = lanes.sub(_snapped(yd, params[U_RY]), lanes.splat(state[1]))
-    dist = work[_DIST * L // 2:]
+    dist = work[(3 + 2 * nsub) * L // 2:]
     lanes.store(dist, 0, lanes.sqrt(lanes.add(lanes.mul(sx, sx), lanes.mul(sy, sy))))
     lanes.store(W, 0, x)
     lanes.store(W, L, y)
@@ -241,13 +240,14 @@ class Benchmark:
 
     @functools.cached_property
     def _tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """The parameter vector (all but the obstacles) and the data: the sub-step rotations (sub-step k of control b turns the heading by
-        k (omega_b dt), omega dt in float32 as the C++ adds it; per sub-step a row of
-        cosines and one of sines, a column per control) and, for every heading cell, the
+        """The parameter vector (all but the obstacles) and the data: the sub-step
+        rotations (sub-step k of control b turns the heading by k (omega_b dt), omega dt
+        in float32 as the C++ adds it; per sub-step a row of cosines and one of sines, a
+        column per control) and, for every heading cell, the
         float32 cosines and sines of the turned headings (:func:`_turned`), then the
         lanes' v and omega dt (float32 pairs packed in float64), then the goal's bearing
         from every cell centre within the border (:func:`_bearings`, 323 kB)."""
-        nsub, dt = _NSUB, 0.05
+        nsub, dt = 10, 0.05
         params = np.zeros(U_OBST)
         params[U_RX:U_RT + 1] = self.res
         params[U_GX:U_GT + 1] = self.goal
@@ -303,7 +303,7 @@ def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
     params[U_NOBS] = obstacles.shape[0]
     return Problem(expand, heuristic, is_goal, params, tables, bench.start, bench.controls, _DIMS, bench.res,
                    bench.controls.shape[0], snap=True, max_depth=bench.max_generations, codes=CODES,
-                   work_size=(_DIST + 2) * LANES // 2)
+                   work_size=(5 + 2 * int(params[U_NSUB])) * LANES // 2)
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):
