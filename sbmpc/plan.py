@@ -377,6 +377,16 @@ def trajectory_json(traj: dict) -> dict:
     """The JSON ``trajectory`` object (CONTRACTS.md keys plus pitch and currents)."""
     return {k: [float(a) for a in traj[k]] for k in TRAJECTORY_KEYS if k in traj}
 
+def trajectory_span(tr: dict, key: str) -> float | None:
+    """Last minus first sample of channel ``key`` of a trajectory (None if it has none)."""
+    return float(tr[key][-1] - tr[key][0]) if len(tr.get(key, ())) else None
+
+
+def trajectory_length(tr: dict) -> float | None:
+    """Length of a trajectory's xy path, m (None if it has no samples)."""
+    return float(np.sum(np.hypot(np.diff(tr["x"]), np.diff(tr["y"])))) if len(tr.get("x", ())) else None
+
+
 @dataclass
 class Plan:
     """The result of planning one scenario for one cost (CONTRACTS.md plan JSON)."""
@@ -398,24 +408,17 @@ class Plan:
     def found(self) -> bool:
         return self.status == "found"
 
-    def _last(self, key):
-        tr = self.trajectory
-        return float(tr[key][-1] - tr[key][0]) if self.found and len(tr.get(key, ())) else None
-
     @property
     def travel_time_s(self):
-        return self._last("t")
+        return trajectory_span(self.trajectory, "t") if self.found else None
 
     @property
     def energy_J(self):
-        return self._last("energy_J")
+        return trajectory_span(self.trajectory, "energy_J") if self.found else None
 
     @property
     def length_m(self):
-        if not self.found:
-            return None
-        x, y = self.trajectory["x"], self.trajectory["y"]
-        return float(np.sum(np.hypot(np.diff(x), np.diff(y))))
+        return trajectory_length(self.trajectory) if self.found else None
 
     def to_json(self) -> dict:
         return {

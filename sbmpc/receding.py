@@ -87,22 +87,17 @@ class RunResult:
     def planning_time_s(self) -> float:
         return float(sum(r.plan.planning_time_s for r in self.plans))
 
-    def _span(self, key):
-        tr = self.trajectory
-        return float(tr[key][-1] - tr[key][0]) if len(tr.get(key, ())) else None
-
     @property
     def travel_time_s(self):
-        return self._span("t")
+        return PL.trajectory_span(self.trajectory, "t")
 
     @property
     def energy_J(self):
-        return self._span("energy_J")
+        return PL.trajectory_span(self.trajectory, "energy_J")
 
     @property
     def length_m(self):
-        tr = self.trajectory
-        return float(np.sum(np.hypot(np.diff(tr["x"]), np.diff(tr["y"])))) if len(tr.get("x", ())) else None
+        return PL.trajectory_length(self.trajectory)
 
     @property
     def predicted(self) -> dict:
