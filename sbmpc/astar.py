@@ -306,22 +306,40 @@ def _centre(state, dims, res, key):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _new_node(cnt, KEYS, CLO, key):
+    """A new open node for cell ``key``: its id."""
+    j = cnt[C_NODES]
+    cnt[C_NODES] += 1
+    for d in range(key.shape[0]):
+        KEYS[j, d] = key[d]
+    CLO[j] = 0
+    return j
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _set_node(X, G, PAR, CTL, DEP, j, state, g, parent, control, depth):
+    """Node j's state, cost from the start, parent, control row and depth."""
+    for d in range(state.shape[0]):
+        X[j, d] = state[d]
+    G[j] = g
+    PAR[j] = parent
+    CTL[j] = control
+    DEP[j] = depth
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt):
     """Put the start node into empty search arrays (cnt zero but C_GOAL and C_FIRST -1)."""
     table[:] = _EMPTY
-    _key_of(start, dims, res, KEYS[0])
-    X[0, :] = start
+    key = np.empty(dims.shape[0], np.int64)
+    _key_of(start, dims, res, key)
+    _new_node(cnt, KEYS, CLO, key)
+    _set_node(X, G, PAR, CTL, DEP, 0, start, 0.0, -1, -1, 0)
     if snap:
-        _centre(X[0], dims, res, KEYS[0])
-    G[0] = 0.0
-    PAR[0] = -1
-    CTL[0] = -1
-    DEP[0] = 0
-    CLO[0] = 0
-    code = _code(KEYS[0])
-    slot, _ = _lookup(table, _shift(table), KEYS, KEYS[0], code)
+        _centre(X[0], dims, res, key)
+    code = _code(key)
+    slot, _ = _lookup(table, _shift(table), KEYS, key, code)
     _insert(table, slot, code, 0)
-    cnt[C_NODES] = 1
     _push(H, cnt, weight * heur(params, data, X[0]), 0)
 
 
@@ -349,9 +367,8 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
     goal = _goal_fn(fa[4], fa[5])
     if cnt[C_NODES] == 0:
         _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
-    kd = dims.shape[0]
     shift = _shift(table)
-    key = np.empty(kd, dtype=np.int64)
+    key = np.empty(dims.shape[0], dtype=np.int64)
     child = np.empty(X.shape[1])
     cur = np.empty(X.shape[1])
     m = controls.shape[0]
@@ -433,39 +450,21 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
                 # cell); near the start a child may stay in its parent's cell while its
                 # hidden state moves on (a drive slewing from a stall to reverse)
                 if g < best[0]:
-                    j = cnt[C_NODES]
-                    cnt[C_NODES] += 1
-                    for d in range(kd):
-                        KEYS[j, d] = key[d]
-                    for d in range(child.shape[0]):
-                        X[j, d] = child[d]
-                    G[j] = g
-                    PAR[j] = n
-                    CTL[j] = c
-                    DEP[j] = DEP[n] + 1
-                    CLO[j] = 0
+                    j = _new_node(cnt, KEYS, CLO, key)
+                    _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
                     _push(H, cnt, g + weight * heur(params, data, child), j)
                 continue
             if same:
                 continue
             slot, j = _lookup(table, shift, KEYS, key, code)
             if j < 0:
-                j = cnt[C_NODES]
-                cnt[C_NODES] += 1
+                j = _new_node(cnt, KEYS, CLO, key)
                 _insert(table, slot, code, j)
-                for d in range(kd):
-                    KEYS[j, d] = key[d]
-                CLO[j] = 0
             elif g >= G[j] or (CLO[j] and not snap):
                 continue
             if snap:
                 _centre(child, dims, res, key)
-            for d in range(child.shape[0]):
-                X[j, d] = child[d]
-            G[j] = g
-            PAR[j] = n
-            CTL[j] = c
-            DEP[j] = DEP[n] + 1
+            _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
             if not CLO[j]:
                 h = heur(params, data, child)
                 if g + best[1] * h < best[0]:
