@@ -36,13 +36,13 @@ from .body import gravity_torque, implicit_wheel_step, mass_matrix
 from .drive import current_window, electrical_power, pid_current
 from .kinematics import alpha_model
 from .params import G, Terrain, Vehicle
-from .resistance import OMEGA_EPS, unit_friction_fast
+from .resistance import OMEGA_EPS, side_force, unit_friction_fast
 
 # ---- parameter vector P ----------------------------------------------------------
 (P_M, P_I, P_R, P_B, P_ALPHA, P_MUROLL, P_MUSA, P_MUOP, P_PRESS, P_VMAX, P_K, P_RA,
  P_IMAX, P_KP, P_KI, P_KD, P_AREF, P_REGEN, P_SCL, P_SCR, P_VISC, P_LAG, P_SAG,
- P_SHEARLAG, P_M11, P_M12) = range(26)
-NP = 26
+ P_SHEARLAG, P_M11, P_M12, P_TC) = range(27)
+NP = 27
 
 # ---- state vector S --------------------------------------------------------------
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
@@ -60,7 +60,7 @@ CHANNELS = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "ta
  R_PB, R_E, R_PITCH, R_REFL, R_REFR, R_S) = range(19)
 NR = 19
 
-STALL_SPEED = 0.02   # m/s: below this in the commanded direction, with a saturated drive ...
+STALL_SPEED = 0.02   # m/s: progress below this along the commanded motion, drive saturated ...
 STALL_TIME = 0.25    # s: ... for this long, the vehicle has stalled
 
 
@@ -78,6 +78,7 @@ def pack(vehicle: Vehicle, terrain: Terrain) -> np.ndarray:
     P[P_SCL], P[P_SCR], P[P_VISC] = v.radius_scale_left, v.radius_scale_right, v.viscous
     P[P_LAG], P[P_SAG], P[P_SHEARLAG] = v.lag, v.sag, v.shear_lag
     P[P_M11], P[P_M12] = mass_matrix(v.mass, v.inertia, v.wheel_radius, v.width, t.alpha)
+    P[P_TC] = 1.0 / v.controller_rate
     return P
 
 
@@ -87,132 +88,284 @@ def _clip(x, lo, hi):
 
 
 @jit
+def _resistance(P, table, S, wl, wr, cp, a_shear):
+    """Resistance torques C (eqs. 17-22, fast form, with rolling and the viscous
+    extension) [N m] of both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine
+    cp, and their Jacobian dC/dw [N m s/rad]. ``a_shear`` < 1 blends the friction with its
+    lagged value in S (shear-lag extension). Returns (res_l, res_r, j_ll, j_lr, j_rl,
+    j_rr, unit_l, unit_r), the last two the (lagged) unit frictions."""
+    scl = P[P_SCL]
+    scr = P[P_SCR]
+    r = P[P_R]
+    fl, fr, dll, dlr, drl, drr = unit_friction_fast(table, scl * wl, scr * wr)
+    if a_shear < 1.0:
+        fl = S[S_FL] + a_shear * (fl - S[S_FL])
+        fr = S[S_FR] + a_shear * (fr - S[S_FR])
+        dll *= a_shear
+        dlr *= a_shear
+        drl *= a_shear
+        drr *= a_shear
+    press = P[P_PRESS] * cp
+    roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
+    droll_l = roll / OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
+    droll_r = roll / OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
+    F_l, dF_l, dR_l = side_force(fl, roll * _clip(wl / OMEGA_EPS, -1.0, 1.0), wl, press, P[P_MUSA], P[P_MUOP])
+    F_r, dF_r, dR_r = side_force(fr, roll * _clip(wr / OMEGA_EPS, -1.0, 1.0), wr, press, P[P_MUSA], P[P_MUOP])
+    visc = P[P_VISC]
+    res_l = r * scl * F_l + visc * wl
+    res_r = r * scr * F_r + visc * wr
+    j_ll = r * scl * (dF_l * dll * scl + dR_l * droll_l) + visc
+    j_lr = r * scl * dF_l * dlr * scr
+    j_rl = r * scr * dF_r * drl * scl
+    j_rr = r * scr * (dF_r * drr * scr + dR_r * droll_r) + visc
+    return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
+
+
+@jit
+def _loop_current(P, ref, integral, ref_rate, w, vmax, dt):
+    """The PID current (Fig. 4) of one side with its integral advanced implicitly to the
+    end of a step of dt [s] at wheel speed w, clipped to the drive's window (eq. 27).
+    Returns (current [A], d current / d w [A s/rad], saturated, new integral)."""
+    k = P[P_K]
+    ra = P[P_RA]
+    e = ref - w
+    z = integral + e * dt
+    ic = pid_current(e, z, ref_rate, P[P_KP], P[P_KI], P[P_KD])
+    lo, hi = current_window(w, vmax, k, ra, P[P_IMAX])
+    i = _clip(ic, lo, hi)
+    sat = i != ic
+    if not sat:
+        return i, -(P[P_KP] + P[P_KI] * dt), False, z
+    if e * (ic - i) > 0.0:          # saturated while winding up: the integral holds
+        z = integral
+    di = -k / ra if abs(i) < P[P_IMAX] else 0.0      # on the voltage bound of eq. 27
+    return i, di, True, z
+
+
+@jit
+def _held_current(icmd, w, vmax, k, ra, imax):
+    """A held current command [A] as the drive delivers it at wheel speed w: clipped to
+    its window (eq. 27). Returns (current, d current / d w [A s/rad], saturated)."""
+    lo, hi = current_window(w, vmax, k, ra, imax)
+    i = _clip(icmd, lo, hi)
+    if i == icmd:
+        return i, 0.0, False
+    return i, (-k / ra if abs(i) < imax else 0.0), True
+
+
+NEWTON_ITERATIONS = 12   # most one implicit solve takes (typically 2-3)
+NEWTON_TOL = 1e-7        # rad/s, wheel-speed change at which the iteration has converged
+SDIRK_GAMMA = 1.0 - math.sqrt(0.5)   # Alexander's L-stable two-stage SDIRK, order 2
+
+
+@jit
+def _solve(P, table, S, wl0, wr0, off_l, off_r, h, digital, icl, icr, refl, refr, zl_b, zr_b,
+           rdl, rdr, vmax, cp, g_l, g_r):
+    """One implicit solve for the wheel speeds w [rad/s] (Newton on two unknowns):
+
+        M (w - w0) = off + h (k I(w) - C(w) - G)
+
+    with resistance C (eqs. 17-22), gravity G (eq. 24), M of eq. 5 (eq. 25) and ``off``
+    [N m s] what earlier stages contributed. The delivered current I: ``digital``, the
+    held commands (icl, icr) clipped to the drive's window at w (its voltage bound falls
+    with speed, eq. 27); otherwise the PID current (Fig. 4) at w with the integral
+    advanced from (zl_b, zr_b) by h e(w), clipped, not winding up while saturated.
+    The friction is stiff near straight motion and at rest (its slope grows like 1/|w|);
+    a step that overshoots a kink is halved. Returns (wl, wr, il, ir, zl, zr, sat_l,
+    sat_r, fl, fr): speeds, currents [A], integrals [rad], saturation, unit frictions."""
+    k = P[P_K]
+    ra = P[P_RA]
+    imax = P[P_IMAX]
+    m11 = P[P_M11]
+    m12 = P[P_M12]
+    lag = P[P_LAG]
+    a_lag = 1.0 - math.exp(-h / lag) if lag > 0.0 else 1.0
+    a_shear = 1.0 - math.exp(-h / P[P_SHEARLAG]) if P[P_SHEARLAG] > 0.0 else 1.0
+    wl = wl0
+    wr = wr0
+    pl = wl0
+    pr = wr0
+    pnorm = 1e300
+    lam = 1.0
+    stl = 0.0
+    str_ = 0.0
+    zl = zl_b
+    zr = zr_b
+    for it in range(NEWTON_ITERATIONS):
+        if digital:
+            il, dil, sat_l = _held_current(icl, wl, vmax, k, ra, imax)
+            ir, dir_, sat_r = _held_current(icr, wr, vmax, k, ra, imax)
+        else:
+            il, dil, sat_l, zl = _loop_current(P, refl, zl_b, rdl, wl, vmax, h)
+            ir, dir_, sat_r, zr = _loop_current(P, refr, zr_b, rdr, wr, vmax, h)
+        if lag > 0.0:
+            il = S[S_IL] + a_lag * (il - S[S_IL])
+            ir = S[S_IR] + a_lag * (ir - S[S_IR])
+            dil *= a_lag
+            dir_ *= a_lag
+        res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, table, S, wl, wr, cp, a_shear)
+        if it == NEWTON_ITERATIONS - 1:
+            break
+        rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (k * il - res_l - g_l)
+        rr = m12 * (wl - wl0) + m11 * (wr - wr0) - off_r - h * (k * ir - res_r - g_r)
+        norm = abs(rl) + abs(rr)
+        if norm > pnorm and lam > 0.01:
+            lam *= 0.5
+            wl = pl + lam * stl
+            wr = pr + lam * str_
+            continue
+        if it > 0 and lam * (abs(stl) + abs(str_)) < NEWTON_TOL:
+            break
+        pl = wl
+        pr = wr
+        pnorm = norm
+        stl, str_ = implicit_wheel_step(m11, m12, j_ll - k * dil, j_lr, j_rl, j_rr - k * dir_,
+                                        0.0, 0.0, rl / h, rr / h, 0.0, 0.0, h)
+        lam = 1.0
+        if abs(stl) + abs(str_) < NEWTON_TOL:
+            break
+        wl = pl + stl
+        wr = pr + str_
+    return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr
+
+
+@jit
+def _battery_power(il, ir, wl, wr, k, ra, regen):
+    """Battery power [W] of both sides (PARAMETERS.md: none regenerated by default)."""
+    pb = electrical_power(il, wl, k, ra) + electrical_power(ir, wr, k, ra)
+    return pb if (pb > 0.0 or regen) else 0.0
+
+
+@jit
 def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     """Advance state S by dt [s] under commands (cmd_l, cmd_r) and pitch [rad]; outputs in O.
 
-    Closed loop: the commands are desired wheel speeds [rad/s]. Open loop
-    (``open_loop`` true): the commands are current commands [A] to the motor controllers
-    (the paper's Fig. 16 drives the open-loop model with tau = K_tau V).
+    Closed loop: the commands are desired wheel speeds [rad/s]; the reference approaches
+    them at the rate limit ``ref_accel``. At the controller period (dt <= 1 /
+    controller_rate) the step *is* the paper's digital PID (Fig. 4): the current command
+    is computed from the measured speeds and held over the step (zero-order hold); the
+    integral does not wind up while the output is saturated; the wheels advance by
+    backward Euler (:func:`_solve`). A coarser step cannot represent a 1 kHz controller
+    sample by sample: it takes the loop's continuous-time limit and integrates the whole
+    closed loop, PID, current window, friction and body, with an L-stable second-order
+    implicit method (two-stage SDIRK): stable at any step, free of the current chatter
+    an explicit PID shows at coarse steps, and converging to the controller-rate
+    solution (``dynamics.convergence`` measures how closely).
+
+    Open loop (``open_loop`` true): the commands are current commands [A] to the motor
+    controllers (the paper's Fig. 16 drives the open-loop model with tau = K_tau V).
     """
-    wl = S[S_WL]
-    wr = S[S_WR]
+    wl0 = S[S_WL]
+    wr0 = S[S_WR]
     k = P[P_K]
     ra = P[P_RA]
+    m11 = P[P_M11]
+    m12 = P[P_M12]
+    regen = P[P_REGEN] != 0.0
     vmax = P[P_VMAX] - P[P_SAG] * S[S_E]
     if vmax < 0.0:
         vmax = 0.0
-    # 1-2: reference, PID, saturation, anti-windup
-    if open_loop:
-        icl = cmd_l
-        icr = cmd_r
-        el = 0.0
-        er = 0.0
-    else:
+    cp = math.cos(pitch)
+    g_l = gravity_torque(P[P_M], G, P[P_R], pitch) * P[P_SCL]
+    g_r = gravity_torque(P[P_M], G, P[P_R], pitch) * P[P_SCR]
+    # 1: the wheel-speed reference approaches the command at the rate limit
+    dl = 0.0
+    dr = 0.0
+    ref_l0 = S[S_REFL]
+    ref_r0 = S[S_REFR]
+    if not open_loop:
         aref = P[P_AREF]
-        dl = cmd_l - S[S_REFL]
-        dr = cmd_r - S[S_REFR]
+        dl = cmd_l - ref_l0
+        dr = cmd_r - ref_r0
         if aref > 0.0:
             dl = _clip(dl, -aref * dt, aref * dt)
             dr = _clip(dr, -aref * dt, aref * dt)
         S[S_REFL] += dl
         S[S_REFR] += dr
-        el = S[S_REFL] - wl
-        er = S[S_REFR] - wr
-        icl = pid_current(el, S[S_INTL], dl / dt, P[P_KP], P[P_KI], P[P_KD])
-        icr = pid_current(er, S[S_INTR], dr / dt, P[P_KP], P[P_KI], P[P_KD])
-    lo_l, hi_l = current_window(wl, vmax, k, ra, P[P_IMAX])
-    lo_r, hi_r = current_window(wr, vmax, k, ra, P[P_IMAX])
-    il = _clip(icl, lo_l, hi_l)
-    ir = _clip(icr, lo_r, hi_r)
-    sat_l = il != icl
-    sat_r = ir != icr
-    if not open_loop:
-        if not (sat_l and el * (icl - il) > 0.0):
-            S[S_INTL] += el * dt
-        if not (sat_r and er * (icr - ir) > 0.0):
-            S[S_INTR] += er * dt
-    # voltage-bound currents fall with speed: their slope enters the implicit step
-    dvl = k * k / ra if (sat_l and abs(il) < P[P_IMAX]) else 0.0
-    dvr = k * k / ra if (sat_r and abs(ir) < P[P_IMAX]) else 0.0
-    lag = P[P_LAG]
-    if lag > 0.0:
-        a = 1.0 - math.exp(-dt / lag)
-        S[S_IL] += a * (il - S[S_IL])
-        S[S_IR] += a * (ir - S[S_IR])
-        il = S[S_IL]
-        ir = S[S_IR]
-        dvl = 0.0
-        dvr = 0.0
+    rdl = dl / dt
+    rdr = dr / dt
+    if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
+        # 2: the digital PID samples the measured speeds; the command is held
+        if open_loop:
+            icl = cmd_l
+            icr = cmd_r
+        else:
+            el = S[S_REFL] - wl0
+            er = S[S_REFR] - wr0
+            icl = pid_current(el, S[S_INTL], rdl, P[P_KP], P[P_KI], P[P_KD])
+            icr = pid_current(er, S[S_INTR], rdr, P[P_KP], P[P_KI], P[P_KD])
+            lo, hi = current_window(wl0, vmax, k, ra, P[P_IMAX])
+            if not (_clip(icl, lo, hi) != icl and el * icl > 0.0):
+                S[S_INTL] += el * dt
+            lo, hi = current_window(wr0, vmax, k, ra, P[P_IMAX])
+            if not (_clip(icr, lo, hi) != icr and er * icr > 0.0):
+                S[S_INTR] += er * dt
+        # 3: backward Euler on eq. 25
+        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr = _solve(
+            P, table, S, wl0, wr0, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, vmax, cp, g_l, g_r)
+        # the held current against the wheel speed, linear over the step
+        pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
+        v0, yr0 = alpha_model(P[P_SCL] * wl0, P[P_SCR] * wr0, P[P_R], P[P_B], P[P_ALPHA])
+        v, yaw_rate = alpha_model(P[P_SCL] * wl, P[P_SCR] * wr, P[P_R], P[P_B], P[P_ALPHA])
+        vm = 0.5 * (v0 + v)
+        ym = 0.5 * (yr0 + yaw_rate)
     else:
-        S[S_IL] = il
-        S[S_IR] = ir
-    tau_l = k * il
-    tau_r = k * ir
-    # 3: resistance (fast form of eqs. 17-22), gravity (eq. 24), implicit eq. 25
-    scl = P[P_SCL]
-    scr = P[P_SCR]
-    r = P[P_R]
-    cp = math.cos(pitch)
-    sp = math.sin(pitch)
-    fl, fr, dll, dlr, drl, drr = unit_friction_fast(table, scl * wl, scr * wr)
-    tl = P[P_SHEARLAG]
-    if tl > 0.0:
-        a = 1.0 - math.exp(-dt / tl)
-        S[S_FL] += a * (fl - S[S_FL])
-        S[S_FR] += a * (fr - S[S_FR])
-        fl = S[S_FL]
-        fr = S[S_FR]
-        dll *= a
-        dlr *= a
-        drl *= a
-        drr *= a
-    else:
-        S[S_FL] = fl
-        S[S_FR] = fr
-    press = P[P_PRESS] * cp
-    mu_l = P[P_MUSA] if il * wl > 0.0 else P[P_MUOP]
-    mu_r = P[P_MUSA] if ir * wr > 0.0 else P[P_MUOP]
-    roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
-    droll_l = roll / OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
-    droll_r = roll / OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
-    visc = P[P_VISC]
-    res_l = r * scl * (press * mu_l * fl + roll * _clip(wl / OMEGA_EPS, -1.0, 1.0)) + visc * wl
-    res_r = r * scr * (press * mu_r * fr + roll * _clip(wr / OMEGA_EPS, -1.0, 1.0)) + visc * wr
-    grav = gravity_torque(P[P_M], G, r, pitch)
-    g_l = grav * scl
-    g_r = grav * scr
-    j_ll = r * scl * (press * mu_l * dll * scl + droll_l) + visc + dvl
-    j_lr = r * scl * press * mu_l * dlr * scr
-    j_rl = r * scr * press * mu_r * drl * scl
-    j_rr = r * scr * (press * mu_r * drr * scr + droll_r) + visc + dvr
-    dwl, dwr = implicit_wheel_step(P[P_M11], P[P_M12], j_ll, j_lr, j_rl, j_rr,
-                                   tau_l, tau_r, res_l, res_r, g_l, g_r, dt)
-    wl = wl + dwl
-    wr = wr + dwr
+        # 2-3: the continuous loop, two-stage SDIRK: stage 1 ends at gamma dt, stage 2
+        # at dt, each solved implicitly for the speeds with the PID current at them
+        gam = SDIRK_GAMMA
+        h = gam * dt
+        w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr = _solve(
+            P, table, S, wl0, wr0, 0.0, 0.0, h, False, 0.0, 0.0, ref_l0 + gam * dl,
+            ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp, g_l, g_r)
+        # stage 1's slopes, from its own equation: M (w1 - w0) = h F1
+        sl = (1.0 - gam) / gam
+        off_l = sl * (m11 * (w1l - wl0) + m12 * (w1r - wr0))
+        off_r = sl * (m12 * (w1l - wl0) + m11 * (w1r - wr0))
+        zbl = S[S_INTL] + sl * (z1l - S[S_INTL])
+        zbr = S[S_INTR] + sl * (z1r - S[S_INTR])
+        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr = _solve(
+            P, table, S, wl0, wr0, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL], S[S_REFR],
+            zbl, zbr, rdl, rdr, vmax, cp, g_l, g_r)
+        S[S_INTL] = zl
+        S[S_INTR] = zr
+        # the stages' quadrature (weights 1 - gamma, gamma at gamma dt and dt)
+        pb = ((1.0 - gam) * _battery_power(i1l, i1r, w1l, w1r, k, ra, regen)
+              + gam * _battery_power(il, ir, wl, wr, k, ra, regen))
+        v1, yr1 = alpha_model(P[P_SCL] * w1l, P[P_SCR] * w1r, P[P_R], P[P_B], P[P_ALPHA])
+        v, yaw_rate = alpha_model(P[P_SCL] * wl, P[P_SCR] * wr, P[P_R], P[P_B], P[P_ALPHA])
+        vm = (1.0 - gam) * v1 + gam * v
+        ym = (1.0 - gam) * yr1 + gam * yaw_rate
+        sat_l = sat_l or s1l
+        sat_r = sat_r or s1r
+    S[S_E] += pb * dt
+    S[S_IL] = il
+    S[S_IR] = ir
+    S[S_FL] = fl
+    S[S_FR] = fr
     S[S_WL] = wl
     S[S_WR] = wr
-    # 4: kinematics (eq. 1) and pose
-    v, yaw_rate = alpha_model(scl * wl, scr * wr, r, P[P_B], P[P_ALPHA])
-    # alpha_model takes one radius: scaled speeds give the per-side rim speeds
-    head = S[S_YAW] + 0.5 * yaw_rate * dt
-    S[S_X] += v * cp * math.cos(head) * dt
-    S[S_Y] += v * cp * math.sin(head) * dt
-    S[S_Z] += v * sp * dt
-    S[S_YAW] += yaw_rate * dt
-    S[S_DIST] += abs(v) * dt
-    S[S_S] += v * dt
-    S[S_T] += dt
-    # energy (PARAMETERS.md: battery power, no regeneration by default)
+    tau_l = k * il
+    tau_r = k * ir
     p_l = electrical_power(il, wl, k, ra)
     p_r = electrical_power(ir, wr, k, ra)
-    pb = p_l + p_r
-    if pb < 0.0 and P[P_REGEN] == 0.0:
-        pb = 0.0
-    S[S_E] += pb * dt
-    # stall: commanded forward (or backward) motion, none achieved, drive saturated
+    # 4: kinematics (eq. 1) and pose: the mean rates over the step, midpoint heading
+    r = P[P_R]
+    head = S[S_YAW] + 0.5 * ym * dt
+    S[S_X] += vm * cp * math.cos(head) * dt
+    S[S_Y] += vm * cp * math.sin(head) * dt
+    S[S_Z] += vm * math.sin(pitch) * dt
+    S[S_YAW] += ym * dt
+    S[S_DIST] += abs(vm) * dt
+    S[S_S] += vm * dt
+    S[S_T] += dt
+    # stall: commanded motion (driving or turning), none achieved, drive saturated. The
+    # progress is the rim-speed vector along the commanded one: for a straight command
+    # the speed v, for a pivot the rim speed of the turn
     if not open_loop:
-        vd = r * (cmd_l + cmd_r) / 2.0
-        if abs(vd) > 0.05 and v * np.sign(vd) < STALL_SPEED and (sat_l or sat_r):
+        cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r))
+        progress = r * (cmd_l * wl + cmd_r * wr) / (2.0 * cn) if cn > 0.0 else 0.0
+        if r * cn > 0.05 and progress < STALL_SPEED and (sat_l or sat_r):
             S[S_STALLT] += dt
             if S[S_STALLT] >= STALL_TIME:
                 S[S_STALLED] = 1.0

@@ -166,9 +166,7 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
     """Eq. 22: C(q, q-dot) = (tau_lRes, tau_rRes) [N m] at constant wheel speeds, exact form.
 
     The friction coefficient of each side is mu_sa where its motor drives (torque and
-    speed of one sign) and mu_op where it brakes; the choice is made self-consistent
-    (the sign of the torque does not depend on which positive mu is used, except at the
-    boundary, where mu_sa is taken).
+    speed of one sign) and mu_op where it brakes, by the one rule of :func:`side_force`.
     """
     wl = np.asarray(wl, float)
     wr = np.asarray(wr, float)
@@ -178,17 +176,47 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
                          wl, wr, vehicle, terrain, pitch)
 
 
+@jit
+def side_force(unit, roll, w, press, mu_sa, mu_op):
+    """Eq. 22's choice of friction coefficient for one side, as a ground force [N].
+
+    The side's longitudinal ground force is F(mu) = press mu unit + roll (eqs. 17/20 per
+    unit p mu times p mu, plus the signed rolling resistance ``roll`` [N]); its resistance
+    torque is r F (eqs. 18, 21). The coefficient is mu_sa where the side's motor *drives*
+    (torque and wheel speed of one sign: F(mu_sa) w > 0) and mu_op where it *brakes*
+    (F(mu_op) w < 0). With mu_sa >= mu_op both can fail at once, in a narrow band where
+    the sliding friction brakes a little less than the rolling resistance pushes: mu_sa
+    would make the side brake and mu_op make it drive. There the coefficient lies
+    between the two and the side neither drives nor brakes: F = 0. So a driving torque
+    never takes the braking coefficient, the choice depends on the state (wheel speeds)
+    alone, never on the sign of a current, and F is a continuous, piecewise-linear
+    function of ``unit``. A wheel at rest holds (mu_op).
+
+    Returns (F [N], dF/d unit [N/m^2], dF/d roll [-]) for the implicit integrator.
+    """
+    f_sa = press * mu_sa * unit + roll
+    if f_sa * w > 0.0:
+        return f_sa, press * mu_sa, 1.0
+    f_op = press * mu_op * unit + roll
+    if f_op * w < 0.0 or w == 0.0:
+        return f_op, press * mu_op, 1.0
+    return 0.0, 0.0, 0.0
+
+
+_side_force_array = np.vectorize(lambda u, roll, w, p, sa, op: side_force(u, roll, w, p, sa, op)[0],
+                                 otypes=[float])
+
+
 def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pitch):
-    """Eqs. 18, 21 for both sides from unit frictions, with mu_sa where the side drives
-    (torque and speed of one sign, strictly) and mu_op where it brakes or holds."""
+    """Eqs. 18, 21 and 22 for both sides from unit frictions: the resistance torques
+    [N m] with each side's coefficient chosen by :func:`side_force`, the same rule as the
+    compiled closed loop."""
     r = vehicle.wheel_radius
     p = patch_pressure(vehicle, pitch)
     out = []
     for unit, w in ((unit_l, wl), (unit_r, wr)):
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
-        tau_sa = resistance_torque(r, p * terrain.mu_sa * unit, roll)
-        tau_op = resistance_torque(r, p * terrain.mu_op * unit, roll)
-        out.append(np.where(tau_sa * w > 0.0, tau_sa, tau_op))
+        out.append(r * _side_force_array(unit, roll, w, p, terrain.mu_sa, terrain.mu_op))
     return out[0], out[1]
 
 
