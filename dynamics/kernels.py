@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 from .body import gravity_torque, implicit_wheel_step, mass_matrix
 from .drive import current_window, electrical_power, pid_current
@@ -46,8 +46,11 @@ NP = 27
 
 # ---- state vector S --------------------------------------------------------------
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
- S_YAW, S_T, S_E, S_DIST, S_S, S_STALLT, S_STALLED) = range(20)
-NS = 20
+ S_YAW, S_T, S_E, S_DIST, S_S, S_STALLT, S_STALLED,
+ S_CWL, S_CWR, S_CFL, S_CFR, S_CLL, S_CLR, S_CRL, S_CRR) = range(28)
+NS = 28
+# S_C*: the unit friction and its slopes (fast form) at the speeds (S_CWL, S_CWR), kept
+# from the last step: the next step starts its solve there and need not look them up
 
 # ---- step outputs O --------------------------------------------------------------
 (O_TAUL, O_TAUR, O_IL, O_IR, O_PL, O_PR, O_PB, O_V, O_YAWRATE, O_SAT) = range(10)
@@ -82,22 +85,26 @@ def pack(vehicle: Vehicle, terrain: Terrain) -> np.ndarray:
     return P
 
 
-@jit
+@jit_inline
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
 
 
-@jit
-def _resistance(P, table, S, wl, wr, cp, a_shear):
-    """Resistance torques C (eqs. 17-22, fast form, with rolling and the viscous
-    extension) [N m] of both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine
-    cp, and their Jacobian dC/dw [N m s/rad]. ``a_shear`` < 1 blends the friction with its
-    lagged value in S (shear-lag extension). Returns (res_l, res_r, j_ll, j_lr, j_rl,
-    j_rr, unit_l, unit_r), the last two the (lagged) unit frictions."""
+@jit_inline
+def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr):
+    """Resistance torques C (eqs. 17-22, with rolling and the viscous extension) [N m] of
+    both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine cp, from the unit
+    frictions (fl, fr) and their slopes there (:func:`unit_friction_fast`), and their
+    Jacobian dC/dw [N m s/rad]. ``a_shear`` < 1 blends the friction with its lagged value
+    in S (shear-lag extension). Returns (res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr),
+    the last two the (lagged) unit frictions."""
     scl = P[P_SCL]
     scr = P[P_SCR]
     r = P[P_R]
-    fl, fr, dll, dlr, drl, drr = unit_friction_fast(table, scl * wl, scr * wr)
+    dll *= scl
+    dlr *= scr
+    drl *= scl
+    drr *= scr
     if a_shear < 1.0:
         fl = S[S_FL] + a_shear * (fl - S[S_FL])
         fr = S[S_FR] + a_shear * (fr - S[S_FR])
@@ -114,14 +121,14 @@ def _resistance(P, table, S, wl, wr, cp, a_shear):
     visc = P[P_VISC]
     res_l = r * scl * F_l + visc * wl
     res_r = r * scr * F_r + visc * wr
-    j_ll = r * scl * (dF_l * dll * scl + dR_l * droll_l) + visc
-    j_lr = r * scl * dF_l * dlr * scr
-    j_rl = r * scr * dF_r * drl * scl
-    j_rr = r * scr * (dF_r * drr * scr + dR_r * droll_r) + visc
+    j_ll = r * scl * (dF_l * dll + dR_l * droll_l) + visc
+    j_lr = r * scl * dF_l * dlr
+    j_rl = r * scr * dF_r * drl
+    j_rr = r * scr * (dF_r * drr + dR_r * droll_r) + visc
     return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
 
 
-@jit
+@jit_inline
 def _loop_current(P, ref, integral, ref_rate, w, vmax, dt):
     """The PID current (Fig. 4) of one side with its integral advanced implicitly to the
     end of a step of dt [s] at wheel speed w, clipped to the drive's window (eq. 27).
@@ -142,7 +149,7 @@ def _loop_current(P, ref, integral, ref_rate, w, vmax, dt):
     return i, di, True, z
 
 
-@jit
+@jit_inline
 def _held_current(icmd, w, vmax, k, ra, imax):
     """A held current command [A] as the drive delivers it at wheel speed w: clipped to
     its window (eq. 27). Returns (current, d current / d w [A s/rad], saturated)."""
@@ -153,26 +160,29 @@ def _held_current(icmd, w, vmax, k, ra, imax):
     return i, (-k / ra if abs(i) < imax else 0.0), True
 
 
-NEWTON_ITERATIONS = 12   # most one implicit solve takes (typically 2-3)
-NEWTON_TOL = 1e-7        # rad/s, wheel-speed change at which the iteration has converged
+NEWTON_ITERATIONS = 6    # most one implicit solve takes (typically 1-2; where it cycles between
+                         # kinks of the friction or the current limit, the last iterate stands)
+NEWTON_TOL = 1e-4        # rad/s: a solve has converged when its next correction is below
 SDIRK_GAMMA = 1.0 - math.sqrt(0.5)   # Alexander's L-stable two-stage SDIRK, order 2
 
 
-@jit
-def _solve(P, table, S, wl0, wr0, off_l, off_r, h, digital, icl, icr, refl, refr, zl_b, zr_b,
-           rdl, rdr, vmax, cp, g_l, g_r):
+@jit_inline
+def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr, refl, refr,
+           zl_b, zr_b, rdl, rdr, vmax, cp, g_l, g_r):
     """One implicit solve for the wheel speeds w [rad/s] (Newton on two unknowns):
 
         M (w - w0) = off + h (k I(w) - C(w) - G)
 
     with resistance C (eqs. 17-22), gravity G (eq. 24), M of eq. 5 (eq. 25) and ``off``
-    [N m s] what earlier stages contributed. The delivered current I: ``digital``, the
-    held commands (icl, icr) clipped to the drive's window at w (its voltage bound falls
-    with speed, eq. 27); otherwise the PID current (Fig. 4) at w with the integral
-    advanced from (zl_b, zr_b) by h e(w), clipped, not winding up while saturated.
-    The friction is stiff near straight motion and at rest (its slope grows like 1/|w|);
-    a step that overshoots a kink is halved. Returns (wl, wr, il, ir, zl, zr, sat_l,
-    sat_r, fl, fr): speeds, currents [A], integrals [rad], saturation, unit frictions."""
+    [N m s] what earlier stages contributed; starting from the guess (wl, wr), where the
+    unit frictions and their slopes ``u`` (6-tuple of :func:`unit_friction_fast`) are
+    known. The delivered current I: ``digital``, the held commands (icl, icr) clipped to
+    the drive's window at w (its voltage bound falls with speed, eq. 27); otherwise the
+    PID current (Fig. 4) at w with the integral advanced from (zl_b, zr_b) by h e(w),
+    clipped, not winding up while saturated. The friction is stiff near straight motion
+    and at rest (its slope grows like 1/|w|); a step that overshoots a kink is halved.
+    Returns (wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u): speeds, currents [A],
+    integrals [rad], saturation, unit frictions (lagged) and ``u`` at the solution."""
     k = P[P_K]
     ra = P[P_RA]
     imax = P[P_IMAX]
@@ -181,10 +191,10 @@ def _solve(P, table, S, wl0, wr0, off_l, off_r, h, digital, icl, icr, refl, refr
     lag = P[P_LAG]
     a_lag = 1.0 - math.exp(-h / lag) if lag > 0.0 else 1.0
     a_shear = 1.0 - math.exp(-h / P[P_SHEARLAG]) if P[P_SHEARLAG] > 0.0 else 1.0
-    wl = wl0
-    wr = wr0
-    pl = wl0
-    pr = wr0
+    tol = NEWTON_TOL * (m11 - abs(m12))     # on the residual [N m s]
+    pl = wl
+    pr = wr
+    pu = u
     pnorm = 1e300
     lam = 1.0
     stl = 0.0
@@ -192,6 +202,8 @@ def _solve(P, table, S, wl0, wr0, off_l, off_r, h, digital, icl, icr, refl, refr
     zl = zl_b
     zr = zr_b
     for it in range(NEWTON_ITERATIONS):
+        if it > 0:
+            u = unit_friction_fast(table, P[P_SCL] * wl, P[P_SCR] * wr)
         if digital:
             il, dil, sat_l = _held_current(icl, wl, vmax, k, ra, imax)
             ir, dir_, sat_r = _held_current(icr, wr, vmax, k, ra, imax)
@@ -203,33 +215,42 @@ def _solve(P, table, S, wl0, wr0, off_l, off_r, h, digital, icl, icr, refl, refr
             ir = S[S_IR] + a_lag * (ir - S[S_IR])
             dil *= a_lag
             dir_ *= a_lag
-        res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, table, S, wl, wr, cp, a_shear)
+        res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
         if it == NEWTON_ITERATIONS - 1:
             break
         rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (k * il - res_l - g_l)
         rr = m12 * (wl - wl0) + m11 * (wr - wr0) - off_r - h * (k * ir - res_r - g_r)
         norm = abs(rl) + abs(rr)
+        if it > 0 and norm < tol:
+            break
         if norm > pnorm and lam > 0.01:
+            # the Newton step overshot a kink of the friction: step back halfway
             lam *= 0.5
             wl = pl + lam * stl
             wr = pr + lam * str_
             continue
-        if it > 0 and lam * (abs(stl) + abs(str_)) < NEWTON_TOL:
-            break
         pl = wl
         pr = wr
+        pu = u
         pnorm = norm
         stl, str_ = implicit_wheel_step(m11, m12, j_ll - k * dil, j_lr, j_rl, j_rr - k * dir_,
                                         0.0, 0.0, rl / h, rr / h, 0.0, 0.0, h)
         lam = 1.0
-        if abs(stl) + abs(str_) < NEWTON_TOL:
-            break
         wl = pl + stl
         wr = pr + str_
-    return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr
+    return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u
 
 
-@jit
+@jit_inline
+def _cached_friction(P, table, S):
+    """The unit frictions and slopes at the state's speeds: kept from the last step when
+    it ended at these speeds, else looked up."""
+    if S[S_CWL] == S[S_WL] and S[S_CWR] == S[S_WR]:
+        return (S[S_CFL], S[S_CFR], S[S_CLL], S[S_CLR], S[S_CRL], S[S_CRR])
+    return unit_friction_fast(table, P[P_SCL] * S[S_WL], P[P_SCR] * S[S_WR])
+
+
+@jit_inline
 def _battery_power(il, ir, wl, wr, k, ra, regen):
     """Battery power [W] of both sides (PARAMETERS.md: none regenerated by default)."""
     pb = electrical_power(il, wl, k, ra) + electrical_power(ir, wr, k, ra)
@@ -284,6 +305,7 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
         S[S_REFR] += dr
     rdl = dl / dt
     rdr = dr / dt
+    u0 = _cached_friction(P, table, S)
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
         # 2: the digital PID samples the measured speeds; the command is held
         if open_loop:
@@ -301,9 +323,9 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
             if not (_clip(icr, lo, hi) != icr and er * icr > 0.0):
                 S[S_INTR] += er * dt
         # 3: backward Euler on eq. 25
-        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr = _solve(
-            P, table, S, wl0, wr0, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, vmax, cp, g_l, g_r)
+        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
+            P, table, S, wl0, wr0, wl0, wr0, u0, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, vmax, cp, g_l, g_r)
         # the held current against the wheel speed, linear over the step
         pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
         v0, yr0 = alpha_model(P[P_SCL] * wl0, P[P_SCR] * wr0, P[P_R], P[P_B], P[P_ALPHA])
@@ -315,18 +337,19 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
         # at dt, each solved implicitly for the speeds with the PID current at them
         gam = SDIRK_GAMMA
         h = gam * dt
-        w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr = _solve(
-            P, table, S, wl0, wr0, 0.0, 0.0, h, False, 0.0, 0.0, ref_l0 + gam * dl,
-            ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp, g_l, g_r)
+        w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr, u = _solve(
+            P, table, S, wl0, wr0, wl0, wr0, u0, 0.0, 0.0, h, False, 0.0, 0.0,
+            ref_l0 + gam * dl, ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp,
+            g_l, g_r)
         # stage 1's slopes, from its own equation: M (w1 - w0) = h F1
         sl = (1.0 - gam) / gam
         off_l = sl * (m11 * (w1l - wl0) + m12 * (w1r - wr0))
         off_r = sl * (m12 * (w1l - wl0) + m11 * (w1r - wr0))
         zbl = S[S_INTL] + sl * (z1l - S[S_INTL])
         zbr = S[S_INTR] + sl * (z1r - S[S_INTR])
-        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr = _solve(
-            P, table, S, wl0, wr0, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL], S[S_REFR],
-            zbl, zbr, rdl, rdr, vmax, cp, g_l, g_r)
+        wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
+            P, table, S, wl0, wr0, w1l, w1r, u, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL],
+            S[S_REFR], zbl, zbr, rdl, rdr, vmax, cp, g_l, g_r)
         S[S_INTL] = zl
         S[S_INTR] = zr
         # the stages' quadrature (weights 1 - gamma, gamma at gamma dt and dt)
@@ -345,6 +368,9 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     S[S_FR] = fr
     S[S_WL] = wl
     S[S_WR] = wr
+    S[S_CWL] = wl
+    S[S_CWR] = wr
+    S[S_CFL], S[S_CFR], S[S_CLL], S[S_CLR], S[S_CRL], S[S_CRR] = u
     tau_l = k * il
     tau_r = k * ir
     p_l = electrical_power(il, wl, k, ra)
@@ -361,14 +387,21 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     S[S_T] += dt
     # stall: commanded motion (driving or turning), none achieved, drive saturated. The
     # progress is the rim-speed vector along the commanded one: for a straight command
-    # the speed v, for a pivot the rim speed of the turn
+    # the speed v, for a pivot the rim speed of the turn. The time below the threshold
+    # is interpolated within the step, so the verdict does not depend on the step.
     if not open_loop:
         cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r))
-        progress = r * (cmd_l * wl + cmd_r * wr) / (2.0 * cn) if cn > 0.0 else 0.0
-        if r * cn > 0.05 and progress < STALL_SPEED and (sat_l or sat_r):
-            S[S_STALLT] += dt
-            if S[S_STALLT] >= STALL_TIME:
-                S[S_STALLED] = 1.0
+        if r * cn > 0.05 and (sat_l or sat_r):
+            q = r / (2.0 * cn)
+            p1 = q * (cmd_l * wl + cmd_r * wr)
+            if p1 < STALL_SPEED:
+                p0 = q * (cmd_l * wl0 + cmd_r * wr0)
+                frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
+                S[S_STALLT] += frac * dt
+                if S[S_STALLT] >= STALL_TIME:
+                    S[S_STALLED] = 1.0
+            else:
+                S[S_STALLT] = 0.0
         else:
             S[S_STALLT] = 0.0
     O[O_TAUL] = tau_l

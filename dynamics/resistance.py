@@ -37,7 +37,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from ._jit import jit
+from ._jit import jit, jit_inline
 
 from .params import G, Terrain, Vehicle
 
@@ -176,7 +176,7 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
                          wl, wr, vehicle, terrain, pitch)
 
 
-@jit
+@jit_inline
 def side_force(unit, roll, w, press, mu_sa, mu_op):
     """Eq. 22's choice of friction coefficient for one side, as a ground force [N].
 
@@ -223,7 +223,7 @@ def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pi
 # ----------------------------------------------------------------------------------
 # The fast form
 # ----------------------------------------------------------------------------------
-@jit
+@jit_inline
 def diamond_angle(wl, wr):
     """Direction coordinate of the wheel-speed vector, t in [0, 4): the position on the
     diamond |a| + |b| = 1 of (a, b) = (wl, wr) / (|wl| + |wr|), counter-clockwise from
@@ -293,7 +293,7 @@ def friction_table(vehicle: Vehicle, terrain: Terrain, size: int = TABLE_SIZE) -
                          terrain.alpha, terrain.shear_modulus, int(size))
 
 
-@jit
+@jit_inline
 def table_lookup(table, t):
     """Linear interpolation of a friction table at diamond angle t in [0, 4]; returns
     (value, slope d value / d t)."""
@@ -309,7 +309,7 @@ def table_lookup(table, t):
     return table[i] + frac * (table[i + 1] - table[i]), slope
 
 
-@jit
+@jit_inline
 def unit_friction_fast(table, wl, wr):
     """Fast form of eqs. 17 and 20 per unit p mu [m^2], including the rest regularisation:
     returns (fl, fr, dfl_dwl, dfl_dwr, dfr_dwl, dfr_dwr), the last four the Jacobian

@@ -1,0 +1,142 @@
+"""Converged edges: does the planner's edge agree with the controller-rate solution, and
+what does an edge cost?
+
+    python bench/bench_edges.py                    # writes bench/results/edges.json
+    python bench/bench_edges.py --baseline d8bfefd # cost per edge against that commit too
+
+Convergence: ``--per-terrain`` random edges (default 200) on every shipped terrain,
+``dynamics.convergence.random_edges``: entry at rest, moving and turning; commands over
+the planner's whole sampled range (pivots included); grades up to the steepest
+sustainable grade + 5 deg, both ways. Each is rolled out for one planning period at the
+planner's step (0.02 s) and at the controller period (1 ms, the paper's 1 kHz digital
+PID) and compared: stall verdict, energy, end pose.
+
+Cost: the planner's own expansion (``sbmpc.skidsteer.expand``, all edges of a node) on
+nodes spread over the hill_tradeoff map, timed in a child process per source tree;
+with ``--baseline REV`` that commit is checked out into a temporary git worktree and the
+two are timed alternately in one run (this machine's speed drifts), reported as the
+median ratio over rounds.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "bench" / "results" / "edges.json"
+
+TIMER = r'''
+import sys, time, math
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from sbmpc import plan as PL, scenario as SC, skidsteer as SS
+from dynamics import kernels as K
+world = PL.resolve(SC.load(sys.argv[2]))
+prob = PL.problem(world, "energy")
+rng = np.random.default_rng(0)
+X0 = prob.start
+e = world.emap
+x0, x1, y0, y1 = e.extent
+states = []
+for i in range(int(sys.argv[3])):
+    x = rng.uniform(x0 + 2, x1 - 2); y = rng.uniform(y0 + 2, y1 - 2); yaw = rng.uniform(-math.pi, math.pi)
+    v = rng.uniform(0.0, 0.8)
+    p, _ = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
+    w = v / world.vehicle.wheel_radius
+    S = world.model(x, y).state(w, w, p, x, y, yaw, e.height(x, y))
+    X = X0.copy(); X[:K.NS] = S; X[SS.X_YAWW] = yaw; X[SS.X_V] = v
+    states.append(X)
+C = prob.controls[:prob.branching]
+children = np.empty((C.shape[0], X0.size)); costs = np.empty(C.shape[0]); work = np.empty(0)
+SS.expand(prob.params, prob.data, work, states[0], C, children, costs)
+t0 = time.perf_counter()
+for X in states:
+    SS.expand(prob.params, prob.data, work, X, C, children, costs)
+dt = time.perf_counter() - t0
+print(dt / (len(states) * C.shape[0]))
+'''
+
+
+def convergence(per_terrain: int, dt: float, period: float, seed: int) -> dict:
+    from dynamics.convergence import compare, random_edges, shipped_models
+    out = {}
+    agg = []
+    for m in shipped_models():
+        edges = random_edges(m, per_terrain, np.random.default_rng(seed))
+        a = compare(edges, dt, period)
+        out[m.terrain.name] = a.summary()
+        agg.append(a)
+        print(m.terrain.name, out[m.terrain.name], flush=True)
+    cat = lambda f: np.concatenate([getattr(a, f) for a in agg])
+    from dynamics.convergence import Agreement
+    total = Agreement(*(cat(f) for f in ("stall_ref", "stall_agrees", "energy_ref", "energy_err", "pos_err", "yaw_err")))
+    out["all"] = total.summary()
+    print("all", out["all"], flush=True)
+    return out
+
+
+def edge_cost(baseline: str | None, rounds: int, nodes: int) -> dict:
+    scen = str(ROOT / "scenarios" / "hill_tradeoff.yaml")
+    trees = {"current": str(ROOT)}
+    tmp = None
+    if baseline:
+        tmp = tempfile.mkdtemp(prefix="sbmpc-baseline-")
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", tmp, baseline],
+                       check=True, capture_output=True)
+        trees["baseline"] = tmp
+    try:
+        times: dict = {k: [] for k in trees}
+        for name, tree in trees.items():      # warm-up: compile and cache each tree
+            subprocess.run([sys.executable, "-c", TIMER, tree, scen, "4"], check=True, capture_output=True)
+        for _ in range(rounds):
+            for name, tree in trees.items():
+                r = subprocess.run([sys.executable, "-c", TIMER, tree, scen, str(nodes)], check=True,
+                                   capture_output=True, text=True)
+                times[name].append(float(r.stdout.strip().splitlines()[-1]))
+        res = {k: {"us_per_edge_median": round(1e6 * float(np.median(v)), 2),
+                   "us_per_edge_all": [round(1e6 * x, 2) for x in v]} for k, v in times.items()}
+        if baseline:
+            ratios = np.array(times["current"]) / np.array(times["baseline"])
+            res["baseline_rev"] = baseline
+            res["ratio_current_to_baseline"] = {"median": round(float(np.median(ratios)), 3),
+                                                "min": round(float(ratios.min()), 3),
+                                                "max": round(float(ratios.max()), 3)}
+        return res
+    finally:
+        if tmp:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", tmp], capture_output=True)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-terrain", type=int, default=200)
+    ap.add_argument("--dt", type=float, default=0.02)
+    ap.add_argument("--period", type=float, default=1.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--baseline", default=None, help="git revision to time against")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--nodes", type=int, default=300)
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+           "dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,
+           "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed)}
+    res["cost"] = edge_cost(args.baseline, args.rounds, args.nodes)
+    print("cost", res["cost"], flush=True)
+    res["bench_s"] = round(time.perf_counter() - t0, 1)
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps(res, indent=1))
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
