@@ -64,6 +64,7 @@ CHANNELS = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "ta
 NR = 19
 
 STALL_SPEED = 0.02   # m/s: progress below this along the commanded motion, drive saturated ...
+STALL_ACCEL = 0.05   # m/s^2: ... closing in on the commanded rim speeds slower than this ...
 STALL_TIME = 0.25    # s: ... for this long, the vehicle has stalled
 
 
@@ -316,11 +317,13 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
             er = S[S_REFR] - wr0
             icl = pid_current(el, S[S_INTL], rdl, P[P_KP], P[P_KI], P[P_KD])
             icr = pid_current(er, S[S_INTR], rdr, P[P_KP], P[P_KI], P[P_KD])
+            # conditional integration: the integral holds only while it would drive
+            # the command further beyond the bound it violates (as in _loop_current)
             lo, hi = current_window(wl0, vmax, k, ra, P[P_IMAX])
-            if not (_clip(icl, lo, hi) != icl and el * icl > 0.0):
+            if el * (icl - _clip(icl, lo, hi)) <= 0.0:
                 S[S_INTL] += el * dt
             lo, hi = current_window(wr0, vmax, k, ra, P[P_IMAX])
-            if not (_clip(icr, lo, hi) != icr and er * icr > 0.0):
+            if er * (icr - _clip(icr, lo, hi)) <= 0.0:
                 S[S_INTR] += er * dt
         # 3: backward Euler on eq. 25
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
@@ -385,24 +388,30 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     S[S_DIST] += abs(vm) * dt
     S[S_S] += vm * dt
     S[S_T] += dt
-    # stall: commanded motion (driving or turning), none achieved, drive saturated. The
-    # progress is the rim-speed vector along the commanded one: for a straight command
-    # the speed v, for a pivot the rim speed of the turn. The time below the threshold
-    # is interpolated within the step, so the verdict does not depend on the step.
+    # stall: the drive saturated, the commanded motion (driving or turning) not achieved
+    # and not being approached. The progress is the rim-speed vector along the commanded
+    # one (for a straight command the speed v, for a pivot the rim speed of the turn);
+    # the approach is how fast the rim speeds close in on the command (a vehicle that
+    # reverses, brakes or turns around closes in; one held by a hill does not). The
+    # time below the threshold is interpolated within the step, so the verdict does not
+    # depend on the step.
     if not open_loop:
         cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r))
+        stalling = False
         if r * cn > 0.05 and (sat_l or sat_r):
             q = r / (2.0 * cn)
             p1 = q * (cmd_l * wl + cmd_r * wr)
             if p1 < STALL_SPEED:
-                p0 = q * (cmd_l * wl0 + cmd_r * wr0)
-                frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
-                S[S_STALLT] += frac * dt
-                if S[S_STALLT] >= STALL_TIME:
-                    S[S_STALLED] = 1.0
-            else:
-                S[S_STALLT] = 0.0
-        else:
+                d0 = r * math.sqrt(0.5 * ((cmd_l - wl0) ** 2 + (cmd_r - wr0) ** 2))
+                d1 = r * math.sqrt(0.5 * ((cmd_l - wl) ** 2 + (cmd_r - wr) ** 2))
+                if d0 - d1 < STALL_ACCEL * dt:
+                    stalling = True
+                    p0 = q * (cmd_l * wl0 + cmd_r * wr0)
+                    frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
+                    S[S_STALLT] += frac * dt
+                    if S[S_STALLT] >= STALL_TIME:
+                        S[S_STALLED] = 1.0
+        if not stalling:
             S[S_STALLT] = 0.0
     O[O_TAUL] = tau_l
     O[O_TAUR] = tau_r

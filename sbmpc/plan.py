@@ -157,10 +157,12 @@ def _start(world: World, start) -> np.ndarray:
     return start_state(world) if start is None else np.ascontiguousarray(start, float)
 
 
-def pack_world(world: World, cost: str) -> tuple:
-    """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost."""
+def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
+    """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost, with
+    the edges integrated at ``dt`` [s] (default the planner's step)."""
     scn, e, v = world.scenario, world.emap, world.vehicle
     ps = scn.planner
+    dt = ps.dt if dt is None else dt
     ny, nx = e.shape
     blocks = [np.concatenate([K.pack(v, t), friction_table(v, t)]) for t in world.terrains]
     parts = [e.heights.ravel()]
@@ -173,8 +175,8 @@ def pack_world(world: World, cost: str) -> tuple:
     offd = offt + sum(b.size for b in blocks)
     data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
-    Q[SS.Q_DT] = ps.dt
-    Q[SS.Q_NSTEP] = max(1, round(ps.period_s / ps.dt))
+    Q[SS.Q_DT] = dt
+    Q[SS.Q_NSTEP] = max(1, round(ps.period_s / dt))
     Q[SS.Q_GX], Q[SS.Q_GY], Q[SS.Q_GR] = scn.goal["x"], scn.goal["y"], scn.goal["radius"]
     Q[SS.Q_HL], Q[SS.Q_HW] = world.half_length, world.half_width
     tip = math.radians(ps.tip_over_deg)
@@ -389,7 +391,9 @@ def trajectory_length(tr: dict) -> float | None:
 
 @dataclass
 class Plan:
-    """The result of planning one scenario for one cost (CONTRACTS.md plan JSON)."""
+    """The result of planning one scenario for one cost (CONTRACTS.md plan JSON). The
+    trajectory, travel time and energy are those of the controls driven at the vehicle's
+    controller rate (``check``), not the search's coarser prediction."""
 
     scenario: str
     cost: str
@@ -403,6 +407,8 @@ class Plan:
     nodes: int = 0
     invalid_edges: dict = field(default_factory=dict)
     found_by: str = ""            # the search that produced the controls (compare may adopt the other's)
+    check: Check | None = None    # the controls replayed at the controller rate
+    repairs: int = 0              # re-plans from where the controller-rate replay parted from the search
 
     @property
     def found(self) -> bool:
@@ -438,26 +444,131 @@ class Plan:
             "nodes": self.nodes,
             "invalid_edges": self.invalid_edges,
             "found_by": self.found_by or f"{self.cost} search",
+            "controller_rate_check": self.check.to_json() if self.check else None,
+            "repairs": self.repairs,
         }
 
 
-def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray | None = None) -> tuple:
+def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray | None = None,
+           dt: float | None = None, hold_last: float = 0.0) -> tuple:
     """Replay controls [(wl, wr, duration_s)] through the closed-loop model over the map
-    from ``start`` (a planner state; default the scenario's start). Returns (trajectory
-    dict sampled every ``every`` steps plus the last step, end code (0 or IN_GOAL,
-    negative if invalid), final state, number of controls used: a replay stops at the
-    first control that enters the goal or fails)."""
-    Q, data = pack_world(world, cost)
-    dt = world.scenario.planner.dt
+    from ``start`` (a planner state; default the scenario's start) at step ``dt`` [s]
+    (default the planner's). Returns (trajectory dict sampled every ``every`` steps plus
+    the last step, end code (0 or IN_GOAL, negative if invalid), final state, number of
+    controls used: a replay stops at the first control that enters the goal or fails).
+    ``hold_last`` [s] holds the last control that much longer (it stops in the goal)."""
+    dt = world.scenario.planner.dt if dt is None else dt
+    Q, data = pack_world(world, cost, dt)
     cl = np.array([c[0] for c in controls], float)
     cr = np.array([c[1] for c in controls], float)
     n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
+    if len(n) and hold_last > 0:
+        n[-1] += int(round(hold_last / dt))
     rec = np.zeros((int(n.sum()) + 1, K.NR))
     X0 = _start(world, start)
     rows, S, end, early = SS.replay(Q, data, X0, cl, cr, n, rec)
     idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
     traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
     return traj, int(end), S, (len(controls) if early < 0 else int(early) + 1)
+
+
+@dataclass(frozen=True)
+class Check:
+    """A plan's controls replayed at the vehicle's controller rate (the paper's 1 kHz
+    digital PID): does the vehicle really get there, and at what cost? ``miss_m`` [m]:
+    how far outside the goal disc the replay's closest approach stays (0 when it enters);
+    ``drift_m`` [m]: the allowance for that (DRIFT_PER_M of the distance driven)."""
+
+    dt: float
+    reached: bool
+    travel_time_s: float | None
+    energy_J: float | None
+    reason: str | None
+    miss_m: float = 0.0
+    drift_m: float = 0.0
+
+    def to_json(self) -> dict:
+        return {"dt": self.dt, "reached": self.reached, "travel_time_s": self.travel_time_s,
+                "energy_J": self.energy_J, "reason": self.reason, "miss_m": self.miss_m,
+                "drift_allowance_m": self.drift_m}
+
+
+HOLD_LAST_S = 0.25   # s: the last control is held this much longer at the controller rate
+DRIFT_PER_M = 0.005  # of the distance driven: how far the controller-rate replay of a plan,
+                     # driven open loop, may miss the goal disc and still count as reaching
+                     # it (a vehicle that closes the loop, sbmpc run, corrects such drift).
+                     # A stall or a tip-over is never allowed.
+PART_M = 0.05        # m: a plan's controller-rate replay has parted from the search's
+PART_DEG = 2.0       # prediction once its pose differs by this much (dynamics.convergence)
+MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
+
+
+def _controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple:
+    """The controls replayed at the controller period from X0, every step recorded.
+    Returns (Check, trajectory dict, controls as driven: cut where the replay enters the
+    goal disc or passes closest to it, the last one held up to HOLD_LAST_S longer)."""
+    dt = 1.0 / world.vehicle.controller_rate
+    traj, end, S, used = replay(world, cost, controls, every=1, start=X0, dt=dt, hold_last=HOLD_LAST_S)
+    g = world.scenario.goal
+    d = np.hypot(traj["x"] - g["x"], traj["y"] - g["y"]) - g["radius"]
+    drift = DRIFT_PER_M * float(S[K.S_DIST] - X0[K.S_DIST])
+    if end == SS.IN_GOAL:
+        i, miss = len(d) - 1, 0.0
+    else:
+        i = int(np.argmin(d))
+        miss = max(0.0, float(d[i]))
+    t = float(traj["t"][i] - X0[K.S_T])
+    e = float(traj["energy_J"][i] - X0[K.S_E])
+    if end == SS.IN_GOAL or (end >= 0 and miss <= drift):
+        # the controls as driven: cumulative ends, the one running at sample i cut there
+        ends = np.cumsum([c[2] for c in controls])
+        k = min(int(np.searchsorted(ends, t - 1e-9)), len(controls) - 1)
+        done = float(ends[k - 1]) if k else 0.0
+        kept = [tuple(c) for c in controls[:k]] + [(controls[k][0], controls[k][1], round(t - done, 9))]
+        traj = {name: v[:i + 1] for name, v in traj.items()}
+        return Check(dt, True, t, e, None, miss, drift), traj, kept
+    tt = float(S[K.S_T] - X0[K.S_T])
+    where = f"at ({S[K.S_X]:.2f}, {S[K.S_Y]:.2f}), t = {tt:.2f} s, control {used} of {len(controls)}"
+    if end < 0:
+        why = f"the vehicle {SS.CODES[-end - 1].split(' (')[0]} {where}"
+    else:
+        why = (f"the controls pass {miss:.2f} m outside the goal disc (allowed: {drift:.2f} m of "
+               f"open-loop drift), ending {where}")
+    return Check(dt, False, tt, float(S[K.S_E] - X0[K.S_E]), why, miss, drift), traj, list(controls)
+
+
+def check(world: World, cost: str, controls, start: np.ndarray | None = None) -> Check:
+    """Replay ``controls`` at the controller period from ``start`` (the check of every
+    plan before it is reported). Reached when the vehicle enters the goal disc, holding
+    the last control up to HOLD_LAST_S longer than planned (the planner cut it where its
+    coarser step entered the goal), or when it passes within the open-loop drift
+    allowance (DRIFT_PER_M of the distance driven) of the disc without stalling."""
+    return _controller_rate(world, cost, controls, _start(world, start))[0]
+
+
+def _parting(world: World, cost: str, controls, X0: np.ndarray, fine: dict) -> int:
+    """Index of the first control whose start the controller-rate replay (``fine``, every
+    step recorded) reaches with a pose PART_M / PART_DEG away from the planner-step
+    replay's; the number of controls the fine replay used when they never part."""
+    dt = world.scenario.planner.dt
+    coarse, *_ = replay(world, cost, controls, every=1, start=X0)
+    n_c = np.cumsum([0] + [max(0, round(c[2] / dt)) for c in controls])
+    n_f = np.cumsum([0] + [max(0, round(c[2] * world.vehicle.controller_rate)) for c in controls])
+    m = min(len(controls), int(np.searchsorted(n_c, len(coarse["t"]) - 1, "right")),
+            int(np.searchsorted(n_f, len(fine["t"]) - 1, "right")))
+    for j in range(1, m):
+        a, b = n_c[j], n_f[j]
+        dpos = math.hypot(coarse["x"][a] - fine["x"][b], coarse["y"][a] - fine["y"][b])
+        dyaw = abs(math.remainder(coarse["yaw"][a] - fine["yaw"][b], 2 * math.pi))
+        if dpos > PART_M or dyaw > math.radians(PART_DEG):
+            return j
+    return m
+
+
+def _fine_state(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
+    """The planner state after ``controls`` driven at the controller period from X0."""
+    _, _, S, _ = replay(world, cost, controls, every=1 << 30, start=X0, dt=1.0 / world.vehicle.controller_rate)
+    return S
 
 
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
@@ -515,12 +626,56 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     else:
         return Plan(world.scenario.name, cost, "no_path", res.reason,
                     planning_time_s=time.perf_counter() - t0, **common)
-    every = max(1, round(RECORD_EVERY / ps.dt))
-    traj, end, S, _ = replay(world, cost, controls, every, start=X0)
+    traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
+    controls, chk, fine, repairs = _checked(world, cost, controls, X0, t0, budget, ps)
+    common["repairs"] = repairs
+    if not chk.reached:
+        return Plan(world.scenario.name, cost, "no_path",
+                    f"the path the search found ({ps.dt * 1e3:g} ms steps) does not hold at the vehicle's "
+                    f"controller rate ({world.vehicle.controller_rate:g} Hz)"
+                    + (f", also after {repairs} re-plans from where it parted" if repairs else "")
+                    + f": {chk.reason}",
+                    planning_time_s=time.perf_counter() - t0, check=chk, **common)
+    every = max(1, round(RECORD_EVERY * world.vehicle.controller_rate))
+    rows = len(fine["t"])
+    idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
+    traj = {name: v[idx].copy() for name, v in fine.items()}
     return Plan(world.scenario.name, cost, "found", None, controls, traj,
-                planning_time_s=time.perf_counter() - t0, found_by=found_by, **common)
+                planning_time_s=time.perf_counter() - t0, found_by=found_by, check=chk, **common)
+
+
+def _checked(world: World, cost: str, controls, X0: np.ndarray, t0: float, budget: float, ps) -> tuple:
+    """Check searched controls at the controller rate; where the check fails, re-plan
+    from the controller-rate state at the first control where the two replays part
+    (the search's model drifted from the vehicle's there) and splice, up to MAX_REPAIRS
+    times within the time budget. Returns (controls as driven, Check, the controller-rate
+    trajectory, re-plans made)."""
+    chk, fine, kept = _controller_rate(world, cost, controls, X0)
+    repairs = 0
+    while not chk.reached and repairs < MAX_REPAIRS:
+        left = budget - (time.perf_counter() - t0)
+        if left <= 0:
+            break
+        j = _parting(world, cost, controls, X0, fine)
+        if j == 0:
+            break
+        Sj = _fine_state(world, cost, controls[:j], X0)
+        if unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
+            break
+        prob = problem(world, cost, Sj)
+        res = Search(prob).run(ps.max_expansions, left)
+        repairs += 1
+        if res.status != "found":
+            break
+        T = res.states[:, K.S_T]
+        prob_controls = prob.controls
+        tail = [(float(prob_controls[c, 0]), float(prob_controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+                for i, c in enumerate(res.control_rows)]
+        controls = [tuple(c) for c in controls[:j]] + tail
+        chk, fine, kept = _controller_rate(world, cost, controls, X0)
+    return kept, chk, fine, repairs
 
 
 def plan_both(world: World, progress=None) -> dict:
@@ -533,9 +688,10 @@ def plan_both(world: World, progress=None) -> dict:
     plans = {c: plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy")}
     t, e = plans["time"], plans["energy"]
     if t.found and e.found:
-        if e.travel_time_s < t.travel_time_s:
+        # on what the vehicle really does: the controller-rate replays
+        if e.check.travel_time_s < t.check.travel_time_s:
             plans["time"] = _adopt(e, "time", t)
-        if t.energy_J < e.energy_J:
+        if t.check.energy_J < e.check.energy_J:
             plans["energy"] = _adopt(t, "energy", e)
     return plans
 

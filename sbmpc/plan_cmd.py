@@ -75,8 +75,17 @@ def summary(plan) -> str:
     return (f"{plan.scenario} [{plan.cost}]: found\n"
             f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
             f"{len(plan.controls)} controls\n"
+            + _check_line(plan) +
             f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
             f"{plan.edges_simulated} edges simulated")
+
+
+def _check_line(plan) -> str:
+    c = plan.check
+    if c is None:
+        return ""
+    return (f"  checked at the controller rate ({c.dt * 1e3:g} ms steps): reaches the goal in "
+            f"{c.travel_time_s:.2f} s with {c.energy_J:.1f} J\n")
 
 
 def run_plan(args) -> int:
