@@ -64,7 +64,7 @@ CHANNELS = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "ta
 NR = 19
 
 STALL_SPEED = 0.02   # m/s: progress below this along the commanded motion, drive saturated ...
-STALL_ACCEL = 0.05   # m/s^2: ... closing in on the commanded rim speeds slower than this ...
+STALL_ACCEL = 0.5    # m/s^2: ... closing in on the commanded rim speeds slower than this ...
 STALL_TIME = 0.25    # s: ... for this long, the vehicle has stalled
 
 
@@ -412,7 +412,10 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
                     if S[S_STALLT] >= STALL_TIME:
                         S[S_STALLED] = 1.0
         if not stalling:
-            S[S_STALLT] = 0.0
+            # the timer leaks at the rate it fills: dT/dt = +1 stalling, -1 not. A stuck
+            # wheel's stick-slip at the regularised friction (a few steps of apparent
+            # approach in every few ms at 1 kHz) does not reset it; real progress does
+            S[S_STALLT] = max(0.0, S[S_STALLT] - dt)
     O[O_TAUL] = tau_l
     O[O_TAUR] = tau_r
     O[O_IL] = il

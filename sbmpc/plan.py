@@ -312,11 +312,12 @@ def _max_rise(H, res, dist):
     return float(np.hypot(gx, gy).max() * dist)
 
 
-def problem(world: World, cost: str, start: np.ndarray | None = None) -> Problem:
+def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float | None = None) -> Problem:
     """The search problem of a world and cost, from ``start`` (a planner state, default
-    the scenario's start state)."""
+    the scenario's start state), its edges integrated at ``dt`` [s] (default the
+    planner's step)."""
     ps = world.scenario.planner
-    Q, data = pack_world(world, cost)
+    Q, data = pack_world(world, cost, dt)
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
@@ -511,12 +512,12 @@ def _controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple
     traj, end, S, used = replay(world, cost, controls, every=1, start=X0, dt=dt, hold_last=HOLD_LAST_S)
     g = world.scenario.goal
     d = np.hypot(traj["x"] - g["x"], traj["y"] - g["y"]) - g["radius"]
-    drift = DRIFT_PER_M * float(S[K.S_DIST] - X0[K.S_DIST])
     if end == SS.IN_GOAL:
         i, miss = len(d) - 1, 0.0
     else:
         i = int(np.argmin(d))
         miss = max(0.0, float(d[i]))
+    drift = DRIFT_PER_M * float(np.sum(np.hypot(np.diff(traj["x"][:i + 1]), np.diff(traj["y"][:i + 1]))))
     t = float(traj["t"][i] - X0[K.S_T])
     e = float(traj["energy_J"][i] - X0[K.S_E])
     if end == SS.IN_GOAL or (end >= 0 and miss <= drift):
@@ -546,29 +547,39 @@ def check(world: World, cost: str, controls, start: np.ndarray | None = None) ->
     return _controller_rate(world, cost, controls, _start(world, start))[0]
 
 
-def _parting(world: World, cost: str, controls, X0: np.ndarray, fine: dict) -> int:
-    """Index of the first control whose start the controller-rate replay (``fine``, every
-    step recorded) reaches with a pose PART_M / PART_DEG away from the planner-step
-    replay's; the number of controls the fine replay used when they never part."""
-    dt = world.scenario.planner.dt
-    coarse, *_ = replay(world, cost, controls, every=1, start=X0)
-    n_c = np.cumsum([0] + [max(0, round(c[2] / dt)) for c in controls])
-    n_f = np.cumsum([0] + [max(0, round(c[2] * world.vehicle.controller_rate)) for c in controls])
-    m = min(len(controls), int(np.searchsorted(n_c, len(coarse["t"]) - 1, "right")),
-            int(np.searchsorted(n_f, len(fine["t"]) - 1, "right")))
-    for j in range(1, m):
-        a, b = n_c[j], n_f[j]
-        dpos = math.hypot(coarse["x"][a] - fine["x"][b], coarse["y"][a] - fine["y"][b])
-        dyaw = abs(math.remainder(coarse["yaw"][a] - fine["yaw"][b], 2 * math.pi))
+def _parting(pred: np.ndarray, controls, X0: np.ndarray, fine: dict, rate: float) -> tuple:
+    """(j, parted): j the first control whose start the controller-rate replay (``fine``,
+    every step recorded from X0) reaches with a pose PART_M / PART_DEG away from the
+    search's prediction ``pred`` (planner states at the control boundaries), parted
+    True; else j the control where the replay stopped (a stall or tip-over) or the
+    number of controls, parted False."""
+    n_f = np.cumsum([0] + [max(0, round(c[2] * rate)) for c in controls])
+    last = min(len(controls), int(np.searchsorted(n_f, len(fine["t"]) - 1, "left")) - 1)
+    for j in range(1, max(last, 0) + 1):
+        b = n_f[j]
+        dpos = math.hypot(pred[j, K.S_X] - fine["x"][b], pred[j, K.S_Y] - fine["y"][b])
+        dyaw = abs(math.remainder(pred[j, K.S_YAW] - fine["yaw"][b], 2 * math.pi))
         if dpos > PART_M or dyaw > math.radians(PART_DEG):
-            return j
-    return m
+            return j, True
+    return max(last, 0), False
 
 
 def _fine_state(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
     """The planner state after ``controls`` driven at the controller period from X0."""
     _, _, S, _ = replay(world, cost, controls, every=1 << 30, start=X0, dt=1.0 / world.vehicle.controller_rate)
     return S
+
+
+def _predicted(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
+    """Planner states (len(controls) + 1, NS+) at the control boundaries, replayed at the
+    planner's step from X0 (for controls that did not come from a search)."""
+    dt = world.scenario.planner.dt
+    out = [np.array(X0, float)]
+    S = np.array(X0, float)
+    for c in controls:
+        _, _, S, _ = replay(world, cost, [c], every=1 << 30, start=S)
+        out.append(S.copy())
+    return np.array(out)
 
 
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
@@ -629,7 +640,8 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
-    controls, chk, fine, repairs = _checked(world, cost, controls, X0, t0, budget, ps)
+    pred = res.states if res.status == "found" else _predicted(world, cost, controls, X0)
+    controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps)
     common["repairs"] = repairs
     if not chk.reached:
         return Plan(world.scenario.name, cost, "no_path",
@@ -646,34 +658,39 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
                 planning_time_s=time.perf_counter() - t0, found_by=found_by, check=chk, **common)
 
 
-def _checked(world: World, cost: str, controls, X0: np.ndarray, t0: float, budget: float, ps) -> tuple:
-    """Check searched controls at the controller rate; where the check fails, re-plan
-    from the controller-rate state at the first control where the two replays part
-    (the search's model drifted from the vehicle's there) and splice, up to MAX_REPAIRS
-    times within the time budget. Returns (controls as driven, Check, the controller-rate
-    trajectory, re-plans made)."""
+def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,
+             budget: float, ps) -> tuple:
+    """Check searched controls at the controller rate. Where the check fails, re-plan
+    from the controller-rate state and splice, up to MAX_REPAIRS times within the time
+    budget: from the first control where the replay parted from the search's prediction
+    ``pred`` (the search's model drifted from the vehicle's there), or, where it never
+    parted but an edge failed at 1 kHz that passed at the search's step, from that
+    edge's start with the search's step halved (that edge was not converged). Returns
+    (controls as driven, Check, the controller-rate trajectory, re-plans made)."""
+    rate = world.vehicle.controller_rate
     chk, fine, kept = _controller_rate(world, cost, controls, X0)
     repairs = 0
+    dt = ps.dt
     while not chk.reached and repairs < MAX_REPAIRS:
         left = budget - (time.perf_counter() - t0)
         if left <= 0:
             break
-        j = _parting(world, cost, controls, X0, fine)
-        if j == 0:
-            break
+        j, parted = _parting(pred, controls, X0, fine, rate)
+        if not parted:
+            dt = max(dt / 2.0, 1.0 / rate)
         Sj = _fine_state(world, cost, controls[:j], X0)
-        if unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
+        if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
-        prob = problem(world, cost, Sj)
+        prob = problem(world, cost, Sj, dt)
         res = Search(prob).run(ps.max_expansions, left)
         repairs += 1
         if res.status != "found":
             break
         T = res.states[:, K.S_T]
-        prob_controls = prob.controls
-        tail = [(float(prob_controls[c, 0]), float(prob_controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+        tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
                 for i, c in enumerate(res.control_rows)]
         controls = [tuple(c) for c in controls[:j]] + tail
+        pred = np.vstack([pred[:j], res.states])
         chk, fine, kept = _controller_rate(world, cost, controls, X0)
     return kept, chk, fine, repairs
 

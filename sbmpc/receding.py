@@ -4,7 +4,9 @@ plan again (``sbmpc run``).
 The planner plans with the world's vehicle. A simulated *truth* (by default the same
 model; or another vehicle, such as one with a flat tyre, or the extended vehicle that
 ``sbmpc diagnose`` wrote) executes the plan one planning period at a time over the same
-map, with the same closed-loop model and integration step. After each period the
+map, with the same closed-loop model stepped at the truth's controller rate (1 kHz for
+the P3-AT: a plan that only holds at the search's coarser step is caught), and the
+planner's prediction is replayed at the planning vehicle's. After each period the
 measured state (pose and drive state: wheel speeds, PID references and integrals,
 currents) is compared with the state the plan predicted, and the planner re-plans from
 the measured state when
@@ -150,11 +152,12 @@ def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
 
 
 class _Executor:
-    """Steps one world's closed-loop model through controls, period by period."""
+    """Steps one world's closed-loop model through controls, period by period, at its
+    vehicle's controller period (the paper's 1 kHz digital PID)."""
 
     def __init__(self, world: PL.World, cost: str, delay_s: float = 0.0):
-        self.Q, self.data = PL.pack_world(world, cost)
-        self.dt = world.scenario.planner.dt
+        self.dt = 1.0 / world.vehicle.controller_rate
+        self.Q, self.data = PL.pack_world(world, cost, self.dt)
         self.lag = int(round(delay_s / self.dt))
         self.prev = (0.0, 0.0)
 
@@ -192,7 +195,7 @@ def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = PL.start_state(twin)           # the measured state
     pieces = []
-    every = max(1, round(PL.RECORD_EVERY / ps.dt))
+    every = max(1, round(PL.RECORD_EVERY / real.dt))
     tol_yaw = math.radians(rs.tol_yaw_deg)
     why = "start"
     current, k, P, since = None, 0, None, 0
@@ -257,8 +260,17 @@ def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                                     f"t = {X[K.S_T]:.1f} s")
         elif X[K.S_T] - out.plans[0].t > t_limit:
+            behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]
+            tail = ""
+            if len(behind) >= 3:
+                xs = np.median([r.x for r in behind])
+                ys = np.median([r.y for r in behind])
+                tail = (f": {len(behind)} re-plans after it fell behind its plans or stalled, around "
+                        f"({xs:.2f}, {ys:.2f}); the vehicle is weaker there than the planning model "
+                        f"({world.vehicle.name}); plan with a model of this vehicle (sbmpc diagnose on a "
+                        f"run of it writes one)")
             return finish("failed", f"took longer than {t_limit:.0f} s ({rs.max_time_factor:g} x the first "
-                                    f"plan's travel time + 30 s) without reaching the goal")
+                                    f"plan's travel time + 30 s) without reaching the goal{tail}")
         elif k >= len(current.controls):
             why = "the plan ended short of the goal"
         elif rs.trigger == "every":

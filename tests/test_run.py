@@ -37,14 +37,20 @@ def _rel(a, b):
 
 @pytest.mark.parametrize("cost", ["time", "energy"])
 def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost):
+    """The truth is driven at the controller rate, as the plan was checked: with a
+    perfect model the run is the first plan, sample for sample. (A plan whose 1 kHz
+    replay passes within the open-loop drift allowance of the goal disc but not into it
+    gets one last short re-plan.)"""
     res = R.run(runup, cost)
     first = res.plans[0].plan
-    assert res.status == "reached" and res.replans == 0 and res.stalls == 0
-    # the executed run is the first plan, sample for sample
-    assert res.travel_time_s == pytest.approx(first.travel_time_s, abs=1e-9)
-    assert res.energy_J == pytest.approx(first.energy_J, abs=1e-6)
-    for k in ("x", "y", "v"):
-        np.testing.assert_allclose(res.trajectory[k], first.trajectory[k], atol=1e-9)
+    short = first.check.miss_m > 0
+    assert res.status == "reached" and res.replans == int(short) and res.stalls == 0
+    n = len(first.trajectory["t"])
+    for k in ("t", "x", "y", "v", "energy_J"):
+        np.testing.assert_allclose(res.trajectory[k][:n], first.trajectory[k], atol=1e-9)
+    if not short:
+        assert res.travel_time_s == pytest.approx(first.travel_time_s, abs=1e-9)
+        assert res.energy_J == pytest.approx(first.energy_J, abs=1e-6)
 
 
 def test_replanning_every_period_with_a_perfect_model_never_does_worse_than_predicted(flat):
@@ -93,8 +99,8 @@ def test_a_much_weaker_truth_fails_with_the_reason(runup):
     truth = runup.vehicle.replace(current_limit=0.8 * runup.vehicle.current_limit)
     res = R.run(runup, "time", truth)
     assert res.status == "failed"
-    assert "stalled" in res.reason and "weaker" in res.reason
-    assert res.stalls == res.settings.max_stalls + 1
+    assert "weaker" in res.reason and "(8." in res.reason       # where: the ramp, 8.0-8.4 m
+    assert res.stalls >= 1
 
 
 def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
@@ -124,7 +130,7 @@ def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
     weak = tmp_path / "weak.yaml"
     weak.write_text(vehicle_to_yaml(v.replace(radius_scale_right=1.0, current_limit=0.8 * v.current_limit)))
     assert main(["run", str(SCN / "runup_ramp.yaml"), "--truth", str(weak), "--quiet"]) == 1
-    assert "stalled" in capsys.readouterr().err
+    assert "weaker" in capsys.readouterr().err
     # bad input: exit 2, one line
     assert main(["run", str(SCN / "flat.yaml"), "--truth", str(tmp_path / "missing.yaml")]) == 2
     err = capsys.readouterr().err.strip()

@@ -1,0 +1,80 @@
+"""Are the energy-optimal plans really cheaper? Every shipped scenario, measured at the
+controller rate (the plans' 1 kHz replays, which is what every plan now reports).
+
+For each scenario:
+
+* the time and the energy plan as ``sbmpc compare`` reports them (each search's own
+  plan, and which one was kept: compare adopts the other search's plan when it is
+  better on the cost, ``found_by``);
+* the energy plan's spread over Halton seeds 0-7 (each seed its own search);
+* the energy plan of a long unweighted search (w = 1, 10 x the expansion budget, no
+  time budget) as the reference for how much the weighted, anytime search loses.
+
+    python bench/bench_energy_plans.py [--seeds 8] [--scenarios flat hill_tradeoff ...]
+
+writes ``bench/results/energy_plans.json``. Energies in J, times in s, one run each.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "bench" / "results" / "energy_plans.json"
+
+
+def _summary(p) -> dict:
+    return {"status": p.status, "energy_J": p.energy_J, "travel_time_s": p.travel_time_s,
+            "expansions": p.nodes_expanded, "planning_time_s": round(p.planning_time_s, 3),
+            "repairs": p.repairs, "found_by": p.found_by or f"{p.cost} search", "reason": p.reason}
+
+
+def main(argv=None) -> int:
+    from sbmpc import plan as PL
+    from sbmpc import scenario as SC
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--scenarios", nargs="*", default=None)
+    args = ap.parse_args(argv)
+    names = args.scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml") if p.stem != "unreachable")
+    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+           "measured_at": "controller rate (1 kHz replays of the plans' controls)", "scenarios": {}}
+    for name in names:
+        scn = SC.load(ROOT / "scenarios" / f"{name}.yaml")
+        world = PL.resolve(scn)
+        both = PL.plan_both(world)
+        row = {"reported": {c: _summary(p) for c, p in both.items()}}
+        seeds = []
+        for s in range(args.seeds):
+            w = PL.resolve(replace(scn, planner=replace(scn.planner, seed=s)))
+            seeds.append(PL.plan(w, "energy").energy_J)
+        found = [e for e in seeds if e is not None]
+        row["energy_by_seed_J"] = seeds
+        if found:
+            row["seed_spread_pct"] = round(100 * (max(found) - min(found)) / min(found), 2)
+            row["seed_median_J"] = statistics.median(found)
+        ps = scn.planner
+        long = PL.resolve(replace(scn, planner=replace(ps, energy_weight=1.0, max_expansions=10 * ps.max_expansions,
+                                                       time_budget_s=86400.0)))
+        ref = PL.plan(long, "energy")
+        row["unweighted_10x"] = _summary(ref)
+        e = both["energy"].energy_J
+        if ref.found and e is not None:
+            row["reported_vs_unweighted_pct"] = round(100 * (e - ref.energy_J) / ref.energy_J, 2)
+        t = both["time"].energy_J
+        row["energy_plan_no_dearer_than_time_plan"] = (e is not None and t is not None and e <= t + 1e-9)
+        res["scenarios"][name] = row
+        print(name, json.dumps({k: v for k, v in row.items() if k != "reported"}), flush=True)
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps(res, indent=1))
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
