@@ -7,10 +7,10 @@ For each scenario:
   plan, and which one was kept: compare adopts the other search's plan when it is
   better on the cost, ``found_by``);
 * the energy plan's spread over Halton seeds 0-7 (each seed its own search);
-* the energy plan of a long unweighted search (w = 1, 10 x the expansion budget, no
-  time budget) as the reference for how much the weighted, anytime search loses.
+* the energy plan of a long unweighted search (w = 1, 10 x the expansion budget, at
+  most ``--long-time-s``) as the reference for how much the weighted, anytime search loses.
 
-    python bench/bench_energy_plans.py [--seeds 8] [--scenarios flat hill_tradeoff ...]
+    python bench/bench_energy_plans.py [--seeds 8] [--scenarios flat hill_tradeoff ...] [--long-time-s 600]
 
 writes ``bench/results/energy_plans.json``. Energies in J, times in s, one run each.
 """
@@ -40,6 +40,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--scenarios", nargs="*", default=None)
+    ap.add_argument("--long-time-s", type=float, default=600.0,
+                    help="wall-clock budget of the long unweighted search [s]")
     args = ap.parse_args(argv)
     names = args.scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml") if p.stem != "unreachable")
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
@@ -60,7 +62,7 @@ def main(argv=None) -> int:
             row["seed_median_J"] = statistics.median(found)
         ps = scn.planner
         long = PL.resolve(replace(scn, planner=replace(ps, energy_weight=1.0, max_expansions=10 * ps.max_expansions,
-                                                       time_budget_s=86400.0)))
+                                                       time_budget_s=args.long_time_s)))
         ref = PL.plan(long, "energy")
         row["unweighted_10x"] = _summary(ref)
         e = both["energy"].energy_J
@@ -71,6 +73,9 @@ def main(argv=None) -> int:
         res["scenarios"][name] = row
         print(name, json.dumps({k: v for k, v in row.items() if k != "reported"}), flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
+    if args.scenarios and OUT.exists():          # measured in parts: keep the others
+        old = json.loads(OUT.read_text())
+        res["scenarios"] = {**old.get("scenarios", {}), **res["scenarios"]}
     OUT.write_text(json.dumps(res, indent=1))
     print(f"wrote {OUT}")
     return 0
