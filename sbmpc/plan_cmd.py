@@ -84,8 +84,13 @@ def _check_line(plan) -> str:
     c = plan.check
     if c is None:
         return ""
-    return (f"  checked at the controller rate ({c.dt * 1e3:g} ms steps): reaches the goal in "
-            f"{c.travel_time_s:.2f} s with {c.energy_J:.1f} J\n")
+    line = f"  checked: these numbers are the controls driven at the controller rate ({c.dt * 1e3:g} ms steps)"
+    if c.miss_m > 0:
+        line += f"; it passes {c.miss_m:.2f} m outside the goal disc (open-loop drift allowance {c.drift_m:.2f} m)"
+    if plan.repairs:
+        line += (f"; {plan.repairs} re-plan{'s' if plan.repairs > 1 else ''} spliced in where that replay "
+                 f"parted from the search's prediction")
+    return line + "\n"
 
 
 def run_plan(args) -> int:

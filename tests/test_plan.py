@@ -160,6 +160,10 @@ def test_cli_plan_writes_json_and_rrd(tmp_path, capsys):
         assert len(doc["trajectory"][key]) == len(doc["trajectory"]["t"])
     assert max(np.diff(doc["trajectory"]["t"])) <= 0.05 + 1e-9
     assert sum(c["duration_s"] for c in doc["controls"]) == pytest.approx(doc["travel_time_s"], abs=1e-6)
+    chk = doc["controller_rate_check"]                 # the numbers are the 1 kHz replay's
+    assert chk["reached"] is True and chk["dt"] == pytest.approx(0.001)
+    assert chk["travel_time_s"] == pytest.approx(doc["travel_time_s"]) and chk["energy_J"] == pytest.approx(doc["energy_J"])
+    assert doc["repairs"] == 0 and "controller rate (1 ms steps)" in out
     from sbmpc.recording import entities
     ents = entities(rrd)
     for e in ("/terrain", "/paths/time", "/vehicle/time", "/vehicle/time/body", "/plots/speed/time",
