@@ -112,6 +112,11 @@ class Agreement:
             "edges": n,
             "stalled_reference": int(self.stall_ref.sum()),
             "stall_verdict_agrees": float(self.stall_agrees.mean()),
+            # disagreements by direction: a stall only at the coarse step loses an edge the
+            # vehicle could drive (conservative); one only at the controller rate is an edge
+            # the planner would wrongly keep (every plan's 1 kHz check catches it)
+            "stall_only_coarse": int((~self.stall_agrees & ~self.stall_ref).sum()),
+            "stall_only_reference": int((~self.stall_agrees & self.stall_ref).sum()),
             "compared": int(both.sum()),
             "energy_within_2pct": float(self.energy_ok()[both].mean()) if both.any() else 1.0,
             "pose_within_5cm_2deg": float(self.pose_ok()[both].mean()) if both.any() else 1.0,
