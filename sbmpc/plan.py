@@ -502,6 +502,14 @@ DRIFT_PER_M = 0.005  # of the distance driven: how far the controller-rate repla
 PART_M = 0.05        # m: a plan's controller-rate replay has parted from the search's
 PART_DEG = 2.0       # prediction once its pose differs by this much (dynamics.convergence)
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
+APPROACH_CONTROLS = 3   # a plan that only passes the goal within the drift allowance is
+APPROACH_SLACK = 0.05   # re-planned from this many controls before its end (or from where
+                        # it parted) and the result kept when it enters the goal disc at
+                        # 1 kHz for at most 5 % more cost
+
+
+def _cost(chk: "Check", cost: str) -> float:
+    return chk.travel_time_s if cost == "time" else chk.energy_J
 
 
 def _controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple:
@@ -665,20 +673,28 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
     budget: from the first control where the replay parted from the search's prediction
     ``pred`` (the search's model drifted from the vehicle's there), or, where it never
     parted but an edge failed at 1 kHz that passed at the search's step, from that
-    edge's start with the search's step halved (that edge was not converged). Returns
+    edge's start with the search's step halved (that edge was not converged). A replay
+    that only passes within the drift allowance of the goal disc gets its last approach
+    planned from where it passed closest, so that the plan enters the disc (a receding-
+    horizon run executes exactly that); if that fails the allowance stands. Returns
     (controls as driven, Check, the controller-rate trajectory, re-plans made)."""
     rate = world.vehicle.controller_rate
     chk, fine, kept = _controller_rate(world, cost, controls, X0)
     repairs = 0
     dt = ps.dt
-    while not chk.reached and repairs < MAX_REPAIRS:
+    while repairs < MAX_REPAIRS and not (chk.reached and chk.miss_m == 0.0):
         left = budget - (time.perf_counter() - t0)
         if left <= 0:
             break
+        base = controls
         j, parted = _parting(pred, controls, X0, fine, rate)
-        if not parted:
+        if chk.reached:
+            # the last approach: from where the replay parted, else a few controls back
+            if not parted:
+                j = max(0, len(kept) - APPROACH_CONTROLS)
+        elif not parted:
             dt = max(dt / 2.0, 1.0 / rate)
-        Sj = _fine_state(world, cost, controls[:j], X0)
+        Sj = _fine_state(world, cost, base[:j], X0)
         if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
         prob = problem(world, cost, Sj, dt)
@@ -689,9 +705,13 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         T = res.states[:, K.S_T]
         tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
                 for i, c in enumerate(res.control_rows)]
-        controls = [tuple(c) for c in controls[:j]] + tail
-        pred = np.vstack([pred[:j], res.states])
-        chk, fine, kept = _controller_rate(world, cost, controls, X0)
+        new = [tuple(c) for c in base[:j]] + tail
+        chk2, fine2, kept2 = _controller_rate(world, cost, new, X0)
+        if chk.reached and not (chk2.reached and chk2.miss_m < chk.miss_m
+                                and _cost(chk2, cost) <= (1.0 + APPROACH_SLACK) * _cost(chk, cost)):
+            break                              # the approach did not help: keep the allowance
+        controls, pred = new, np.vstack([pred[:j], res.states])
+        chk, fine, kept = chk2, fine2, kept2
     return kept, chk, fine, repairs
 
 
