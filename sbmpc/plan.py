@@ -555,18 +555,18 @@ def check(world: World, cost: str, controls, start: np.ndarray | None = None) ->
     return _controller_rate(world, cost, controls, _start(world, start))[0]
 
 
-def _parting(pred: np.ndarray, controls, X0: np.ndarray, fine: dict, rate: float) -> tuple:
+def _parting(pred: np.ndarray, controls, fine: dict, rate: float) -> tuple:
     """(j, parted): j the first control whose start the controller-rate replay (``fine``,
-    every step recorded from X0) reaches with a pose PART_M / PART_DEG away from the
-    search's prediction ``pred`` (planner states at the control boundaries), parted
-    True; else j the control where the replay stopped (a stall or tip-over) or the
-    number of controls, parted False."""
+    every step recorded) reaches with a pose PART_M / PART_DEG away from the search's
+    prediction ``pred`` (poses (x, y, yaw) at the control boundaries), parted True; else
+    j the control where the replay stopped (a stall or tip-over) or the number of
+    controls, parted False."""
     n_f = np.cumsum([0] + [max(0, round(c[2] * rate)) for c in controls])
     last = min(len(controls), int(np.searchsorted(n_f, len(fine["t"]) - 1, "left")) - 1)
     for j in range(1, max(last, 0) + 1):
         b = n_f[j]
-        dpos = math.hypot(pred[j, K.S_X] - fine["x"][b], pred[j, K.S_Y] - fine["y"][b])
-        dyaw = abs(math.remainder(pred[j, K.S_YAW] - fine["yaw"][b], 2 * math.pi))
+        dpos = math.hypot(pred[j, 0] - fine["x"][b], pred[j, 1] - fine["y"][b])
+        dyaw = abs(math.remainder(pred[j, 2] - fine["yaw"][b], 2 * math.pi))
         if dpos > PART_M or dyaw > math.radians(PART_DEG):
             return j, True
     return max(last, 0), False
@@ -579,15 +579,13 @@ def _fine_state(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray
 
 
 def _predicted(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
-    """Planner states (len(controls) + 1, NS+) at the control boundaries, replayed at the
+    """Poses (len(controls) + 1, 3) [m, m, rad] at the control boundaries, replayed at the
     planner's step from X0 (for controls that did not come from a search)."""
     dt = world.scenario.planner.dt
-    out = [np.array(X0, float)]
-    S = np.array(X0, float)
-    for c in controls:
-        _, _, S, _ = replay(world, cost, [c], every=1 << 30, start=S)
-        out.append(S.copy())
-    return np.array(out)
+    traj, *_ = replay(world, cost, controls, every=1, start=X0)
+    b = np.cumsum([0] + [max(0, round(c[2] / dt)) for c in controls])
+    b = np.minimum(b, len(traj["t"]) - 1)
+    return np.column_stack([traj["x"][b], traj["y"][b], traj["yaw"][b]])
 
 
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
@@ -648,7 +646,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
-    pred = res.states if res.status == "found" else _predicted(world, cost, controls, X0)
+    pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else _predicted(world, cost, controls, X0)
     controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps)
     common["repairs"] = repairs
     if not chk.reached:
@@ -671,7 +669,7 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
     """Check searched controls at the controller rate. Where the check fails, re-plan
     from the controller-rate state and splice, up to MAX_REPAIRS times within the time
     budget: from the first control where the replay parted from the search's prediction
-    ``pred`` (the search's model drifted from the vehicle's there), or, where it never
+    ``pred`` (poses at the control boundaries: the search's model drifted from the vehicle's there), or, where it never
     parted but an edge failed at 1 kHz that passed at the search's step, from that
     edge's start with the search's step halved (that edge was not converged). A replay
     that only passes within the drift allowance of the goal disc gets its last approach
@@ -686,15 +684,14 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         left = budget - (time.perf_counter() - t0)
         if left <= 0:
             break
-        base = controls
-        j, parted = _parting(pred, controls, X0, fine, rate)
+        j, parted = _parting(pred, controls, fine, rate)
         if chk.reached:
             # the last approach: from where the replay parted, else a few controls back
             if not parted:
                 j = max(0, len(kept) - APPROACH_CONTROLS)
         elif not parted:
             dt = max(dt / 2.0, 1.0 / rate)
-        Sj = _fine_state(world, cost, base[:j], X0)
+        Sj = _fine_state(world, cost, controls[:j], X0)
         if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
         prob = problem(world, cost, Sj, dt)
@@ -705,12 +702,12 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         T = res.states[:, K.S_T]
         tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
                 for i, c in enumerate(res.control_rows)]
-        new = [tuple(c) for c in base[:j]] + tail
+        new = [tuple(c) for c in controls[:j]] + tail
         chk2, fine2, kept2 = _controller_rate(world, cost, new, X0)
         if chk.reached and not (chk2.reached and chk2.miss_m < chk.miss_m
                                 and _cost(chk2, cost) <= (1.0 + APPROACH_SLACK) * _cost(chk, cost)):
             break                              # the approach did not help: keep the allowance
-        controls, pred = new, np.vstack([pred[:j], res.states])
+        controls, pred = new, np.vstack([pred[:j], res.states[:, [K.S_X, K.S_Y, K.S_YAW]]])
         chk, fine, kept = chk2, fine2, kept2
     return kept, chk, fine, repairs
 
@@ -725,10 +722,9 @@ def plan_both(world: World, progress=None) -> dict:
     plans = {c: plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy")}
     t, e = plans["time"], plans["energy"]
     if t.found and e.found:
-        # on what the vehicle really does: the controller-rate replays
-        if e.check.travel_time_s < t.check.travel_time_s:
+        if e.travel_time_s < t.travel_time_s:      # (both the controller-rate replays')
             plans["time"] = _adopt(e, "time", t)
-        if t.check.energy_J < e.check.energy_J:
+        if t.energy_J < e.energy_J:
             plans["energy"] = _adopt(t, "energy", e)
     return plans
 
