@@ -37,9 +37,11 @@ TIMER = r'''
 import sys, time, math
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-from sbmpc import plan as PL, scenario as SC, skidsteer as SS
+from sbmpc import plan as PL, scenario as SC
+from sbmpc import world as WO
+from sbmpc.problems import skidsteer as SS
 from dynamics import kernels as K
-world = PL.resolve(SC.load(sys.argv[2]))
+world = WO.resolve(SC.load(sys.argv[2]))
 prob = PL.problem(world, "energy")
 rng = np.random.default_rng(0)
 X0 = prob.start

@@ -36,6 +36,7 @@ def _summary(p) -> dict:
 
 def main(argv=None) -> int:
     from sbmpc import plan as PL
+    from sbmpc import world as WO
     from sbmpc import scenario as SC
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)
@@ -48,12 +49,12 @@ def main(argv=None) -> int:
            "measured_at": "controller rate (1 kHz replays of the plans' controls)", "scenarios": {}}
     for name in names:
         scn = SC.load(ROOT / "scenarios" / f"{name}.yaml")
-        world = PL.resolve(scn)
+        world = WO.resolve(scn)
         both = PL.plan_both(world)
         row = {"reported": {c: _summary(p) for c, p in both.items()}}
         seeds = []
         for s in range(args.seeds):
-            w = PL.resolve(replace(scn, planner=replace(scn.planner, seed=s)))
+            w = WO.resolve(replace(scn, planner=replace(scn.planner, seed=s)))
             seeds.append(PL.plan(w, "energy").energy_J)
         found = [e for e in seeds if e is not None]
         row["energy_by_seed_J"] = seeds
@@ -61,7 +62,7 @@ def main(argv=None) -> int:
             row["seed_spread_pct"] = round(100 * (max(found) - min(found)) / min(found), 2)
             row["seed_median_J"] = statistics.median(found)
         ps = scn.planner
-        long = PL.resolve(replace(scn, planner=replace(ps, energy_weight=1.0, max_expansions=10 * ps.max_expansions,
+        long = WO.resolve(replace(scn, planner=replace(ps, energy_weight=1.0, max_expansions=10 * ps.max_expansions,
                                                        time_budget_s=args.long_time_s)))
         ref = PL.plan(long, "energy")
         row["unweighted_10x"] = _summary(ref)

@@ -46,7 +46,8 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
 
     from dynamics import kernels as K
     from sbmpc import plan as PL
-    from sbmpc import skidsteer as SS
+    from sbmpc import world as WO
+    from sbmpc.problems import skidsteer as SS
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(seed)
@@ -68,7 +69,7 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
         b.setHigh(i, float(hi[i]))
     space.setBounds(b)
     space.registerDefaultProjection(ob.RealVectorOrthogonalProjectionEvaluator(space, [K.S_X, K.S_Y]))
-    wlo, whi = PL.wheel_speed_range(world)
+    wlo, whi = WO.wheel_speed_range(world)
     cspace = oc.RealVectorControlSpace(space, 2)
     cb = ob.RealVectorBounds(2)
     cb.setLow(wlo)
@@ -154,13 +155,15 @@ def main(argv=None) -> int:
     from dataclasses import replace
 
     from sbmpc import plan as PL
+
+    from sbmpc import world as WO
     from sbmpc import scenario as SC
-    PL.plan(PL.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba
+    PL.plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba
     out = {"budget_s": args.budget, "scenarios": {}}
     for name in args.scenarios:
         scn = SC.load(ROOT / "scenarios" / f"{name}.yaml")
         scn = replace(scn, planner=replace(scn.planner, time_budget_s=args.budget))
-        world = PL.resolve(scn)
+        world = WO.resolve(scn)
         rows = {}
         for cost in ("time", "energy"):
             p = PL.plan(world, cost)

@@ -28,14 +28,15 @@ def row(plan) -> dict:
 
 def main() -> int:
     from sbmpc import plan as PL
+    from sbmpc import world as WO
     from sbmpc import scenario as SC
     t0 = time.perf_counter()
-    PL.plan(PL.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")        # compile / load the cache
+    PL.plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")        # compile / load the cache
     warm = time.perf_counter() - t0
     res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
                  "warmup_s": round(warm, 2), "scenarios": {}, "map_size": [], "branching": []}
     for path in sorted((ROOT / "scenarios").glob("*.yaml")):
-        world = PL.resolve(SC.load(path))
+        world = WO.resolve(SC.load(path))
         res["scenarios"][path.stem] = {c: row(PL.plan(world, c)) for c in ("time", "energy")}
         print(path.stem, res["scenarios"][path.stem], flush=True)
     # growth with map size: the hills field's description scaled to L x L metres
@@ -44,14 +45,14 @@ def main() -> int:
         gen = dict(field.map_spec["generate"], size=[L, L])
         gen["features"] = [dict(gen["features"][0], count=int(round(24 * (L / 60) ** 2)))]
         scn = replace(field, map_spec={"generate": gen}, goal=dict(field.goal, x=L - 5.0, y=L - 5.0))
-        world = PL.resolve(scn)
+        world = WO.resolve(scn)
         r = {"size_m": L, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
         res["map_size"].append(r)
         print("size", r, flush=True)
     # growth with the branching factor, on the hill trade-off
     hill = SC.load(ROOT / "scenarios" / "hill_tradeoff.yaml")
     for b in (8, 12, 16, 24, 32):
-        world = PL.resolve(replace(hill, planner=replace(hill.planner, branching=b)))
+        world = WO.resolve(replace(hill, planner=replace(hill.planner, branching=b)))
         r = {"branching": b, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
         res["branching"].append(r)
         print("branching", r, flush=True)

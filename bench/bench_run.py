@@ -44,12 +44,12 @@ def timed_run(world, cost, truth=None, **kw):
 def main() -> int:
     from dynamics.discrepancy import diagnose
     from dynamics.synth import apply, synth_run
-    from sbmpc import plan as PL
+    from sbmpc import world as WO
     from sbmpc import scenario as SC
     from sbmpc.figures import plot_runs
 
     def world(name):
-        return PL.resolve(SC.load(ROOT / "scenarios" / f"{name}.yaml"))
+        return WO.resolve(SC.load(ROOT / "scenarios" / f"{name}.yaml"))
 
     t0 = time.perf_counter()
     timed_run(world("flat"), "time")                       # compile / load the cache

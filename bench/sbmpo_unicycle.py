@@ -39,7 +39,7 @@ def main(argv=None) -> int:
     if not (args.data / "config.csv").is_file():
         print(f"--data: expected config.csv in '{args.data}', found none", file=sys.stderr)
         return 2
-    from sbmpc.unicycle import Benchmark, read_obstacle_maps, solve
+    from sbmpc.problems.unicycle import Benchmark, read_obstacle_maps, solve
     bench = Benchmark.read(args.data / "config.csv")
     main_map = read_obstacle_maps(args.data / "obstacles_main.csv")[0]
     suite = read_obstacle_maps(args.data / "obstacles_suite.csv")

@@ -1,4 +1,5 @@
-"""Planning a scenario: resolve it into a world, build the search problem, search, replay.
+"""Planning a scenario: build the search problem of a world (:mod:`sbmpc.world`), search,
+check the plan at the controller rate (and repair it), replay.
 
 ``plan(world, cost)`` returns a :class:`Plan` whose controls, replayed through the
 closed-loop model over the map (:func:`replay`), reproduce its trajectory and end in
@@ -6,155 +7,22 @@ the goal; the plan's trajectory *is* that replay.
 """
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
-from scipy import ndimage
-from scipy.stats import qmc
 
-from dynamics import ParameterError, kernels as K
-from dynamics.params import G, Terrain, Vehicle, load_terrain, load_vehicle
+from dynamics import kernels as K
 from dynamics.resistance import friction_table
-from dynamics.simulate import Model
-from maps import ElevationMap
-from maps.grid import pitch_roll_at
-from maps.io import MapError, load_map
 
-from . import skidsteer as SS
-from .astar import Problem, Search, SearchResult
-from .errors import InputError
-from .scenario import Scenario, terrain_layer
+from .heuristics import _bounds, _lowest_in_disc, cost_to_go, unreachable_reason
+from .problems import skidsteer as SS
+from .search.astar import Problem, Search, SearchResult
+from .world import FIXED_CONTROLS, World, _start, control_set
 
 RECORD_EVERY = 0.05   # s: trajectory samples in the plan JSON
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
-
-
-@dataclass(frozen=True, eq=False)
-class World:
-    """A scenario resolved: the map (with its terrain layer), the vehicle, the terrains."""
-
-    scenario: Scenario
-    emap: ElevationMap
-    vehicle: Vehicle
-    terrains: tuple
-
-    @property
-    def half_length(self) -> float:
-        """Half the wheelbase [m]: where the axles touch the ground ahead and behind."""
-        v = self.vehicle
-        return 0.25 * (v.patch_outer + v.patch_inner)
-
-    @property
-    def half_width(self) -> float:
-        return 0.5 * self.vehicle.width
-
-    @property
-    def margin(self) -> float:
-        """Half-diagonal of the footprint [m]: how close the centre may come to the map edge."""
-        v = self.vehicle
-        return math.hypot(0.5 * v.patch_outer, 0.5 * (v.width + v.patch_width))
-
-    def terrain_at(self, x: float, y: float) -> Terrain:
-        k = self.emap.terrain_index(x, y)
-        return self.terrains[max(k, 0)]
-
-    def model(self, x: float, y: float) -> Model:
-        return Model(self.vehicle, self.terrain_at(x, y), self.scenario.planner.dt)
-
-
-def resolve(scn: Scenario) -> World:
-    """Load the map, vehicle and terrains of a scenario; InputError on any problem."""
-    src = str(scn.path) if scn.path else scn.name
-    try:
-        emap = load_map(scn.map_spec, scn.base, "map")
-    except MapError as exc:
-        raise InputError(f"{src}: {exc}") from None
-    try:
-        vehicle = load_vehicle(scn.vehicle, scn.base)
-    except ParameterError as exc:
-        raise InputError(f"{src}: vehicle: {exc}") from None
-    if isinstance(scn.terrain, str):
-        names = [scn.terrain]
-    else:
-        names = [scn.terrain["default"]] + [r.terrain for r in scn.terrain["regions"]]
-        names = list(dict.fromkeys(names))
-    terrains = []
-    for n in names:
-        try:
-            terrains.append(load_terrain(n, scn.base))
-        except ParameterError as exc:
-            raise InputError(f"{src}: terrain: {exc}") from None
-    if not isinstance(scn.terrain, str):
-        ny, nx = emap.shape
-        ox, oy = emap.origin
-        layer = terrain_layer(scn.terrain["regions"], 0, names, ox + emap.resolution * np.arange(nx),
-                              oy + emap.resolution * np.arange(ny))
-        emap = ElevationMap(emap.heights, emap.resolution, emap.origin, layer, tuple(names), emap.name)
-    world = World(scn, emap, vehicle, tuple(terrains))
-    problems = []
-    x0, x1, y0, y1 = emap.extent
-    m = world.margin
-    for key, p in (("start", scn.start), ("goal", scn.goal)):
-        if not emap.contains(p["x"], p["y"], m):
-            problems.append(f"{key}: expected (x, y) at least {m:.2f} m inside the map "
-                            f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
-    if scn.cost == "energy" and vehicle.regen:
-        problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
-    if problems:
-        raise InputError(f"{src}: " + "; ".join(problems))
-    return world
-
-
-# ---- the search problem ------------------------------------------------------------
-def wheel_speed_range(world: World) -> tuple:
-    ws = world.scenario.planner.wheel_speeds
-    if ws is not None:
-        return ws
-    w0 = world.vehicle.no_load_speed
-    return -0.5 * w0, w0
-
-
-FIXED_CONTROLS = ((1.0, 1.0), (1.0, 0.85), (0.85, 1.0))   # x the top of the range
-
-
-def control_set(world: World) -> np.ndarray:
-    """Desired wheel speeds (m, 2) [rad/s]: first the fixed rows (top speed straight and
-    two gentle turns at top speed, tried at every expansion: a uniform sample of the
-    square almost never has both wheels at full speed), then a scrambled Halton sequence
-    over the sampled range (seeded: the same seed gives the same plan)."""
-    ps = world.scenario.planner
-    lo, hi = wheel_speed_range(world)
-    nh = ps.branching - len(FIXED_CONTROLS)
-    m = nh * (64 if ps.samples == "rotating" else 1)
-    pts = qmc.Halton(d=2, scramble=True, seed=ps.seed).random(m)
-    fixed = hi * np.array(FIXED_CONTROLS)
-    return np.ascontiguousarray(np.vstack([fixed, lo + (hi - lo) * pts]))
-
-
-def start_state(world: World) -> np.ndarray:
-    """The model's state at the scenario's start: steady driving at the start speed."""
-    s = world.scenario.start
-    e = world.emap
-    yaw = math.radians(s["yaw_deg"])
-    pitch, _ = e.pitch_roll(s["x"], s["y"], yaw, world.half_length, world.half_width)
-    w = s["v"] / world.vehicle.wheel_radius
-    v = world.vehicle
-    S = world.model(s["x"], s["y"]).state(w / v.radius_scale_left, w / v.radius_scale_right, pitch,
-                                          s["x"], s["y"], yaw, e.height(s["x"], s["y"]))
-    X = np.zeros(SS.NX)
-    X[:K.NS] = S
-    X[SS.X_YAWW] = math.atan2(math.sin(yaw), math.cos(yaw))
-    X[SS.X_V] = s["v"]
-    return X
-
-
-def _start(world: World, start) -> np.ndarray:
-    """The planner state to start from: ``start`` (contiguous float64) or the scenario's."""
-    return start_state(world) if start is None else np.ascontiguousarray(start, float)
 
 
 def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
@@ -196,122 +64,6 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
     return Q, data
 
 
-def _lowest_in_disc(e: ElevationMap, x, y, r) -> float:
-    ang = np.linspace(0, 2 * np.pi, 33)
-    pts = [(x, y)] + [(x + rr * np.cos(a), y + rr * np.sin(a)) for rr in (0.5 * r, r) for a in ang]
-    # bilinear heights: the minimum over the disc lies on a grid node inside it or on the samples
-    zs = [e.height(px, py) for px, py in pts]
-    ny, nx = e.shape
-    ox, oy = e.origin
-    X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
-    inside = (X - x) ** 2 + (Y - y) ** 2 <= r * r
-    if inside.any():
-        zs.append(float(e.heights[inside].min()))
-    return float(min(zs))
-
-
-OCTILE = 1.0823922002923938   # largest ratio of an 8-neighbour grid path to the straight line
-
-
-def _bounds(world: World):
-    """(v_bound [m/s], F_roll [N], m g [N]) of the straight-line heuristics."""
-    v = world.vehicle
-    lo, hi = wheel_speed_range(world)
-    vb = 1.05 * v.wheel_radius * max(abs(lo), abs(hi)) * max(v.radius_scale_left, v.radius_scale_right)
-    # rolling resistance is mu m g cos(pitch): the pitch is at most the steepest slope
-    # of the map (and the tip-over limit)
-    steepest = min(math.radians(world.scenario.planner.tip_over_deg), math.atan(_max_rise(world.emap.heights, world.emap.resolution, 1.0)))
-    froll = min(t.mu_roll for t in world.terrains) * v.mass * G * math.cos(steepest)
-    return vb, froll, v.mass * G
-
-
-RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle
-
-
-def climb_limit(world: World) -> float:
-    """Steepest uphill grade [rad] the cost-to-go grid lets a step take: the steepest
-    grade the vehicle holds at any speed on the best of the map's terrains
-    (``dynamics.limits``) plus RUNUP_DEG for what momentum carries over a short ramp."""
-    from dynamics.limits import steepest_grade
-    return max(steepest_grade(world.vehicle, t) for t in world.terrains) + math.radians(RUNUP_DEG)
-
-
-@functools.lru_cache(maxsize=8)
-def blocked_cells(world: World) -> np.ndarray:
-    """(ny, nx) cells where the vehicle tips over at every heading (computed once per
-    world: the reachability check and the cost-to-go grid share it)."""
-    e = world.emap
-    ox, oy = e.origin
-    b = _blocked(e.heights, e.resolution, ox, oy, world.half_length, world.half_width,
-                 math.radians(world.scenario.planner.tip_over_deg), 16)
-    b.setflags(write=False)        # cached and shared
-    return b
-
-
-@functools.lru_cache(maxsize=8)
-def cost_to_go(world: World, cost: str) -> tuple:
-    """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
-    over 8-neighbour steps, see :mod:`sbmpc.skidsteer`), and the slack [s or J] the
-    heuristic subtracts for the way from a pose to its nearest node. Unreachable nodes
-    get a large finite cost. Cached per (world, cost): planning and replaying share it."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
-    e, scn = world.emap, world.scenario
-    H = e.heights
-    ny, nx = H.shape
-    res = e.resolution
-    vb, froll, mg = _bounds(world)
-    ox, oy = e.origin
-    blocked = blocked_cells(world).ravel()
-    if e.terrain_layer is not None and len(world.terrains) > 1:
-        mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer].ravel()
-    else:
-        mu = np.full(nx * ny, world.terrains[0].mu_roll)
-    gy, gx = np.gradient(H, res)
-    # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
-    froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
-    idx = np.arange(nx * ny).reshape(ny, nx)
-    climb = math.tan(climb_limit(world))
-    src, dst, w = [], [], []
-    for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        a = idx[:ny - dj, max(0, -di):nx - max(0, di)].ravel()
-        b = idx[dj:, max(0, di):nx - max(0, -di)].ravel()      # the cell (j + dj, i + di)
-        d = res * math.hypot(di, dj)
-        ok = ~(blocked[a] | blocked[b])
-        a, b = a[ok], b[ok]
-        for p, q in ((a, b), (b, a)):          # step from p to q
-            up = (H.ravel()[q] - H.ravel()[p]) / d
-            p, q = p[up <= climb], q[up <= climb]
-            if cost == "time":
-                wt = np.full(p.size, d / vb)
-            else:
-                f = np.minimum(froll_cell[p], froll_cell[q])
-                wt = np.maximum(0.0, f * d + mg * (H.ravel()[q] - H.ravel()[p]))
-            # reversed edges: Dijkstra runs from the goal
-            src.append(q)
-            dst.append(p)
-            w.append(wt / OCTILE + 1e-12)
-    G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(nx * ny, nx * ny)).tocsr()
-    X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
-    g = scn.goal
-    goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
-    if goal_nodes.size == 0:
-        return np.zeros((ny, nx)), 0.0
-    D = dijkstra(G_, indices=goal_nodes, min_only=True)
-    D[~np.isfinite(D)] = 1e12
-    diag = res * math.sqrt(2.0)
-    slack = diag / vb if cost == "time" else (froll_cell.max() * diag + mg * _max_rise(H, res, diag))
-    D = D.reshape(ny, nx)
-    D.setflags(write=False)        # cached and shared
-    return D, float(slack)
-
-
-def _max_rise(H, res, dist):
-    """Largest height gain [m] within ``dist`` [m] on the map (from its steepest slope)."""
-    gy, gx = np.gradient(H, res)
-    return float(np.hypot(gx, gy).max() * dist)
-
-
 def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float | None = None) -> Problem:
     """The search problem of a world and cost, from ``start`` (a planner state, default
     the scenario's start state), its edges integrated at ``dt`` [s] (default the
@@ -325,50 +77,6 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine)
-
-
-# ---- reachability pre-check -----------------------------------------------------------
-@njit(cache=True, error_model="numpy")
-def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
-    """Cells where the vehicle would exceed the tip-over limit at every heading."""
-    ny, nx = H.shape
-    out = np.zeros((ny, nx), np.bool_)
-    for j in range(ny):
-        for i in range(nx):
-            x = ox + i * res
-            y = oy + j * res
-            blocked = True
-            for k in range(nheadings):
-                p, r = pitch_roll_at(H, res, ox, oy, x, y, math.pi * k / nheadings, hl, hw)
-                if abs(p) <= tip and abs(r) <= tip:
-                    blocked = False
-                    break
-            out[j, i] = blocked
-    return out
-
-
-def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
-    """Why no path can exist, when the goal disc is cut off from the start (or from the
-    position ``xy``) by cells where the vehicle tips over at every heading (checked at
-    cell centres); else None."""
-    e, scn = world.emap, world.scenario
-    sx, sy = xy if xy is not None else (scn.start["x"], scn.start["y"])
-    ox, oy = e.origin
-    labels, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
-    def cell(x, y):
-        return (min(max(int(round((y - oy) / e.resolution)), 0), e.shape[0] - 1),
-                min(max(int(round((x - ox) / e.resolution)), 0), e.shape[1] - 1))
-    s = labels[cell(sx, sy)]
-    ny, nx = e.shape
-    X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
-    g = scn.goal
-    in_goal = (X - g["x"]) ** 2 + (Y - g["y"]) ** 2 <= max(g["radius"], 0.5 * e.resolution) ** 2
-    if s == 0:
-        return f"the start stands on a slope beyond the tip-over limit of {scn.planner.tip_over_deg:g} deg at every heading"
-    if not np.any(labels[in_goal] == s):
-        return (f"the goal is cut off from the start by slopes beyond the tip-over limit of "
-                f"{scn.planner.tip_over_deg:g} deg (no heading crosses them); no path can exist")
-    return None
 
 
 # ---- the plan ------------------------------------------------------------------------

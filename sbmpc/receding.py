@@ -41,7 +41,9 @@ from dynamics import kernels as K
 from dynamics.params import Vehicle
 
 from . import plan as PL
-from . import skidsteer as SS
+
+from . import world as WO
+from .problems import skidsteer as SS
 from .scenario import RunSettings
 
 
@@ -155,7 +157,7 @@ class _Executor:
     """Steps one world's closed-loop model through controls, period by period, at its
     vehicle's controller period (the paper's 1 kHz digital PID)."""
 
-    def __init__(self, world: PL.World, cost: str, delay_s: float = 0.0):
+    def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0):
         self.dt = 1.0 / world.vehicle.controller_rate
         self.Q, self.data = PL.pack_world(world, cost, self.dt)
         self.lag = int(round(delay_s / self.dt))
@@ -178,7 +180,7 @@ class _Executor:
         return rec[:rows], int(end), S
 
 
-def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
+def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
     """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
 
@@ -193,7 +195,7 @@ def run(world: PL.World, cost: str | None = None, truth: Vehicle | None = None,
     out = RunResult(world.scenario.name, cost, world.vehicle.name, twin.vehicle.name, rs)
     model = _Executor(world, cost)
     real = _Executor(twin, cost, twin.vehicle.delay)
-    X = PL.start_state(twin)           # the measured state
+    X = WO.start_state(twin)           # the measured state
     pieces = []
     every = max(1, round(PL.RECORD_EVERY / real.dt))
     tol_yaw = math.radians(rs.tol_yaw_deg)

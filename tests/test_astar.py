@@ -8,8 +8,8 @@ from hypothesis import given, settings, strategies as st
 from numba import njit
 from scipy.sparse.csgraph import shortest_path
 
-from sbmpc import astar
-from sbmpc.astar import EXPAND, GOAL, HEURISTIC, Problem, search
+from sbmpc.search import astar
+from sbmpc.search.astar import EXPAND, GOAL, HEURISTIC, Problem, search
 
 # ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
 # params: [n, goal_i, goal_j]; data: blocked flags, row-major n x n
@@ -98,7 +98,7 @@ def test_budget_ends_the_search_with_the_reason():
 
 
 def test_arrays_grow_without_changing_the_answer():
-    from sbmpc.astar import Search
+    from sbmpc.search.astar import Search
     blocked = np.zeros((40, 40), bool)
     p = grid_problem(blocked, (39, 39))
     small = Search(p, capacity=8).run(100_000)

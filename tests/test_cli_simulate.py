@@ -4,7 +4,7 @@ import sys
 
 import pytest
 
-from sbmpc.cli import main
+from sbmpc.commands.cli import main
 
 KEYS = ["t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"]
 

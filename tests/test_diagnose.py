@@ -9,7 +9,7 @@ from dynamics import load_terrain, load_vehicle
 from dynamics.discrepancy import CANDIDATES, MARGIN, diagnose, noise_scale, replay
 from dynamics.runs import Run, RunError, read_run, write_run
 from dynamics.synth import STRENGTHS, synth_run
-from sbmpc.cli import main
+from sbmpc.commands.cli import main
 
 P3AT, VINYL = load_vehicle("p3at"), load_terrain("vinyl")
 DURATION = 60.0

@@ -5,7 +5,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from numba import njit
 
-from sbmpc import lanes
+from sbmpc.search import lanes
 
 _f32 = st.floats(-1e6, 1e6, width=32)
 

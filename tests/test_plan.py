@@ -9,8 +9,9 @@ import pytest
 
 from dynamics import kernels as K
 from sbmpc import plan as PL
+from sbmpc import world as WO
 from sbmpc import scenario as SC
-from sbmpc.cli import main
+from sbmpc.commands.cli import main
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 SHIPPED = sorted(p.stem for p in SCEN.glob("*.yaml"))
@@ -22,7 +23,7 @@ def plans():
     """Both plans of every shipped scenario as ``sbmpc compare`` reports them, computed once."""
     out = {}
     for name in SHIPPED:
-        world = PL.resolve(SC.load(SCEN / f"{name}.yaml"))
+        world = WO.resolve(SC.load(SCEN / f"{name}.yaml"))
         out[name] = (world, PL.plan_both(world))
     return out
 
@@ -75,7 +76,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     from dataclasses import replace
     import sbmpc.plan as mod
     scn = SC.load(SCEN / "hills_field.yaml")
-    world = PL.resolve(replace(scn, planner=replace(scn.planner, energy_weight=2.0)))
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=2.0)))
     p = PL.plan(world, "energy")
     assert p.found and p.repairs >= 1 and p.check.reached
     saved = mod.MAX_REPAIRS
@@ -113,7 +114,7 @@ def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
     # the ramp; driving at full command from rest 6 m before it, it crosses
     from dataclasses import replace
     w0 = world.vehicle.no_load_speed
-    slow = PL.World(replace(world.scenario, start=dict(world.scenario.start, x=6.5, v=0.7)),
+    slow = WO.World(replace(world.scenario, start=dict(world.scenario.start, x=6.5, v=0.7)),
                     world.emap, world.vehicle, world.terrains)
     w_slow = 0.7 / world.vehicle.wheel_radius
     _, end, S, _ = PL.replay(slow, "time", [(w_slow, w_slow, 20.0)])

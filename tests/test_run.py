@@ -12,10 +12,10 @@ import pytest
 from dynamics.discrepancy import diagnose
 from dynamics.params import vehicle_to_yaml
 from dynamics.synth import apply, synth_run
-from sbmpc import plan as PL
+from sbmpc import world as WO
 from sbmpc import receding as R
 from sbmpc import scenario as SC
-from sbmpc.cli import main
+from sbmpc.commands.cli import main
 from sbmpc.recording import entities
 
 SCN = Path(__file__).resolve().parents[1] / "scenarios"
@@ -23,12 +23,12 @@ SCN = Path(__file__).resolve().parents[1] / "scenarios"
 
 @pytest.fixture(scope="module")
 def flat():
-    return PL.resolve(SC.load(SCN / "flat.yaml"))
+    return WO.resolve(SC.load(SCN / "flat.yaml"))
 
 
 @pytest.fixture(scope="module")
 def runup():
-    return PL.resolve(SC.load(SCN / "runup_ramp.yaml"))
+    return WO.resolve(SC.load(SCN / "runup_ramp.yaml"))
 
 
 def _rel(a, b):
@@ -104,7 +104,7 @@ def test_a_much_weaker_truth_fails_with_the_reason(runup):
 
 
 def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
-    v = PL.resolve(SC.load(SCN / "flat.yaml")).vehicle.replace(radius_scale_right=0.92, name="p3at_flat_tyre")
+    v = WO.resolve(SC.load(SCN / "flat.yaml")).vehicle.replace(radius_scale_right=0.92, name="p3at_flat_tyre")
     truth = tmp_path / "flat_tyre.yaml"
     truth.write_text(vehicle_to_yaml(v))
     before = truth.read_text()

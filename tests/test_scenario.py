@@ -1,12 +1,11 @@
 """Scenario files: validation with every problem at once, key paths, exit code 2."""
-import textwrap
 from pathlib import Path
 
 import pytest
 import yaml
 
 from sbmpc import scenario as SC
-from sbmpc.cli import main
+from sbmpc.commands.cli import main
 from sbmpc.errors import InputError
 
 SHIPPED = sorted((Path(__file__).resolve().parents[1] / "scenarios").glob("*.yaml"))

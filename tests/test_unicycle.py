@@ -11,7 +11,7 @@ BENCH = Path(__file__).resolve().parents[2] / "shared" / "data" / "bench" / "sbm
 
 @pytest.mark.skipif(not BENCH.is_dir(), reason="benchmark inputs ../shared/data/bench absent")
 def test_unicycle_main_map_matches_the_reference_cpp():
-    from sbmpc.unicycle import Benchmark, read_obstacle_maps, solve
+    from sbmpc.problems.unicycle import Benchmark, read_obstacle_maps, solve
     bench = Benchmark.read(BENCH / "config.csv")
     res = solve(bench, read_obstacle_maps(BENCH / "obstacles_main.csv")[0])
     assert res.status == "found"
@@ -51,7 +51,7 @@ def test_unicycle_expansion_equals_the_straightforward_float32_edges(i, j, k, of
     float32 rounding (2e-6 m), the same validity, and the cost is the distance between
     snapped cells. Headings on the grid (nodes) read tabulated sines and cosines, others
     (``off``) compute them."""
-    from sbmpc.unicycle import Benchmark, problem, read_obstacle_maps
+    from sbmpc.problems.unicycle import Benchmark, problem, read_obstacle_maps
     bench = Benchmark.read(BENCH / "config.csv")
     obstacles = read_obstacle_maps(BENCH / "obstacles_main.csv")[0]
     p = problem(bench, obstacles)
@@ -82,7 +82,7 @@ def test_unicycle_heuristic_equals_its_formula_on_and_off_the_grid(i, j, k, off)
     """Distance to the goal plus the wrapped bearing error, the bearing from the goal
     table for cell centres within the border and from atan2 elsewhere (off the grid, or
     beyond the table): bit for bit the formula with atan2."""
-    from sbmpc.unicycle import Benchmark, problem, read_obstacle_maps
+    from sbmpc.problems.unicycle import Benchmark, problem, read_obstacle_maps
     bench = Benchmark.read(BENCH / "config.csv")
     p = problem(bench, read_obstacle_maps(BENCH / "obstacles_main.csv")[0])
     state = np.array([i * 0.1 + off, j * 0.1, k * math.pi / 36])

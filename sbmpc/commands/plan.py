@@ -7,7 +7,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from .errors import InputError, NoResult
+from ..errors import InputError, NoResult
 
 
 def add_parsers(sub):
@@ -43,14 +43,14 @@ def _out_file(path: Path | None, flag: str):
 
 
 def _world(args):
-    from . import plan as PL
-    from . import scenario as SC
+    from .. import scenario as SC
+    from .. import world as WO
     scn = SC.load(args.scenario)
     if args.seed is not None:
         if not 0 <= args.seed < 2**31:
             raise InputError(f"--seed: expected an integer in [0, 2^31), found {args.seed}")
         scn = replace(scn, planner=replace(scn.planner, seed=args.seed))
-    return PL.resolve(scn)
+    return WO.resolve(scn)
 
 
 class Progress:
@@ -94,8 +94,8 @@ def _check_line(plan) -> str:
 
 
 def run_plan(args) -> int:
-    from . import plan as PL
-    from . import recording
+    from .. import plan as PL
+    from .. import recording
     _out_file(args.json, "--json")
     _out_file(args.rrd, "--rrd")
     world = _world(args)
@@ -124,9 +124,9 @@ def compare_table(plans: dict) -> str:
 
 
 def run_compare(args) -> int:
-    from . import plan as PL
-    from . import recording
-    from .figures import plot_compare
+    from .. import plan as PL
+    from .. import recording
+    from ..figures import plot_compare
     out = args.out
     if out.exists() and not out.is_dir():
         raise InputError(f"--out: expected a folder, found the file '{out}'")

@@ -43,7 +43,7 @@ from numba import njit
 from dynamics import kernels as K
 from maps.grid import cell_value, height_at, pitch_roll_at
 
-from .astar import EXPAND, GOAL, HEURISTIC
+from ..search.astar import EXPAND, GOAL, HEURISTIC
 
 # ---- extra state entries after the model's ------------------------------------------
 X_YAWW = K.NS          # heading wrapped to (-pi, pi] [rad]

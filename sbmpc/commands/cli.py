@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .errors import InputError, NoResult
+from ..errors import InputError, NoResult
 
 
 class _Parser(argparse.ArgumentParser):
@@ -18,11 +18,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
                 "closed-loop dynamic model of Yu et al. (2010).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    from . import diagnose_cmd, plan_cmd, run_cmd, simulate_cmd
-    simulate_cmd.add_parser(sub)
-    plan_cmd.add_parsers(sub)
-    diagnose_cmd.add_parsers(sub)
-    run_cmd.add_parsers(sub)
+    from . import diagnose, plan, run, simulate
+    simulate.add_parser(sub)
+    plan.add_parsers(sub)
+    diagnose.add_parsers(sub)
+    run.add_parsers(sub)
     return p
 
 

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from . import lanes
-from .astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
+from ..search import lanes
+from ..search.astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt, obstacle count, reach of an edge (its longest length, plus 10 %

@@ -7,7 +7,7 @@ import math
 import time
 from pathlib import Path
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def add_parsers(sub):

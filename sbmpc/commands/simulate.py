@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def add_parser(sub):
@@ -124,6 +124,6 @@ def run(args) -> int:
                "stalled": traj.stalled, **info, "summary": summary, "trajectory": traj.to_json()}
         args.json.write_text(json.dumps(doc, indent=1))
     if args.plot:
-        from .figures import plot_trajectory
+        from ..figures import plot_trajectory
         plot_trajectory(traj, args.plot, f"{manoeuvre} on {model.terrain.name}")
     return 0

@@ -5,8 +5,8 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from .errors import InputError, NoResult
-from .plan_cmd import Progress, _out_file, _world
+from ..errors import InputError, NoResult
+from .plan import Progress, _out_file, _world
 
 
 def add_parsers(sub):
@@ -59,7 +59,7 @@ def summary(res) -> str:
 
 
 def run_run(args) -> int:
-    from . import receding, recording
+    from .. import receding, recording
     _out_file(args.json, "--json")
     _out_file(args.rrd, "--rrd")
     world = _world(args)

@@ -1,0 +1,144 @@
+"""A scenario made concrete: its map, vehicle and terrains loaded (:class:`World`), the
+wheel-speed range and control set the planner samples, and the planner state at the start.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import qmc
+
+from dynamics import ParameterError, kernels as K
+from dynamics.params import Terrain, Vehicle, load_terrain, load_vehicle
+from dynamics.simulate import Model
+from maps import ElevationMap
+from maps.io import MapError, load_map
+
+from .errors import InputError
+from .problems import skidsteer as SS
+from .scenario import Scenario, terrain_layer
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A scenario resolved: the map (with its terrain layer), the vehicle, the terrains."""
+
+    scenario: Scenario
+    emap: ElevationMap
+    vehicle: Vehicle
+    terrains: tuple
+
+    @property
+    def half_length(self) -> float:
+        """Half the wheelbase [m]: where the axles touch the ground ahead and behind."""
+        v = self.vehicle
+        return 0.25 * (v.patch_outer + v.patch_inner)
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * self.vehicle.width
+
+    @property
+    def margin(self) -> float:
+        """Half-diagonal of the footprint [m]: how close the centre may come to the map edge."""
+        v = self.vehicle
+        return math.hypot(0.5 * v.patch_outer, 0.5 * (v.width + v.patch_width))
+
+    def terrain_at(self, x: float, y: float) -> Terrain:
+        k = self.emap.terrain_index(x, y)
+        return self.terrains[max(k, 0)]
+
+    def model(self, x: float, y: float) -> Model:
+        return Model(self.vehicle, self.terrain_at(x, y), self.scenario.planner.dt)
+
+
+def resolve(scn: Scenario) -> World:
+    """Load the map, vehicle and terrains of a scenario; InputError on any problem."""
+    src = str(scn.path) if scn.path else scn.name
+    try:
+        emap = load_map(scn.map_spec, scn.base, "map")
+    except MapError as exc:
+        raise InputError(f"{src}: {exc}") from None
+    try:
+        vehicle = load_vehicle(scn.vehicle, scn.base)
+    except ParameterError as exc:
+        raise InputError(f"{src}: vehicle: {exc}") from None
+    if isinstance(scn.terrain, str):
+        names = [scn.terrain]
+    else:
+        names = [scn.terrain["default"]] + [r.terrain for r in scn.terrain["regions"]]
+        names = list(dict.fromkeys(names))
+    terrains = []
+    for n in names:
+        try:
+            terrains.append(load_terrain(n, scn.base))
+        except ParameterError as exc:
+            raise InputError(f"{src}: terrain: {exc}") from None
+    if not isinstance(scn.terrain, str):
+        ny, nx = emap.shape
+        ox, oy = emap.origin
+        layer = terrain_layer(scn.terrain["regions"], 0, names, ox + emap.resolution * np.arange(nx),
+                              oy + emap.resolution * np.arange(ny))
+        emap = ElevationMap(emap.heights, emap.resolution, emap.origin, layer, tuple(names), emap.name)
+    world = World(scn, emap, vehicle, tuple(terrains))
+    problems = []
+    x0, x1, y0, y1 = emap.extent
+    m = world.margin
+    for key, p in (("start", scn.start), ("goal", scn.goal)):
+        if not emap.contains(p["x"], p["y"], m):
+            problems.append(f"{key}: expected (x, y) at least {m:.2f} m inside the map "
+                            f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
+    if scn.cost == "energy" and vehicle.regen:
+        problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
+    if problems:
+        raise InputError(f"{src}: " + "; ".join(problems))
+    return world
+
+
+# ---- the search problem ------------------------------------------------------------
+def wheel_speed_range(world: World) -> tuple:
+    ws = world.scenario.planner.wheel_speeds
+    if ws is not None:
+        return ws
+    w0 = world.vehicle.no_load_speed
+    return -0.5 * w0, w0
+
+
+FIXED_CONTROLS = ((1.0, 1.0), (1.0, 0.85), (0.85, 1.0))   # x the top of the range
+
+
+def control_set(world: World) -> np.ndarray:
+    """Desired wheel speeds (m, 2) [rad/s]: first the fixed rows (top speed straight and
+    two gentle turns at top speed, tried at every expansion: a uniform sample of the
+    square almost never has both wheels at full speed), then a scrambled Halton sequence
+    over the sampled range (seeded: the same seed gives the same plan)."""
+    ps = world.scenario.planner
+    lo, hi = wheel_speed_range(world)
+    nh = ps.branching - len(FIXED_CONTROLS)
+    m = nh * (64 if ps.samples == "rotating" else 1)
+    pts = qmc.Halton(d=2, scramble=True, seed=ps.seed).random(m)
+    fixed = hi * np.array(FIXED_CONTROLS)
+    return np.ascontiguousarray(np.vstack([fixed, lo + (hi - lo) * pts]))
+
+
+def start_state(world: World) -> np.ndarray:
+    """The model's state at the scenario's start: steady driving at the start speed."""
+    s = world.scenario.start
+    e = world.emap
+    yaw = math.radians(s["yaw_deg"])
+    pitch, _ = e.pitch_roll(s["x"], s["y"], yaw, world.half_length, world.half_width)
+    w = s["v"] / world.vehicle.wheel_radius
+    v = world.vehicle
+    S = world.model(s["x"], s["y"]).state(w / v.radius_scale_left, w / v.radius_scale_right, pitch,
+                                          s["x"], s["y"], yaw, e.height(s["x"], s["y"]))
+    X = np.zeros(SS.NX)
+    X[:K.NS] = S
+    X[SS.X_YAWW] = math.atan2(math.sin(yaw), math.cos(yaw))
+    X[SS.X_V] = s["v"]
+    return X
+
+
+def _start(world: World, start) -> np.ndarray:
+    """The planner state to start from: ``start`` (contiguous float64) or the scenario's."""
+    return start_state(world) if start is None else np.ascontiguousarray(start, float)
