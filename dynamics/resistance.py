@@ -34,7 +34,11 @@ Singular cases (PARAMETERS.md) and the choices made:
 """
 from __future__ import annotations
 
+import hashlib
+import inspect
+import os
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 from ._jit import jit, jit_inline
@@ -264,8 +268,50 @@ def diamond_point(t):
     return wl, wr
 
 
+def _cache_dir() -> Path:
+    """Where computed friction tables are kept between runs: $SBMPC_CACHE_DIR, else
+    $XDG_CACHE_HOME/sbmpc, else ~/.cache/sbmpc."""
+    d = os.environ.get("SBMPC_CACHE_DIR")
+    if d:
+        return Path(d)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "sbmpc"
+
+
+@lru_cache(maxsize=1)
+def _code_hash() -> str:
+    """Hash of the source of everything a friction table is computed from: a change of
+    the physics makes new tables instead of reading stale ones."""
+    src = "".join(inspect.getsource(f) for f in (unit_friction_right, shear_displacement, contact_time,
+                                                 sliding_velocity, diamond_point, _compute_table, _gauss))
+    return hashlib.sha256(src.encode()).hexdigest()[:16]
+
+
 @lru_cache(maxsize=64)
 def _table_cached(r, B, L, C, b, alpha, K, size):
+    """The table of a geometry, alpha and K: read from the disk cache (:func:`_cache_dir`)
+    when it holds it, else computed (about 0.3 s) and written there (best effort: a
+    cache that cannot be written is skipped)."""
+    key = hashlib.sha256(repr((r, B, L, C, b, alpha, K, size, _code_hash())).encode()).hexdigest()[:24]
+    path = _cache_dir() / f"friction-{key}.npy"
+    try:
+        values = np.load(path)
+        if values.shape == (size + 1,) and values.dtype == np.float64 and np.all(np.isfinite(values)):
+            values.setflags(write=False)
+            return values
+    except (OSError, ValueError):
+        pass
+    values = _compute_table(r, B, L, C, b, alpha, K, size)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp.npy")
+        np.save(tmp, values)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return values
+
+
+def _compute_table(r, B, L, C, b, alpha, K, size):
     veh = Vehicle(wheel_radius=r, width=B, patch_outer=L, patch_inner=C, patch_width=b)
     ter = Terrain(alpha=alpha, shear_modulus=K)
     half = size // 2

@@ -76,7 +76,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
-                   weight=ps.weight(cost), refine=ps.refine)
+                   weight=ps.weight(cost), refine=ps.refine, expand_batch=SS.expand_batch)
 
 
 # ---- the plan ------------------------------------------------------------------------
@@ -337,7 +337,8 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     search = Search(prob)
     if inc is not None:
         search.bound(inc[0] * (1.0 + 1e-9))
-    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress)
+    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=ps.batch,
+                                   threads=ps.threads or None)
     common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges, nodes=res.nodes, invalid_edges=res.invalid)
     if res.status == "found":
         T = res.states[:, K.S_T]
@@ -403,7 +404,7 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
         prob = problem(world, cost, Sj, dt)
-        res = Search(prob).run(ps.max_expansions, left)
+        res = Search(prob).run(ps.max_expansions, left, batch=ps.batch, threads=ps.threads or None)
         repairs += 1
         if res.status != "found":
             break

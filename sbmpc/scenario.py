@@ -47,7 +47,11 @@ class PlannerSettings:
     after the first solution, go on (anytime weighted A*, pruning with the unweighted
     bound) for refine times the expansions it took, keeping the best plan (0: stop at
     the first; on the shipped scenarios refinement changed no time plan by more than
-    0.04 s and did not recover what a weight of 2 lost for energy).
+    0.04 s and did not recover what a weight of 2 lost for energy); threads: CPU threads
+    that simulate a node's edges in parallel (0: all of numba's, one per core; the plan
+    is the serial search's); batch: nodes expanded together, their edges simulated as
+    one batch (1: the serial search's order; more expands some nodes the serial search
+    would not, which changes the plan slightly).
     """
 
     branching: int = 16
@@ -65,6 +69,8 @@ class PlannerSettings:
     time_weight: float = 1.1
     energy_weight: float = 1.2
     refine: float = 0.0
+    batch: int = 1
+    threads: int = 0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -123,6 +129,8 @@ _SETTING_RANGES = {
     "time_weight": (float, 1.0, 10.0),
     "refine": (float, 0.0, 100.0),
     "energy_weight": (float, 1.0, 10.0),
+    "batch": (int, 1, 4096),
+    "threads": (int, 0, 1024),
 }
 
 

@@ -196,3 +196,18 @@ def test_cli_compare_writes_table_figure_and_recording(tmp_path, capsys):
     from sbmpc.recording import entities
     ents = entities(out / "compare.rrd")
     assert "/paths/time" in ents and "/paths/energy" in ents
+
+
+def test_parallel_edges_give_the_serial_plan_and_a_batch_stays_close():
+    """The skid-steer's batch expander runs a node's edges on numba's threads: with
+    batch 1 the plan is the serial search's, control for control. A batch of 4 nodes
+    expands other nodes too; its plan stays within 1 % here."""
+    from dataclasses import replace
+    scn = SC.load(SCEN / "hill_tradeoff.yaml")
+    def plan(batch, threads):
+        return PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, batch=batch, threads=threads))), "time")
+    serial, parallel, batched = plan(1, 1), plan(1, 2), plan(4, 2)
+    assert serial.found and parallel.found and batched.found
+    assert parallel.controls == serial.controls
+    assert parallel.nodes_expanded == serial.nodes_expanded
+    assert batched.travel_time_s <= 1.01 * serial.travel_time_s

@@ -137,3 +137,22 @@ def test_friction_forces_and_eq18_give_the_resistance_torques():
     roll = rolling_resistance(VINYL.mu_roll, V.mass, 0.0, 1.0)
     assert float(tr) == pytest.approx(V.wheel_radius * (float(fr) + roll), rel=1e-12)
     assert float(tl) == pytest.approx(V.wheel_radius * (float(fl) + roll), rel=1e-12)
+
+
+def test_friction_table_disk_cache_gives_the_computed_table_and_survives_a_bad_file(tmp_path, monkeypatch):
+    from dynamics import resistance as R
+    monkeypatch.setenv("SBMPC_CACHE_DIR", str(tmp_path))
+    veh, ter = load_vehicle("p3at"), load_terrain("grass")
+    args = (veh.wheel_radius, veh.width, veh.patch_outer, veh.patch_inner, veh.patch_width, ter.alpha,
+            ter.shear_modulus, 512)
+    fresh = R._compute_table(*args)
+    R._table_cached.cache_clear()
+    first = R._table_cached(*args)                    # computed and written
+    files = list(tmp_path.glob("friction-*.npy"))
+    assert len(files) == 1 and np.array_equal(first, fresh)
+    R._table_cached.cache_clear()
+    assert np.array_equal(R._table_cached(*args), fresh)     # read back
+    files[0].write_bytes(b"not a numpy file")
+    R._table_cached.cache_clear()
+    assert np.array_equal(R._table_cached(*args), fresh)     # recomputed
+    R._table_cached.cache_clear()

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from dynamics import kernels as K
 from maps.grid import cell_value, height_at, pitch_roll_at
@@ -144,6 +144,14 @@ def expand(params, data, work, state, controls, children, costs):
     """The edges of one expansion (:mod:`sbmpc.astar`), one :func:`propagate` per control."""
     for b in range(controls.shape[0]):
         costs[b] = propagate(params, data, state, controls[b], children[b])
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def expand_batch(params, data, parents, owner, controls, children, costs):
+    """The edges of a batch of nodes (``Problem.expand_batch``), in parallel over numba's
+    threads: edge e from ``parents[owner[e]]`` under ``controls[e]``."""
+    for e in prange(owner.shape[0]):
+        costs[e] = propagate(params, data, parents[owner[e]], controls[e], children[e])
 
 
 @njit(HEURISTIC.signature, cache=True, error_model="numpy")

@@ -343,6 +343,125 @@ def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, D
     _push(H, cnt, weight * heur(params, data, X[0]), 0)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur, taken):
+    """Pop the open set until a node to expand: returns (RUNNING, its id), its state
+    copied into ``cur``; or (status, -1) when the search ends (FOUND, EXHAUSTED,
+    ITERATIONS). ``taken``: nodes already taken into the current batch; a goal popped
+    then goes back into the open set and (RUNNING, -1) ends the batch, so that the
+    batch's nodes, which come before it, are expanded first (as the serial search
+    would)."""
+    heur = _heuristic_fn(fa[2], fa[3])
+    goal = _goal_fn(fa[4], fa[5])
+    while True:
+        if cnt[C_HEAP] == 0:
+            return (FOUND if cnt[C_GOAL] >= 0 else EXHAUSTED), -1
+        if cnt[C_ITERS] >= max_iters:
+            return (FOUND if cnt[C_GOAL] >= 0 else ITERATIONS), -1
+        if cnt[C_FIRST] >= 0 and cnt[C_ITERS] >= cnt[C_FIRST] * (1.0 + refine):
+            return FOUND, -1
+        n = _pop(H, cnt)
+        if CLO[n]:
+            continue
+        for d in range(cur.shape[0]):
+            cur[d] = X[n, d]
+        if best[0] < np.inf and G[n] + best[1] * heur(params, data, cur) >= best[0]:
+            CLO[n] = 1
+            continue
+        if goal(params, data, cur):
+            if taken > 0:
+                _push(H, cnt, G[n] + weight * heur(params, data, cur), n)
+                return RUNNING, -1
+            if G[n] < best[0]:
+                best[0] = G[n]
+                best[1] = 1.0
+                cnt[C_GOAL] = n
+                if cnt[C_FIRST] < 0:
+                    cnt[C_FIRST] = max(cnt[C_ITERS], 1)
+            if refine <= 0.0:
+                return FOUND, -1
+            CLO[n] = 1
+            continue
+        CLO[n] = 1
+        cnt[C_ITERS] += 1
+        if DEP[n] >= max_depth:
+            cnt[C_DEPTHCUT] += 1
+            continue
+        return RUNNING, n
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _pick(controls, nbranch, nfixed, rotate, iters, U, crow, off):
+    """The controls of one expansion (the ``iters``-th) into rows off.. of U and their
+    rows in ``controls`` into crow (Problem's branching, fixed rows and rotation)."""
+    m = controls.shape[0]
+    base = (iters - 1) * (nbranch - nfixed) if rotate else 0
+    for b in range(nbranch):
+        c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
+        crow[off + b] = c
+        for d in range(U.shape[1]):
+            U[off + b, d] = controls[c, d]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _add_children(fa, weight, params, data, dims, res, snap, settle, n, crow, CH, CO, off, nbranch,
+                  X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child):
+    """Merge the children of node n (rows off.. off + nbranch of CH, CO and crow) into
+    the graph and the open set (module doc)."""
+    heur = _heuristic_fn(fa[2], fa[3])
+    goal = _goal_fn(fa[4], fa[5])
+    pcode = _code(KEYS[n])
+    cnt[C_EDGES] += nbranch
+    for b in range(off, off + nbranch):
+        c = crow[b]
+        cost = CO[b]
+        if cost < 0.0:
+            code = int(-cost)
+            if code > MAX_CODE:
+                code = MAX_CODE
+            cnt[C_INVALID + code] += 1
+            continue
+        for d in range(child.shape[0]):
+            child[d] = CH[b, d]
+        _key_of(child, dims, res, key)
+        code = _code(key)
+        g = G[n] + cost
+        same = code == pcode and (code >= 0 or _is_key(KEYS, n, key))
+        terminal = not snap and goal(params, data, child)
+        if terminal or (same and DEP[n] < settle):
+            # a node of its own, outside the grid: a goal state is terminal (the goal
+            # disc may be smaller than a cell, or lie in the parent's or a closed
+            # cell); near the start a child may stay in its parent's cell while its
+            # hidden state moves on (a drive slewing from a stall to reverse)
+            if g < best[0]:
+                j = _new_node(cnt, KEYS, CLO, key)
+                _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
+                _push(H, cnt, g + weight * heur(params, data, child), j)
+            continue
+        if same:
+            continue
+        slot, j = _lookup(table, shift, KEYS, key, code)
+        if j < 0:
+            j = _new_node(cnt, KEYS, CLO, key)
+            _insert(table, slot, code, j)
+        elif g >= G[j] or (CLO[j] and not snap):
+            continue
+        if snap:
+            _centre(child, dims, res, key)
+        _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
+        if not CLO[j]:
+            h = heur(params, data, child)
+            if g + best[1] * h < best[0]:
+                _push(H, cnt, g + weight * h, j)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _full(cnt, table, H, cap, new):
+    """Whether the arrays may not hold ``new`` more nodes and open-set entries."""
+    return (cnt[C_NODES] + new > cap or 2 * (cnt[C_HEAP] + new + 1) > H.shape[0]
+            or 4 * (cnt[C_NODES] + new) > table.shape[0])
+
+
 @njit(_RUN_SIG, cache=True, error_model="numpy")
 def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, H,
@@ -364,112 +483,103 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
     cheaper) resets the weight to 1."""
     expand = _expand_fn(fa[0], fa[1])
     heur = _heuristic_fn(fa[2], fa[3])
-    goal = _goal_fn(fa[4], fa[5])
     if cnt[C_NODES] == 0:
         _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
     shift = _shift(table)
     key = np.empty(dims.shape[0], dtype=np.int64)
     child = np.empty(X.shape[1])
     cur = np.empty(X.shape[1])
-    m = controls.shape[0]
     # the controls of one expansion (all rows in order when every row is tried), their
     # rows in ``controls``, the children and edge costs
-    every = nbranch == m and not rotate
+    every = nbranch == controls.shape[0] and not rotate
     U = controls if every else np.empty((nbranch, controls.shape[1]))
     crow = np.arange(nbranch)
     CH = np.empty((nbranch, X.shape[1]))
     CO = np.empty(nbranch)
-    cap = X.shape[0]
     done = 0
     while done < chunk:
-        if cnt[C_HEAP] == 0:
-            return FOUND if cnt[C_GOAL] >= 0 else EXHAUSTED
-        if cnt[C_ITERS] >= max_iters:
-            return FOUND if cnt[C_GOAL] >= 0 else ITERATIONS
-        if cnt[C_FIRST] >= 0 and cnt[C_ITERS] >= cnt[C_FIRST] * (1.0 + refine):
-            return FOUND
-        if (cnt[C_NODES] + nbranch > cap or 2 * (cnt[C_HEAP] + nbranch) > H.shape[0]
-                or 4 * (cnt[C_NODES] + nbranch) > table.shape[0]):
+        if _full(cnt, table, H, X.shape[0], nbranch):
             return GROW
-        if cnt[C_SEQ] > SEQ_LIMIT - 1 - nbranch:
+        if cnt[C_SEQ] > SEQ_LIMIT - 2 - nbranch:
             _renumber(H, cnt)
-        n = _pop(H, cnt)
-        if CLO[n]:
-            continue
-        for d in range(cur.shape[0]):
-            cur[d] = X[n, d]
-        if best[0] < np.inf and G[n] + best[1] * heur(params, data, cur) >= best[0]:
-            CLO[n] = 1
-            continue
-        if goal(params, data, cur):
-            if G[n] < best[0]:
-                best[0] = G[n]
-                best[1] = 1.0
-                cnt[C_GOAL] = n
-                if cnt[C_FIRST] < 0:
-                    cnt[C_FIRST] = max(cnt[C_ITERS], 1)
-            if refine <= 0.0:
-                return FOUND
-            CLO[n] = 1
-            continue
-        CLO[n] = 1
-        cnt[C_ITERS] += 1
+        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur, 0)
+        if n < 0:
+            return st
         done += 1
-        if DEP[n] >= max_depth:
-            cnt[C_DEPTHCUT] += 1
-            continue
         if not every:
-            base = (cnt[C_ITERS] - 1) * (nbranch - nfixed) if rotate else 0
-            for b in range(nbranch):
-                c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
-                crow[b] = c
-                for d in range(U.shape[1]):
-                    U[b, d] = controls[c, d]
+            _pick(controls, nbranch, nfixed, rotate, cnt[C_ITERS], U, crow, 0)
         expand(params, data, work, cur, U, CH, CO)
-        pcode = _code(KEYS[n])
-        cnt[C_EDGES] += nbranch
-        for b in range(nbranch):
-            c = crow[b]
-            cost = CO[b]
-            if cost < 0.0:
-                code = int(-cost)
-                if code > MAX_CODE:
-                    code = MAX_CODE
-                cnt[C_INVALID + code] += 1
-                continue
-            for d in range(child.shape[0]):
-                child[d] = CH[b, d]
-            _key_of(child, dims, res, key)
-            code = _code(key)
-            g = G[n] + cost
-            same = code == pcode and (code >= 0 or _is_key(KEYS, n, key))
-            terminal = not snap and goal(params, data, child)
-            if terminal or (same and DEP[n] < settle):
-                # a node of its own, outside the grid: a goal state is terminal (the goal
-                # disc may be smaller than a cell, or lie in the parent's or a closed
-                # cell); near the start a child may stay in its parent's cell while its
-                # hidden state moves on (a drive slewing from a stall to reverse)
-                if g < best[0]:
-                    j = _new_node(cnt, KEYS, CLO, key)
-                    _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
-                    _push(H, cnt, g + weight * heur(params, data, child), j)
-                continue
-            if same:
-                continue
-            slot, j = _lookup(table, shift, KEYS, key, code)
-            if j < 0:
-                j = _new_node(cnt, KEYS, CLO, key)
-                _insert(table, slot, code, j)
-            elif g >= G[j] or (CLO[j] and not snap):
-                continue
-            if snap:
-                _centre(child, dims, res, key)
-            _set_node(X, G, PAR, CTL, DEP, j, child, g, n, c, DEP[n] + 1)
-            if not CLO[j]:
-                h = heur(params, data, child)
-                if g + best[1] * h < best[0]:
-                    _push(H, cnt, g + weight * h, j)
+        _add_children(fa, weight, params, data, dims, res, snap, settle, n, crow, CH, CO, 0, nbranch,
+                      X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
     return RUNNING
+
+
+_BATCH_SIG = types.UniTuple(types.int64, 2)(
+    _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, _I1, _F1, types.boolean,
+    types.int64, types.int64, types.int64, types.float64, types.int64, types.int64,
+    _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1,
+    _I1, _F2, _I1, _F2, _I1, _F2, _F1)
+
+
+@njit(_BATCH_SIG, cache=True, error_model="numpy")
+def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, dims, res, snap,
+              max_depth, settle, max_iters, refine, size, pending,
+              X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt, best,
+              BN, BP, BO, BU, BR, CH, CO):
+    """One round of the batched search: merge the children of the ``pending`` nodes of
+    the last batch (BN: their ids; rows i * nbranch.. of CH, CO: the edges of BN[i]),
+    then take up to ``size`` nodes to expand, in the serial search's order, into a new
+    batch: BN their ids, BP their states, and per edge e (nbranch per node) BO[e] the
+    row of its node in BP, BU[e] its control, BR[e] the control's row. Returns
+    (RUNNING, k) with k > 0 nodes taken (the caller simulates their k * nbranch edges
+    into CH, CO and calls again with pending = k), (GROW, 0) when the arrays must grow
+    first (the pending children were merged), or (status, 0) when the search ends (as
+    :func:`run_search`)."""
+    heur = _heuristic_fn(fa[2], fa[3])
+    if cnt[C_NODES] == 0:
+        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
+    shift = _shift(table)
+    key = np.empty(dims.shape[0], dtype=np.int64)
+    child = np.empty(X.shape[1])
+    for i in range(pending):
+        _add_children(fa, weight, params, data, dims, res, snap, settle, BN[i], BR, CH, CO, i * nbranch, nbranch,
+                      X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
+    new = size * nbranch
+    if _full(cnt, table, H, X.shape[0], new + size):
+        return GROW, 0
+    if cnt[C_SEQ] > SEQ_LIMIT - 2 - new - size:
+        _renumber(H, cnt)
+    k = 0
+    st = RUNNING
+    while k < size:
+        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, BP[k], k)
+        if n < 0:
+            break
+        BN[k] = n
+        _pick(controls, nbranch, nfixed, rotate, cnt[C_ITERS], BU, BR, k * nbranch)
+        for b in range(k * nbranch, (k + 1) * nbranch):
+            BO[b] = k
+        k += 1
+    if k > 0:
+        return RUNNING, k
+    return st, 0
+
+
+@njit(cache=True, error_model="numpy")
+def expand_nodes(fa, params, data, work, BP, BO, BU, CH, CO):
+    """The edges of a batch, one node after another through the problem's serial
+    ``expand`` (for a problem with no batch expander of its own): the rows of BO come in
+    runs of equal node index."""
+    expand = _expand_fn(fa[0], fa[1])
+    e = 0
+    E = BO.shape[0]
+    while e < E:
+        k = BO[e]
+        f = e
+        while f < E and BO[f] == k:
+            f += 1
+        expand(params, data, work, BP[k], BU[e:f], CH[e:f], CO[e:f])
+        e = f
 
 
 # ---- Python side -----------------------------------------------------------------
@@ -511,6 +621,12 @@ def _entry():
     return run_search.overloads[tuple(_RUN_SIG.args)].entry_point
 
 
+@functools.lru_cache(maxsize=None)
+def _batch_entry():
+    """The compiled entry point of :func:`run_batch` (as :func:`_entry`)."""
+    return run_batch.overloads[tuple(_BATCH_SIG.args)].entry_point
+
+
 _F64, _I64 = np.dtype(np.float64), np.dtype(np.int64)
 _KINDS = (("params", _F64, 1), ("data", _F64, 1), ("start", _F64, 1), ("controls", _F64, 2), ("dims", _I64, 1),
           ("res", _F64, 1))
@@ -537,7 +653,13 @@ class Problem:
     their own instead of dropped (for states whose hidden part, such as a controller's,
     changes while the gridded part does not); ``codes``: names of the invalid-edge codes
     (1-based) for the reason of a failure; ``work_size``: length of the ``work`` array
-    each search gives ``expand``.
+    each search gives ``expand``; ``expand_batch``: optionally, a numba function
+    ``expand_batch(params, data, parents, owner, controls, children, costs)`` that
+    simulates the edges of a batch of nodes (:meth:`Search.run` with ``batch`` > 1):
+    edge e from state ``parents[owner[e]]`` under ``controls[e]`` into ``children[e]``
+    and ``costs[e]``, as ``expand`` would; it may run them in parallel (numba's
+    ``prange``: the search sets numba's thread count) or on another device. Without
+    one, a batch's nodes are expanded one after another through ``expand``.
     """
 
     expand: object
@@ -559,6 +681,7 @@ class Problem:
     weight: float = 1.0
     refine: float = 0.0
     work_size: int = 0
+    expand_batch: object = None
 
 
 @dataclass
@@ -618,9 +741,10 @@ class Search:
         self.best[0] = cost
         self.best[1] = self.problem.weight if weight is None else weight
 
-    def _grow(self):
+    def _grow(self, new: int):
+        """Double the arrays until they hold ``new`` more nodes and open-set entries."""
         n = self.cnt[C_NODES]
-        if n + self.problem.branching > self.X.shape[0] or 4 * (n + self.problem.branching) > self.table.shape[0]:
+        if n + new > self.X.shape[0] or 4 * (n + new) > self.table.shape[0]:
             cap = 2 * self.X.shape[0]
             for name in ("X", "G", "PAR", "CTL", "DEP", "CLO", "KEYS"):
                 a = getattr(self, name)
@@ -630,16 +754,28 @@ class Search:
             self.table = _cell_table(cap)
             rehash(self.table, self.KEYS, n)
         h = self.cnt[C_HEAP]
-        if 2 * (h + self.problem.branching) > self.H.shape[0]:
+        if 2 * (h + new + 1) > self.H.shape[0]:
             H = np.empty(2 * self.H.shape[0], np.int64)
             H[:2 * h] = self.H[:2 * h]
             self.H = H
+        if _full(self.cnt, self.table, self.H, self.X.shape[0], new):
+            self._grow(new)
 
     def run(self, max_iterations: int, time_budget_s: float = math.inf, chunk: int = 256,
-            progress=None) -> SearchResult:
+            progress=None, batch: int = 1, threads: int | None = None) -> SearchResult:
         """Search until the goal, an empty open set, ``max_iterations`` expansions or
-        ``time_budget_s`` of wall-clock time. ``progress(iterations, nodes, best_h)`` is
-        called after every chunk."""
+        ``time_budget_s`` of wall-clock time. ``progress(iterations, nodes, elapsed_s)``
+        is called after every chunk of about ``chunk`` expansions.
+
+        ``batch`` > 1: take the ``batch`` best open nodes at a time (in the serial
+        search's order, up to a goal) and simulate all their edges as one batch
+        (``Problem.expand_batch``, on ``threads`` threads), then merge their children in
+        the same order. With batch 1 the search is the serial A*, with ``threads`` > 1
+        its edges run in parallel (the same nodes are expanded); a larger batch expands
+        some nodes the serial search would have skipped (the children of the batch's
+        first nodes could not yet be seen), in exchange for more edges at a time."""
+        if batch > 1 or (threads or 1) > 1:
+            return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
         p = self.problem
         t0 = time.perf_counter()
         while True:
@@ -648,7 +784,7 @@ class Search:
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best)
             if st == GROW:
-                self._grow()
+                self._grow(p.branching)
                 continue
             elapsed = time.perf_counter() - t0
             if st != RUNNING:
@@ -659,6 +795,57 @@ class Search:
                 if self.cnt[C_GOAL] >= 0:
                     st = FOUND
                 break
+        return self._result(st, elapsed, max_iterations, time_budget_s)
+
+    def _run_batched(self, max_iterations, time_budget_s, chunk, progress, size, threads) -> SearchResult:
+        p = self.problem
+        nb = int(p.branching)
+        E = size * nb
+        ns = p.start.shape[0]
+        BN = np.zeros(size, np.int64)
+        BP = np.zeros((size, ns))
+        BO = np.zeros(E, np.int64)
+        BU = np.zeros((E, p.controls.shape[1]))
+        BR = np.zeros(E, np.int64)
+        CH = np.zeros((E, ns))
+        CO = np.zeros(E)
+        if p.expand_batch is not None:
+            if threads is not None:
+                import numba
+                numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+            def expand(k):
+                p.expand_batch(p.params, p.data, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb], CO[:k * nb])
+        else:
+            def expand(k):
+                expand_nodes(self._fa, p.params, p.data, self.work, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb],
+                             CO[:k * nb])
+        run = _batch_entry()
+        t0 = time.perf_counter()
+        pending = 0
+        shown = 0
+        while True:
+            st, k = run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
+                        bool(p.rotate), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
+                        int(max_iterations), float(p.refine), size, pending, self.X, self.G, self.PAR, self.CTL,
+                        self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
+                        BN, BP, BO, BU, BR, CH, CO)
+            pending = 0
+            if st == GROW:
+                self._grow(E + size)
+                continue
+            elapsed = time.perf_counter() - t0
+            if k == 0:
+                break
+            expand(k)
+            pending = k
+            if self.cnt[C_ITERS] - shown >= chunk:
+                shown = self.cnt[C_ITERS]
+                elapsed = time.perf_counter() - t0
+                if progress is not None:
+                    progress(int(self.cnt[C_ITERS]), int(self.cnt[C_NODES]), elapsed)
+                if elapsed > time_budget_s:
+                    st = FOUND if self.cnt[C_GOAL] >= 0 else RUNNING
+                    break
         return self._result(st, elapsed, max_iterations, time_budget_s)
 
     def _result(self, st, elapsed, max_iterations, time_budget_s) -> SearchResult:
