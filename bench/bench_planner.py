@@ -1,9 +1,16 @@
 """Planner speed: planning time, expansions and edge rollouts per second on the shipped
-scenarios (both costs), and how planning time grows with map size and branching factor.
+scenarios (both costs), serial against parallel edges and a batched search, side by
+side in one run; and how planning time grows with map size and branching factor.
 
     python bench/bench_planner.py            # writes bench/results/planner.json
 
-Numba is warmed up first (one small plan); every figure is one run on one core.
+Numba is warmed up first (one small plan and one of each configuration). Per scenario
+and cost, three configurations run one after another: ``serial`` (one thread, batch 1:
+the serial A*), ``threads`` (a node's edges on every core, batch 1: the same plan) and
+``batch4`` (every core, the 4 best nodes expanded together). The speed-up is the ratio
+of planning times within that run (these machines are noisy: compare ratios, not
+seconds across runs). Map size and branching rows use the default settings (every
+core, batch 1).
 """
 from __future__ import annotations
 
@@ -18,6 +25,9 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "planner.json"
 
 
+CONFIGS = {"serial": dict(threads=1, batch=1), "threads": dict(threads=0, batch=1), "batch4": dict(threads=0, batch=4)}
+
+
 def row(plan) -> dict:
     t = plan.planning_time_s
     return {"status": plan.status, "planning_time_s": round(t, 3), "expansions": plan.nodes_expanded,
@@ -30,15 +40,31 @@ def main() -> int:
     from sbmpc import plan as PL
     from sbmpc import world as WO
     from sbmpc import scenario as SC
+    import numba
     t0 = time.perf_counter()
-    PL.plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")        # compile / load the cache
+    flat = SC.load(ROOT / "scenarios" / "flat.yaml")
+    for cfg in CONFIGS.values():                                              # compile / load the cache
+        PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), "time")
     warm = time.perf_counter() - t0
     res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+                 "cores": numba.config.NUMBA_NUM_THREADS, "configs": CONFIGS,
                  "warmup_s": round(warm, 2), "scenarios": {}, "map_size": [], "branching": []}
     for path in sorted((ROOT / "scenarios").glob("*.yaml")):
-        world = WO.resolve(SC.load(path))
-        res["scenarios"][path.stem] = {c: row(PL.plan(world, c)) for c in ("time", "energy")}
-        print(path.stem, res["scenarios"][path.stem], flush=True)
+        scn = SC.load(path)
+        out = {}
+        for c in ("time", "energy"):
+            rows = {k: row(PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), c))
+                    for k, cfg in CONFIGS.items()}
+            s = rows["serial"]
+            for k in ("threads", "batch4"):
+                r = rows[k]
+                if s["status"] == r["status"] == "found":
+                    r["speedup"] = round(s["planning_time_s"] / r["planning_time_s"], 2)
+                    key = "travel_time_s" if c == "time" else "energy_J"
+                    r["cost_vs_serial"] = round(r[key] / s[key] - 1.0, 4)
+            out[c] = rows
+        res["scenarios"][path.stem] = out
+        print(path.stem, json.dumps(out), flush=True)
     # growth with map size: the hills field's description scaled to L x L metres
     field = SC.load(ROOT / "scenarios" / "hills_field.yaml")
     for L in (20, 40, 60, 80):

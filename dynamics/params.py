@@ -133,8 +133,8 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
 
 
 def _check_number(src: str, key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{src}: key '{key}': expected a number, found {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not -1e300 < value < 1e300:
+        raise ParameterError(f"{src}: key '{key}': expected a number, found {value!r:.60}")
     value = float(value)
     lo, hi, lo_incl = _BOUNDS[key]
     ok = (value >= lo if lo_incl else value > lo) and value <= hi and math.isfinite(value)
@@ -181,19 +181,49 @@ def _from_mapping(cls, data: Any, src: str):
     return _validated(cls(**values, sources=sources), src)
 
 
-def _read_yaml(path: Path) -> Any:
+MAX_YAML_BYTES = 4_000_000   # parameter and scenario files larger than this are refused
+
+
+class NoAliasLoader(yaml.SafeLoader):
+    """PyYAML's safe loader without aliases (``*name``): a few lines of nested aliases
+    expand to gigabytes ("billion laughs"); no parameter or scenario file needs them."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            raise yaml.composer.ComposerError(None, None, "an alias (*name): aliases are not accepted",
+                                              self.peek_event().start_mark)
+        return super().compose_node(parent, index)
+
+
+def read_yaml_text(path: Path) -> Any:
+    """Parse a YAML file with :class:`NoAliasLoader`. Raises ValueError with the reason
+    (too large, not UTF-8 text, malformed YAML with its line) and OSError."""
+    size = path.stat().st_size
+    if size > MAX_YAML_BYTES:
+        raise ValueError(f"expected a YAML file of at most {MAX_YAML_BYTES // 1_000_000} MB, found {size / 1e6:.1f} MB")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise ValueError("expected a UTF-8 text (YAML) file, found binary data") from None
+    try:
+        return yaml.load(text, Loader=NoAliasLoader)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}: " if mark is not None else ""
+        raise ValueError(f"{where}malformed YAML: {getattr(exc, 'problem', exc)}") from None
+
+
+def _read_yaml(path: Path) -> Any:
+    if path.is_dir():
+        raise ParameterError(f"{path}: expected a YAML file, found a folder")
+    try:
+        return read_yaml_text(path)
     except FileNotFoundError:
         raise ParameterError(f"{path}: file not found") from None
     except OSError as exc:
         raise ParameterError(f"{path}: cannot read: {exc.strerror}") from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise ParameterError(f"{path}:{where}: malformed YAML: {getattr(exc, 'problem', exc)}") from None
+    except ValueError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
 
 
 def _shipped(kind: str) -> dict[str, Path]:

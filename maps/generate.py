@@ -41,8 +41,8 @@ def _num(d, key, path, positive=False):
     if key not in d:
         raise GeneratorError(f"{path}.{key}: expected a number, found nothing")
     v = d[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-        raise GeneratorError(f"{path}.{key}: expected a number, found {v!r}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not -1e300 < v < 1e300:
+        raise GeneratorError(f"{path}.{key}: expected a number, found {v!r:.60}")
     if positive and v <= 0:
         raise GeneratorError(f"{path}.{key}: expected a positive number, found {v!r}")
     return float(v)

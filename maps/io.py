@@ -26,9 +26,9 @@ class MapError(ValueError):
 
 def _number(spec, key, where, positive=False):
     v = spec.get(key)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or (positive and v <= 0):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not -1e300 < v < 1e300 or (positive and v <= 0):
         want = "a positive number" if positive else "a number"
-        raise MapError(f"{where}.{key}: expected {want}, found {v!r}")
+        raise MapError(f"{where}.{key}: expected {want}, found {v!r:.60}")
     return float(v)
 
 

@@ -296,6 +296,14 @@ def _predicted(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
     return np.column_stack([traj["x"][b], traj["y"][b], traj["yaw"][b]])
 
 
+def _threads(ps) -> int:
+    """Threads for the search's edges: the scenario's, or with 0 every core numba uses."""
+    if ps.threads:
+        return ps.threads
+    import numba
+    return numba.config.NUMBA_NUM_THREADS
+
+
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
     """(cost, controls) of a control sequence replayed from ``start`` when it ends in the
     goal (its last control cut where it enters the goal disc); else None."""
@@ -338,7 +346,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     if inc is not None:
         search.bound(inc[0] * (1.0 + 1e-9))
     res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=ps.batch,
-                                   threads=ps.threads or None)
+                                   threads=_threads(ps))
     common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges, nodes=res.nodes, invalid_edges=res.invalid)
     if res.status == "found":
         T = res.states[:, K.S_T]
@@ -404,7 +412,7 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
         prob = problem(world, cost, Sj, dt)
-        res = Search(prob).run(ps.max_expansions, left, batch=ps.batch, threads=ps.threads or None)
+        res = Search(prob).run(ps.max_expansions, left, batch=ps.batch, threads=_threads(ps))
         repairs += 1
         if res.status != "found":
             break

@@ -21,7 +21,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
+
+from dynamics.params import read_yaml_text
 
 from .errors import InputError
 
@@ -165,6 +166,12 @@ class Scenario:
         return replace(self, cost=cost)
 
 
+def shown(value, limit: int = 60) -> str:
+    """repr of a value for an error message, cut to ``limit`` characters."""
+    r = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 30 else f"an integer of {len(str(abs(value)))} digits"
+    return r if len(r) <= limit else r[:limit] + " ..."
+
+
 class _Problems:
     """Collects every problem of a file, then raises one InputError listing them."""
 
@@ -173,7 +180,7 @@ class _Problems:
         self.items: list[str] = []
 
     def add(self, key: str, expected: str, found):
-        self.items.append(f"{key}: expected {expected}, found {found!r}")
+        self.items.append(f"{key}: expected {expected}, found {shown(found)}")
 
     def raise_if_any(self):
         if len(self.items) == 1:
@@ -189,6 +196,9 @@ def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math
             return math.nan
         return default
     v = d[key]
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10 ** 30:
+        probs.add(f"{where}.{key}", what, v)
+        return math.nan
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
         probs.add(f"{where}.{key}", what, v)
         return math.nan
@@ -204,12 +214,13 @@ def _unknown(d: dict, known: set, where: str, probs: _Problems):
 def _point_list(v, n_min):
     return (isinstance(v, (list, tuple)) and len(v) >= n_min
             and all(isinstance(p, (list, tuple)) and len(p) == 2
-                    and all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in p) for p in v))
+                    and all(isinstance(a, (int, float)) and not isinstance(a, bool) and -1e300 < a < 1e300
+                            for a in p) for p in v))
 
 
 def _numbers(v, n):
     return (isinstance(v, (list, tuple)) and len(v) == n
-            and all(isinstance(a, (int, float)) and not isinstance(a, bool) and math.isfinite(a) for a in v))
+            and all(isinstance(a, (int, float)) and not isinstance(a, bool) and -1e300 < a < 1e300 for a in v))
 
 
 def _terrain(spec, probs: _Problems):
@@ -258,7 +269,7 @@ def _numeric_settings(spec: dict, ranges: dict, where: str, probs: _Problems) ->
         if key not in spec:
             continue
         v = spec[key]
-        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and lo <= v <= hi
+        ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and -1e300 < v < 1e300 and lo <= v <= hi
               and (typ is float or float(v).is_integer()))
         if not ok:
             kind = "an integer" if typ is int else "a number"
@@ -358,16 +369,18 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
 def load(path: Path | str) -> Scenario:
     """Read and validate a scenario file (the file is only read)."""
     path = Path(path)
-    if not path.is_file():
+    if path.is_dir():
+        raise InputError(f"{path}: expected a scenario YAML file, found a folder")
+    if not path.exists():
         raise InputError(f"{path}: expected a scenario YAML file, found no such file")
+    if not path.is_file():
+        raise InputError(f"{path}: expected a scenario YAML file, found a special file (a device or a pipe)")
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" line {mark.line + 1}" if mark is not None else ""
-        raise InputError(f"{path}{where}: expected valid YAML, found {getattr(exc, 'problem', exc)}") from None
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: expected a UTF-8 text file, found binary data") from None
+        data = read_yaml_text(path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the scenario: {exc.strerror}") from None
+    except ValueError as exc:
+        raise InputError(f"{path}: {exc}") from None
     return parse(data, str(path), path)
 
 

@@ -16,7 +16,8 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
-                "closed-loop dynamic model of Yu et al. (2010).")
+                "closed-loop dynamic model of Yu et al. (2010).",
+                epilog="--debug (anywhere on the line): show the traceback of an internal error.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     from . import diagnose, plan, run, simulate
     simulate.add_parser(sub)
@@ -27,6 +28,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one command. Exit codes: 0 done, 1 no result (no path, a failed run), 2 bad
+    input (one line saying which file, key or flag, what was expected and what was
+    found), 3 an internal error (one line; ``--debug`` shows the traceback), 130
+    interrupted."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    if debug:
+        argv.remove("--debug")
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
@@ -40,6 +49,32 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"sbmpc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:
+        if debug:
+            raise
+        fn = str(exc.filename) if exc.filename else ""
+        name = f" '{fn if len(fn) <= 80 else fn[:80] + ' ...'}'" if fn else ""
+        print(f"sbmpc {args.command}: error: cannot read or write{name}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError:
+        if debug:
+            raise
+        print(f"sbmpc {args.command}: error: an input file is not UTF-8 text (binary data where text was expected)",
+              file=sys.stderr)
+        return 2
+    except MemoryError:
+        if debug:
+            raise
+        print(f"sbmpc {args.command}: error: out of memory (an input larger than this machine can hold?)",
+              file=sys.stderr)
+        return 2
+    except Exception as exc:            # the last resort: never a bare traceback
+        if debug:
+            raise
+        msg = str(exc).splitlines()[0][:200] if str(exc) else ""
+        print(f"sbmpc {args.command}: internal error: {type(exc).__name__}: {msg} "
+              f"(please report it; run again with --debug for the traceback)", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":  # pragma: no cover

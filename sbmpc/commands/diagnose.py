@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from .files import Outputs, atomic, write_text
 
 
 def add_parsers(sub):
@@ -37,6 +38,11 @@ def add_parsers(sub):
     s.set_defaults(func=run_synth)
 
 
+def _file(spec):
+    """The file a vehicle or terrain value names, if it names one (else a shipped name)."""
+    return Path(spec) if isinstance(spec, str) and spec and Path(spec).is_file() else None
+
+
 def _load_models(vehicle, terrain, run=None):
     from dynamics import ParameterError, load_terrain, load_vehicle
     v = vehicle or (run.meta.get("vehicle") if run is not None else None) or "p3at"
@@ -52,11 +58,11 @@ def run_synth(args) -> int:
     from dynamics.synth import synth_run
     if not 1.0 <= args.duration <= 3600.0:
         raise InputError(f"--duration: expected seconds in [1, 3600], found {args.duration}")
-    if not args.out.parent.exists():
-        raise InputError(f"--out: expected a path in an existing folder, found '{args.out}'")
+    Outputs([_file(args.vehicle), _file(args.terrain)]).file(args.out, "--out")
     vehicle, terrain = _load_models(args.vehicle, args.terrain)
     run, params = synth_run(args.effect, args.seed, vehicle, terrain, duration=args.duration)
-    write_run(args.out, run)
+    with atomic(args.out) as tmp:
+        write_run(tmp, run)
     print(f"wrote {args.out}: {len(run)} samples, hidden effect {args.effect} {params}")
     return 0
 
@@ -65,13 +71,19 @@ def run_diagnose(args) -> int:
     from dynamics.discrepancy import MARGIN, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
-    for path, flag in ((args.json, "--json"), (args.vehicle_out, "--vehicle-out")):
-        if path is not None and not path.parent.exists():
-            raise InputError(f"{flag}: expected a path in an existing folder, found '{path}'")
+    outs = Outputs([args.run, _file(args.vehicle), _file(args.terrain)])
+    outs.file(args.json, "--json")
+    outs.file(args.vehicle_out, "--vehicle-out")
+    if args.report is not None:
+        outs.folder(args.report, "--report", ("report.md", "replay.png", "residuals.png")
+                    + (() if args.vehicle_out else ("extended_vehicle.yaml",)))
+    elif args.vehicle_out is None and args.json is not None:
+        outs.file(args.json.parent / "extended_vehicle.yaml", "--json (extended_vehicle.yaml is written beside it)")
     try:
         run = read_run(args.run)
     except RunError as exc:
         raise InputError(str(exc)) from None
+    outs.add_inputs([_file(run.meta.get("vehicle")), _file(run.meta.get("terrain"))])
     if len(run) < 50:
         raise InputError(f"{args.run}: expected at least 50 samples to diagnose, found {len(run)}")
     vehicle, terrain = _load_models(args.vehicle, args.terrain, run)
@@ -109,12 +121,12 @@ def run_diagnose(args) -> int:
             note += (f" (the terrain's mu_sa, mu_op are {d.extended_terrain.mu_sa:.3f}, {d.extended_terrain.mu_op:.3f};"
                      " the vehicle is unchanged)")
         out_vehicle.parent.mkdir(parents=True, exist_ok=True)
-        out_vehicle.write_text(vehicle_to_yaml(d.extended_vehicle, note))
+        write_text(out_vehicle, vehicle_to_yaml(d.extended_vehicle, note))
     doc = d.to_json(str(out_vehicle) if out_vehicle else None)
     doc["run"] = str(args.run)
     doc["diagnosis_time_s"] = elapsed
     if args.json:
-        args.json.write_text(json.dumps(doc, indent=1))
+        write_text(args.json, json.dumps(doc, indent=1))
     if args.report:
         args.report.mkdir(parents=True, exist_ok=True)
         write_report(args.report, run, vehicle, terrain, pitch, d, doc, replay)
@@ -186,4 +198,4 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
         ps = ", ".join(f"{k} = {v:.4g} ± {c.stderr[k]:.2g}" for k, v in c.params.items())
         lines.append(f"| {c.effect} | {c.heldout_error:.2f} | {c.gain:.3f} | {c.bic_delta:.0f} | {ps} | {c.whiteness_q:.0f} |")
     lines += ["", "![measured vs baseline vs extended](replay.png)", "", "![residuals and ranking](residuals.png)", ""]
-    (folder / "report.md").write_text("\n".join(lines))
+    write_text(folder / "report.md", "\n".join(lines))

@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError, NoResult
+from .files import Outputs, atomic, scenario_inputs, write_text
 
 
 def add_parsers(sub):
@@ -31,15 +32,6 @@ def add_parsers(sub):
     c.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     c.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
     c.set_defaults(func=run_compare)
-
-
-def _out_file(path: Path | None, flag: str):
-    if path is None:
-        return
-    if path.exists() and path.is_dir():
-        raise InputError(f"{flag}: expected a file path, found the folder '{path}'")
-    if not path.parent.exists():
-        raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{path.parent}')")
 
 
 def _world(args):
@@ -96,16 +88,18 @@ def _check_line(plan) -> str:
 def run_plan(args) -> int:
     from .. import plan as PL
     from .. import recording
-    _out_file(args.json, "--json")
-    _out_file(args.rrd, "--rrd")
+    outs = Outputs(scenario_inputs(args.scenario))
+    outs.file(args.json, "--json")
+    outs.file(args.rrd, "--rrd")
     world = _world(args)
     cost = args.cost or world.scenario.cost
     plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet))
     print(summary(plan))
     if args.json:
-        args.json.write_text(json.dumps(plan.to_json(), indent=1))
+        write_text(args.json, json.dumps(plan.to_json(), indent=1))
     if args.rrd:
-        recording.write(args.rrd, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}")
+        with atomic(args.rrd) as tmp:
+            recording.write(tmp, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}")
     if not plan.found:
         raise NoResult(f"no path: {plan.reason}")
     return 0
@@ -128,8 +122,7 @@ def run_compare(args) -> int:
     from .. import recording
     from ..figures import plot_compare
     out = args.out
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out: expected a folder, found the file '{out}'")
+    Outputs(scenario_inputs(args.scenario)).folder(out, "--out", ("compare.json", "compare.png", "compare.rrd"))
     world = _world(args)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -147,10 +140,11 @@ def run_compare(args) -> int:
         doc["tradeoff"] = {"time_saved_s": e.travel_time_s - t.travel_time_s,
                            "energy_saved_J": t.energy_J - e.energy_J,
                            "holds": bool(t.travel_time_s <= e.travel_time_s + 1e-9 and e.energy_J <= t.energy_J + 1e-9)}
-    (out / "compare.json").write_text(json.dumps(doc, indent=1))
-    plot_compare(world.emap, plans, world.scenario, out / "compare.png",
-                 title=f"{world.scenario.name}: time- vs energy-optimal")
-    recording.write(out / "compare.rrd", world.emap, plans, app=f"sbmpc compare {world.scenario.name}")
+    write_text(out / "compare.json", json.dumps(doc, indent=1))
+    with atomic(out / "compare.png") as tmp:
+        plot_compare(world.emap, plans, world.scenario, tmp, title=f"{world.scenario.name}: time- vs energy-optimal")
+    with atomic(out / "compare.rrd") as tmp:
+        recording.write(tmp, world.emap, plans, app=f"sbmpc compare {world.scenario.name}")
     print(f"wrote {out / 'compare.json'}, {out / 'compare.png'}, {out / 'compare.rrd'}")
     if not any(p.found for p in plans.values()):
         raise NoResult(f"no path: {plans['time'].reason}")

@@ -6,7 +6,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError, NoResult
-from .plan import Progress, _out_file, _world
+from .files import Outputs, atomic, scenario_inputs, write_text
+from .plan import Progress, _world
 
 
 def add_parsers(sub):
@@ -58,10 +59,16 @@ def summary(res) -> str:
     return "\n".join(lines)
 
 
+def _vehicle_file(spec):
+    """The file a --truth / --vehicle value names, if it names one."""
+    return Path(spec) if spec and Path(spec).is_file() else None
+
+
 def run_run(args) -> int:
     from .. import receding, recording
-    _out_file(args.json, "--json")
-    _out_file(args.rrd, "--rrd")
+    outs = Outputs(scenario_inputs(args.scenario) + [_vehicle_file(args.truth), _vehicle_file(args.vehicle)])
+    outs.file(args.json, "--json")
+    outs.file(args.rrd, "--rrd")
     world = _world(args)
     base = world.scenario.base
     if args.vehicle:
@@ -77,9 +84,10 @@ def run_run(args) -> int:
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet))
     print(summary(res))
     if args.json:
-        args.json.write_text(json.dumps(res.to_json(), indent=1))
+        write_text(args.json, json.dumps(res.to_json(), indent=1))
     if args.rrd:
-        recording.write_run(args.rrd, world.emap, res, app=f"sbmpc run {world.scenario.name}")
+        with atomic(args.rrd) as tmp:
+            recording.write_run(tmp, world.emap, res, app=f"sbmpc run {world.scenario.name}")
     if res.status != "reached":
         raise NoResult(f"failed: {res.reason}")
     return 0

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .files import Outputs, atomic, write_text
 
 
 def add_parser(sub):
@@ -41,18 +42,14 @@ def _need(value, flag, what):
     return value
 
 
-def _check_out(path: Path | None, flag: str):
-    if path is not None and path.parent and not path.parent.exists():
-        raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{path.parent}')")
-
-
 def run(args) -> int:
     from dynamics import ParameterError
     from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
     from dynamics.simulate import Model, simulate
 
-    _check_out(args.json, "--json")
-    _check_out(args.plot, "--plot")
+    outs = Outputs([Path(v) for v in (args.vehicle, args.terrain) if v and Path(v).is_file()])
+    outs.file(args.json, "--json")
+    outs.file(args.plot, "--plot")
     try:
         model = Model.load(args.vehicle, args.terrain, args.dt)
     except ParameterError as exc:
@@ -122,8 +119,9 @@ def run(args) -> int:
         doc = {"schema": "sbmpc.simulate/1", "manoeuvre": manoeuvre, "vehicle": model.vehicle.name,
                "terrain": model.terrain.name, "open_loop": bool(args.open_loop), "dt_s": dt,
                "stalled": traj.stalled, **info, "summary": summary, "trajectory": traj.to_json()}
-        args.json.write_text(json.dumps(doc, indent=1))
+        write_text(args.json, json.dumps(doc, indent=1))
     if args.plot:
         from ..figures import plot_trajectory
-        plot_trajectory(traj, args.plot, f"{manoeuvre} on {model.terrain.name}")
+        with atomic(args.plot) as tmp:
+            plot_trajectory(traj, tmp, f"{manoeuvre} on {model.terrain.name}")
     return 0

@@ -1,0 +1,151 @@
+"""The files of one command: inputs are never written, outputs are checked before any
+work and written atomically.
+
+* :class:`Outputs` collects a command's inputs (every file it reads: the scenario and
+  the map, vehicle and terrain files it names; a run CSV) and checks each output path
+  when it is declared: not a folder, in an existing and writable folder, and not one of
+  the inputs (compared as the same file on disk, so a link or another spelling of an
+  input's path is caught too). A bad path is an :class:`InputError` (exit 2) before
+  the plan, the run or the diagnosis starts.
+* :func:`atomic` gives a writer a temporary path in the target folder and renames it
+  into place when the writer is done, so that an interrupted command leaves the old
+  file or the new one, never half of one.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+class Outputs:
+    """Output paths of a command, checked against its ``inputs`` (existing files only
+    are compared; missing ones cannot be overwritten)."""
+
+    def __init__(self, inputs=()):
+        self.inputs: list[Path] = []
+        self.declared: list[tuple[Path, str]] = []
+        self.add_inputs(inputs)
+
+    def add_inputs(self, paths) -> None:
+        for p in paths:
+            if p is None:
+                continue
+            p = Path(p)
+            if p.is_file():
+                self.inputs.append(p)
+        for path, flag in self.declared:
+            self._not_an_input(path, flag)
+
+    def _not_an_input(self, path: Path, flag: str) -> None:
+        for src in self.inputs:
+            if _same(path, src) or path.resolve() == src.resolve():
+                raise InputError(f"{flag}: '{path}' is an input of this command ({src}); "
+                                 "choose another output path (inputs are never overwritten)")
+
+    def file(self, path: Path | None, flag: str) -> Path | None:
+        """Check an output file path (None: no output); returns it."""
+        if path is None:
+            return None
+        path = Path(path)
+        if path.is_dir():
+            raise InputError(f"{flag}: expected a file path, found the folder '{path}'")
+        parent = path.parent
+        if not parent.exists():
+            raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{parent}')")
+        if not parent.is_dir():
+            raise InputError(f"{flag}: expected a path in a folder, found '{path}' ('{parent}' is a file)")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError(f"{flag}: cannot write into the folder '{parent}' (permission denied)")
+        if path.exists() and not os.access(path, os.W_OK):
+            raise InputError(f"{flag}: cannot replace '{path}' (permission denied)")
+        self._not_an_input(path, flag)
+        self.declared.append((path, flag))
+        return path
+
+    def folder(self, path: Path, flag: str, names=()) -> Path:
+        """Check an output folder (created later if missing, with its parents) and the
+        files ``names`` that will be written into it."""
+        path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise InputError(f"{flag}: expected a folder, found the file '{path}'")
+        probe = path
+        while not probe.exists():
+            probe = probe.parent
+        if not probe.is_dir():
+            raise InputError(f"{flag}: cannot create the folder '{path}' ('{probe}' is a file)")
+        if not os.access(probe, os.W_OK | os.X_OK):
+            raise InputError(f"{flag}: cannot write into the folder '{probe}' (permission denied)")
+        for name in names:
+            f = path / name
+            if f.is_dir():
+                raise InputError(f"{flag}: would write '{f}', found a folder there")
+            self._not_an_input(f, flag)
+            self.declared.append((f, flag))
+        return path
+
+
+@contextlib.contextmanager
+def atomic(path: Path):
+    """A temporary path beside ``path`` (same suffix, so writers that pick the format
+    from it still do) that replaces ``path`` when the block ends without an error; on
+    an error the temporary file is removed and ``path`` is untouched."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    with atomic(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def scenario_inputs(path: Path) -> list[Path]:
+    """The scenario file and every file it names (map, vehicle, terrains), read from the
+    raw YAML without validating it (validation comes later and reports its own
+    problems)."""
+    from dynamics.params import read_yaml_text
+    out = [Path(path)]
+    try:
+        doc = read_yaml_text(Path(path))
+    except (OSError, ValueError):          # the scenario loader reports it
+        return out
+    if not isinstance(doc, dict):
+        return out
+    base = Path(path).parent
+    names = []
+    m = doc.get("map")
+    if isinstance(m, dict) and isinstance(m.get("file"), str):
+        names.append(m["file"])
+    for key in ("vehicle", "terrain"):
+        v = doc.get(key)
+        if isinstance(v, str):
+            names.append(v)
+        elif isinstance(v, dict):
+            names += [x for x in (v.get("default"),) if isinstance(x, str)]
+            for r in v.get("regions") or []:
+                if isinstance(r, dict) and isinstance(r.get("terrain"), str):
+                    names.append(r["terrain"])
+    for n in names:
+        for cand in (base / n, base / f"{n}.yaml", Path(n)):
+            try:
+                if cand.is_file():
+                    out.append(cand)
+            except OSError:        # a name too long for a path: not a file
+                pass
+    return out

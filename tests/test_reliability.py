@@ -1,0 +1,158 @@
+"""Reliability of the command line (issue 16): no input is ever replaced, output paths
+are checked before the work, and every bad file or value ends in one line and exit 2
+(an internal error in one line and exit 3), never a traceback. Each case asserts the
+exit code, the single line and that the input files are unchanged."""
+import hashlib
+import shutil
+from pathlib import Path
+
+import pytest
+
+from sbmpc.commands.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCEN = ROOT / "scenarios"
+
+
+def digest(folder: Path) -> dict:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+@pytest.fixture()
+def work(tmp_path):
+    """A folder with the flat scenario, a vehicle file and a short synthetic run."""
+    shutil.copy(SCEN / "flat.yaml", tmp_path / "s.yaml")
+    (tmp_path / "t.yaml").write_text("name: heavy\nmass: 40.0\n")
+    assert main(["synth", "--effect", "none", "--duration", "5", "--out", str(tmp_path / "r.csv")]) == 0
+    return tmp_path
+
+
+def one_line_error(capsys, code, rc):
+    err = capsys.readouterr().err.strip()
+    assert rc == code, err
+    assert "\n" not in err and "Traceback" not in err, err
+    return err
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["plan", "{w}/s.yaml", "--json", "{w}/s.yaml"], "--json"),
+    (["plan", "{w}/s.yaml", "--rrd", "{w}/s.yaml"], "--rrd"),
+    (["plan", "{w}/s.yaml", "--json", "{w}/./sub/../s.yaml"], "--json"),
+    (["run", "{w}/s.yaml", "--json", "{w}/s.yaml"], "--json"),
+    (["run", "{w}/s.yaml", "--truth", "{w}/t.yaml", "--json", "{w}/t.yaml"], "--json"),
+    (["diagnose", "{w}/r.csv", "--json", "{w}/r.csv"], "--json"),
+    (["diagnose", "{w}/r.csv", "--vehicle-out", "{w}/r.csv"], "--vehicle-out"),
+    (["diagnose", "{w}/r.csv", "--vehicle", "{w}/extended_vehicle.yaml", "--json", "{w}/d.json"], "--json"),
+    (["simulate", "--vehicle", "{w}/t.yaml", "--v", "0.5", "--json", "{w}/t.yaml"], "--json"),
+])
+def test_an_output_that_is_an_input_is_refused_before_any_work(work, capsys, argv, flag):
+    (work / "sub").mkdir()
+    shutil.copy(work / "t.yaml", work / "extended_vehicle.yaml")
+    before = digest(work)
+    rc = main([a.format(w=work) for a in argv])
+    err = one_line_error(capsys, 2, rc)
+    assert flag in err and "is an input" in err
+    assert digest(work) == before
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["plan", "{s}", "--json", "{root}/README.md/x.json"], "is a file"),
+    (["plan", "{s}", "--json", "{root}/docs"], "found the folder"),
+    (["plan", "{s}", "--json", "{w}/no/such/x.json"], "no folder"),
+    (["compare", "{s}", "--out", "{root}/README.md/x"], "is a file"),
+    (["compare", "{s}", "--out", "{root}/README.md"], "expected a folder"),
+    (["diagnose", "{w}/r.csv", "--report", "{root}/README.md"], "expected a folder"),
+    (["diagnose", "{w}/r.csv", "--json", "{root}/docs"], "found the folder"),
+    (["synth", "--effect", "none", "--out", "{root}/docs"], "found the folder"),
+])
+def test_bad_output_paths_end_in_one_line_before_the_work(work, capsys, argv, says):
+    before = digest(ROOT)
+    rc = main([a.format(w=work, s=work / "s.yaml", root=ROOT) for a in argv])
+    assert says in one_line_error(capsys, 2, rc)
+    assert digest(ROOT) == before and not (ROOT / "extended_vehicle.yaml").exists()
+
+
+def test_an_unwritable_output_folder_is_refused(work, capsys):
+    import os
+    if os.geteuid() == 0:
+        pytest.skip("root writes anywhere")
+    ro = work / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        rc = main(["plan", str(work / "s.yaml"), "--json", str(ro / "p.json")])
+        assert "permission denied" in one_line_error(capsys, 2, rc)
+    finally:
+        ro.chmod(0o700)
+
+
+BILLION_LAUGHS = """\
+name: laughs
+a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]
+b: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a]
+c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b]
+d: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c]
+e: &e [*d, *d, *d, *d, *d, *d, *d, *d, *d]
+f: &f [*e, *e, *e, *e, *e, *e, *e, *e, *e]
+g: &g [*f, *f, *f, *f, *f, *f, *f, *f, *f]
+h: &h [*g, *g, *g, *g, *g, *g, *g, *g, *g]
+description: *h
+"""
+
+
+FLAT = (SCEN / "flat.yaml").read_text()
+
+
+@pytest.mark.parametrize("text, says", [
+    (BILLION_LAUGHS, "aliases are not accepted"),
+    (FLAT.replace("x: 2.0, y: 2.0", "x: " + "9" * 400 + ", y: 2.0"), "integer of 400 digits"),
+    (FLAT.replace("resolution: 0.25", "resolution: " + "1" * 400), "resolution: expected a number"),
+    (FLAT.replace("vehicle: p3at", "vehicle: " + "v" * 5000), " ..."),
+    (FLAT.replace("terrain: vinyl", "terrain: " + "v" * 5000), " ..."),
+])
+def test_hostile_scenarios_end_in_one_line(tmp_path, capsys, text, says):
+    s = tmp_path / "s.yaml"
+    s.write_text(text)
+    before = s.read_bytes()
+    rc = main(["plan", str(s)])
+    err = one_line_error(capsys, 2, rc)
+    assert says in err and len(err) < 400
+    assert s.read_bytes() == before
+
+
+def test_binary_and_special_files_are_named_as_such(tmp_path, capsys):
+    png = ROOT / "docs" / "model.png"
+    s = tmp_path / "s.yaml"
+    s.write_bytes(png.read_bytes())
+    assert "binary data" in one_line_error(capsys, 2, main(["plan", str(s)]))
+    assert "found a folder" in one_line_error(capsys, 2, main(["plan", str(tmp_path)]))
+    if Path("/dev/null").exists():
+        assert "special file" in one_line_error(capsys, 2, main(["plan", "/dev/null"]))
+    rc = main(["simulate", "--vehicle", str(png), "--v", "0.5"])
+    assert "binary data" in one_line_error(capsys, 2, rc)
+
+
+def test_an_internal_error_is_one_line_and_exit_3_and_debug_shows_it(work, capsys, monkeypatch):
+    from sbmpc import plan as PL
+    def broken(*a, **k):
+        raise ZeroDivisionError("float division by zero")
+    monkeypatch.setattr(PL, "plan", broken)
+    rc = main(["plan", str(work / "s.yaml")])
+    err = one_line_error(capsys, 3, rc)
+    assert "internal error: ZeroDivisionError" in err and "--debug" in err
+    with pytest.raises(ZeroDivisionError):
+        main(["plan", str(work / "s.yaml"), "--debug"])
+
+
+def test_outputs_are_written_whole_or_not_at_all(tmp_path):
+    from sbmpc.commands.files import atomic
+    target = tmp_path / "p.json"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("interrupted")
+    assert target.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["p.json"]
+    with atomic(target) as tmp:
+        tmp.write_text("new")
+    assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["p.json"]
