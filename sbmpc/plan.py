@@ -73,10 +73,39 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
+    if on_gpu(ps):
+        from .problems.skidsteer_cuda import CudaEdges
+        batch = CudaEdges(Q, data)
+    else:
+        batch = SS.expand_batch
     return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
                    dims, res, ps.branching, rotate=ps.samples == "rotating",
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
-                   weight=ps.weight(cost), refine=ps.refine, expand_batch=SS.expand_batch)
+                   weight=ps.weight(cost), refine=ps.refine, expand_batch=batch)
+
+
+GPU_BATCH = 64     # nodes per batch on a GPU (batch 0: auto): 1024 edges at branching 16
+
+
+def device_note(ps) -> str | None:
+    """One line when the scenario asks for the GPU and it cannot be used (the CPU plans
+    instead), else None."""
+    if ps.device != "cuda":
+        return None
+    from .problems.skidsteer_cuda import unavailable
+    why = unavailable()
+    return None if why is None else f"device cuda: {why}; planning on the CPU"
+
+
+def on_gpu(ps) -> bool:
+    """Whether the edges of this planner's searches run on the GPU."""
+    return ps.device == "cuda" and device_note(ps) is None
+
+
+def batch_size(ps) -> int:
+    """Nodes expanded together: the scenario's, or with 0 (auto) 1 on the CPU and
+    GPU_BATCH on a GPU."""
+    return ps.batch or (GPU_BATCH if on_gpu(ps) else 1)
 
 
 # ---- the plan ------------------------------------------------------------------------
@@ -345,7 +374,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     search = Search(prob)
     if inc is not None:
         search.bound(inc[0] * (1.0 + 1e-9))
-    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=ps.batch,
+    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=batch_size(ps),
                                    threads=_threads(ps))
     common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges, nodes=res.nodes, invalid_edges=res.invalid)
     if res.status == "found":
@@ -412,7 +441,7 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
             break
         prob = problem(world, cost, Sj, dt)
-        res = Search(prob).run(ps.max_expansions, left, batch=ps.batch, threads=_threads(ps))
+        res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=_threads(ps))
         repairs += 1
         if res.status != "found":
             break

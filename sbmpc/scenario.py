@@ -52,7 +52,9 @@ class PlannerSettings:
     that simulate a node's edges in parallel (0: all of numba's, one per core; the plan
     is the serial search's); batch: nodes expanded together, their edges simulated as
     one batch (1: the serial search's order; more expands some nodes the serial search
-    would not, which changes the plan slightly).
+    would not, which changes the plan slightly; 0: 1 on the CPU, 64 on a GPU); device:
+    'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
+    one-line note and the CPU).
     """
 
     branching: int = 16
@@ -70,8 +72,9 @@ class PlannerSettings:
     time_weight: float = 1.1
     energy_weight: float = 1.2
     refine: float = 0.0
-    batch: int = 1
+    batch: int = 0
     threads: int = 0
+    device: str = "cpu"
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -130,7 +133,7 @@ _SETTING_RANGES = {
     "time_weight": (float, 1.0, 10.0),
     "refine": (float, 0.0, 100.0),
     "energy_weight": (float, 1.0, 10.0),
-    "batch": (int, 1, 4096),
+    "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),
 }
 
@@ -299,6 +302,11 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
             probs.add("planner.samples", "'fixed' or 'rotating'", spec["samples"])
         else:
             kw["samples"] = spec["samples"]
+    if "device" in spec:
+        if spec["device"] not in ("cpu", "cuda"):
+            probs.add("planner.device", "'cpu' or 'cuda'", spec["device"])
+        else:
+            kw["device"] = spec["device"]
     if kw.get("dt", 0.01) > kw.get("period_s", 1.0):
         probs.add("planner.dt", "a step no longer than planner.period_s", kw.get("dt"))
     return PlannerSettings(**kw)

@@ -97,6 +97,27 @@ def test_steep_hill_every_plan_goes_around(plans):
     assert ps["time"].invalid_edges.get(PL.SS.CODES[PL.SS.STALL - 1], 0) > 0     # the flanks were tried
 
 
+def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
+    """Outside the 1.5 m pass (y 9.25-10.75 m) the ridge's flanks are steeper, straight
+    up, than the vehicle can climb even with a run-up (``heuristics.climb_limit``), so
+    both plans cross x = 15 m inside the pass at ground level, within the default node
+    budget."""
+    from sbmpc import heuristics
+    world, ps = plans["narrow_pass"]
+    e = world.emap
+    y = e.origin[1] + e.resolution * np.arange(e.shape[0])
+    grade = np.abs(np.diff(e.heights, axis=1)).max(axis=1) / e.resolution
+    outside = (y < 9.0) | (y > 11.0)
+    assert np.all(grade[outside] > math.tan(heuristics.climb_limit(world)))
+    for plan in ps.values():
+        assert plan.nodes_expanded < world.scenario.planner.max_expansions
+        x, yy, z = (np.asarray(plan.trajectory[k]) for k in ("x", "y", "z"))
+        i = np.flatnonzero((x[:-1] - 15.0) * (x[1:] - 15.0) <= 0)
+        assert i.size >= 1
+        assert np.all((yy[i] > 9.25 + world.half_width) & (yy[i] < 10.75 - world.half_width))
+        assert max(z) < 0.3
+
+
 def test_hill_tradeoff_time_crosses_energy_goes_around(plans):
     world, ps = plans["hill_tradeoff"]
     top = world.emap.heights.max()

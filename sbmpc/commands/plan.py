@@ -21,6 +21,7 @@ def add_parsers(sub):
     p.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
     p.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    add_backend_flags(p)
     p.set_defaults(func=run_plan)
 
     c = sub.add_parser("compare", help="plan both costs and compare the time- and energy-optimal paths",
@@ -31,7 +32,17 @@ def add_parsers(sub):
     c.add_argument("--out", type=Path, default=Path("."), help="output folder (created if missing; default .)")
     c.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     c.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    add_backend_flags(c)
     c.set_defaults(func=run_compare)
+
+
+def add_backend_flags(p):
+    p.add_argument("--device", choices=("cpu", "cuda"),
+                   help="where the edges are simulated (default: the scenario's planner.device, cpu); "
+                   "cuda needs numba-cuda and an NVIDIA GPU, else a note and the CPU")
+    p.add_argument("--threads", type=int, help="CPU threads for the edges (default: the scenario's; 0: every core)")
+    p.add_argument("--batch", type=int, help="nodes expanded together (default: the scenario's; 0: 1 on the CPU, "
+                   "64 on a GPU)")
 
 
 def _world(args):
@@ -42,6 +53,21 @@ def _world(args):
         if not 0 <= args.seed < 2**31:
             raise InputError(f"--seed: expected an integer in [0, 2^31), found {args.seed}")
         scn = replace(scn, planner=replace(scn.planner, seed=args.seed))
+    over = {}
+    for flag, key, hi in (("threads", "threads", 1024), ("batch", "batch", 4096)):
+        v = getattr(args, flag, None)
+        if v is not None:
+            if not 0 <= v <= hi:
+                raise InputError(f"--{flag}: expected an integer in [0, {hi}], found {v}")
+            over[key] = v
+    if getattr(args, "device", None):
+        over["device"] = args.device
+    if over:
+        scn = replace(scn, planner=replace(scn.planner, **over))
+    from ..plan import device_note
+    note = device_note(scn.planner)
+    if note:
+        print(f"note: {note}", file=sys.stderr)
     return WO.resolve(scn)
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, scenario_inputs, write_text
-from .plan import Progress, _world
+from .plan import Progress, _world, add_backend_flags
 
 
 def add_parsers(sub):
@@ -27,6 +27,7 @@ def add_parsers(sub):
     r.add_argument("--json", type=Path, help="write the run JSON (schema sbmpc.run/1) here")
     r.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
     r.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
+    add_backend_flags(r)
     r.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
     r.set_defaults(func=run_run)
 

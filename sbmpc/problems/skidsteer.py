@@ -65,10 +65,12 @@ COST_TIME, COST_ENERGY = 0.0, 1.0
 
 
 @njit(cache=True, error_model="numpy")
-def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
-    """Simulate one edge in place on S for up to ``nsteps`` steps (module doc). When
-    ``rec`` has rows, every step is recorded from row ``rows`` on. Returns (end, rows):
-    end is 0 (full period), IN_GOAL (stopped in the goal disc) or a negative code."""
+def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
+    """Simulate one edge in place on S for up to ``nsteps`` steps (module doc). Every
+    step is recorded into the rows of ``rec`` from row ``rows`` on, while there are any.
+    ``O``: scratch for the model's outputs (K.NO). Returns (end, rows): end is 0 (full
+    period), IN_GOAL (stopped in the goal disc) or a negative code. Allocates nothing:
+    the same code runs as a CUDA device function (:mod:`sbmpc.problems.skidsteer_cuda`)."""
     dt = params[Q_DT]
     res = params[Q_RES]
     ox = params[Q_OX]
@@ -90,7 +92,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
     gx = params[Q_GX]
     gy = params[Q_GY]
     gr2 = params[Q_GR] * params[Q_GR]
-    O = np.zeros(K.NO)
+    for d in range(O.shape[0]):
+        O[d] = 0.0
     record = rec.shape[0] > 0
     end = 0
     for i in range(nsteps + 1):
@@ -127,16 +130,23 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows):
 
 
 @njit(cache=True, error_model="numpy")
-def propagate(params, data, state, control, out):
-    """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
-    out[:] = state
-    end, _ = edge(params, data, out, control[0], control[1], int(params[Q_NSTEP]),
-                  np.empty((0, K.NR)), 0)
+def edge_cost(params, data, state, control, out, rec, rows, O):
+    """One SBMPC edge from ``state`` into ``out``: its cost (time [s] or energy [J]) or
+    a negative invalid code (``rec``, ``rows``, ``O``: as :func:`edge`; no allocation)."""
+    for d in range(out.shape[0]):
+        out[d] = state[d]
+    end, _ = edge(params, data, out, control[0], control[1], int(params[Q_NSTEP]), rec, rows, O)
     if end < 0:
         return float(end)
     if params[Q_COST] == COST_TIME:
         return out[K.S_T] - state[K.S_T]
     return out[K.S_E] - state[K.S_E]
+
+
+@njit(cache=True, error_model="numpy")
+def propagate(params, data, state, control, out):
+    """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
+    return edge_cost(params, data, state, control, out, np.empty((0, K.NR)), 0, np.empty(K.NO))
 
 
 @njit(EXPAND.signature, cache=True, error_model="numpy")
@@ -217,7 +227,7 @@ def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
     rows = 1
     end = 0
     for e in range(cmd_l.shape[0]):
-        end, rows = edge(params, data, S, cmd_l[e], cmd_r[e], nsteps[e], rec, rows)
+        end, rows = edge(params, data, S, cmd_l[e], cmd_r[e], nsteps[e], rec, rows, O)
         if end < 0 or (end == IN_GOAL and e < cmd_l.shape[0] - 1):
             return rows, S, end, e
     return rows, S, end, -1
