@@ -154,9 +154,35 @@ def _validated(obj, src: str):
     return obj
 
 
-def _from_mapping(cls, data: Any, src: str):
+# keys a parameter file may leave out without naming a ``base``: what the paper's model
+# does without them (no extension, no regeneration, equal wheels) or only labels
+OPTIONAL = {"name", "description", "sources", "regen", "radius_scale_left", "radius_scale_right", "viscous",
+            "delay", "lag", "sag", "shear_lag"}
+
+
+def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = "", base_dir: Path | None = None,
+                  depth: int = 0):
+    """A Vehicle or Terrain from a mapping. ``base: NAME_OR_PATH`` takes every value not
+    given from that vehicle or terrain; without it, a file (``complete``) must give every
+    parameter but the OPTIONAL ones: a partial file silently taking the rest from the
+    P3-AT was a trap."""
     if not isinstance(data, dict):
         raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {type(data).__name__}")
+    data = dict(data)
+    parent = None
+    if "base" in data:
+        b = data.pop("base")
+        if not isinstance(b, str) or not b:
+            raise ParameterError(f"{src}: key 'base': expected a shipped name or a path to a YAML file, found {b!r:.60}")
+        if depth > 8:
+            raise ParameterError(f"{src}: key 'base': expected a chain of at most 8 bases, found more (a loop?)")
+        try:
+            parent = _load(cls, kind or ("vehicles" if cls is Vehicle else "terrains"), b,
+                           base_dir if base_dir is not None else Path(src).parent, depth + 1)
+        except ParameterError as exc:
+            if depth > 0:
+                raise
+            raise ParameterError(f"{src}: key 'base': {exc}") from None
     known = {f.name: f for f in dataclasses.fields(cls)}
     values: dict[str, Any] = {}
     sources: dict[str, str] = {}
@@ -178,6 +204,17 @@ def _from_mapping(cls, data: Any, src: str):
             values[key] = raw
         else:
             values[key] = _check_number(src, key, raw)
+    missing = [f.name for f in dataclasses.fields(cls) if f.name not in OPTIONAL and f.name not in data]
+    if parent is None and complete and missing:
+        raise ParameterError(f"{src}: expected every parameter or a 'base' (e.g. 'base: "
+                             f"{'p3at' if cls is Vehicle else 'vinyl'}') to take the others from, found no "
+                             f"{', '.join(missing[:6])}{' ...' if len(missing) > 6 else ''}")
+    if parent is not None:
+        merged = {f.name: getattr(parent, f.name) for f in dataclasses.fields(cls) if f.name != "sources"}
+        merged.update(values)
+        inherited = {k: f"{v} (from base {parent.name})" for k, v in parent.sources.items() if k not in values}
+        own = {k: sources.get(k, f"set in {src}") for k in values if k not in ("name", "description")}
+        return _validated(cls(**merged, sources={**inherited, **own}), src)
     return _validated(cls(**values, sources=sources), src)
 
 
@@ -241,22 +278,27 @@ def shipped_terrains() -> list[str]:
     return sorted(_shipped("terrains"))
 
 
-def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: Path | None):
+def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: Path | None, depth: int = 0):
     if isinstance(spec, cls):
         return spec
     if isinstance(spec, dict):
-        return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>")
+        return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>", kind=kind, base_dir=base, depth=depth)
     spec_s = str(spec)
     shipped = _shipped(kind)
     if spec_s in shipped:
-        return _from_mapping(cls, _read_yaml(shipped[spec_s]), str(shipped[spec_s]))
+        return _from_mapping(cls, _read_yaml(shipped[spec_s]), str(shipped[spec_s]), True, kind, depth=depth)
     path = Path(spec_s)
     if base is not None and not path.is_absolute():
         path = base / path
-    if path.suffix in (".yaml", ".yml") or path.exists():
-        return _from_mapping(cls, _read_yaml(path), str(path))
+    try:
+        is_file = path.suffix in (".yaml", ".yml") or path.exists()
+    except OSError:                # a name too long for a path
+        is_file = False
+    if is_file:
+        return _from_mapping(cls, _read_yaml(path), str(path), True, kind, path.parent, depth)
     raise ParameterError(
-        f"{kind[:-1]} '{spec_s}': expected a shipped name ({', '.join(sorted(shipped))}) or a path to a YAML file, found neither")
+        f"{kind[:-1]} '{spec_s:.60}': expected a shipped name ({', '.join(sorted(shipped))}) or a path to a YAML file, "
+        "found neither")
 
 
 def load_vehicle(spec: "str | Path | dict | Vehicle" = "p3at", base: Path | None = None) -> Vehicle:

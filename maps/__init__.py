@@ -5,7 +5,7 @@ pitch/roll queries, loading from .npy and PNG files, and seeded generators.
 """
 from .generate import GeneratorError, generate
 from .grid import ElevationMap, gradient_at, height_at, pitch_roll_at
-from .io import MapError, load_map
+from .io import MapError, MapWarning, load_map
 
-__all__ = ["ElevationMap", "GeneratorError", "MapError", "generate", "gradient_at", "height_at",
+__all__ = ["ElevationMap", "GeneratorError", "MapError", "MapWarning", "generate", "gradient_at", "height_at",
            "load_map", "pitch_roll_at"]

@@ -5,6 +5,17 @@ A map specification is the ``map:`` section of a scenario (paths relative to ``b
     map: {file: maps/two_hills.npy, resolution: 0.25, origin: [0, 0]}
     map: {file: maps/valley.png, resolution: 0.5, origin: [0, 0], height_range: [0.0, 6.0]}
     map: {generate: {size: [60, 60], resolution: 0.25, seed: 3, features: [...]}}
+    map: {heights: <2-D array>, resolution: 0.25, origin: [0, 0]}     # from Python
+
+Heights are rows of y and columns of x: ``H[j, i]`` is the height [m] at
+``(origin[0] + i * resolution, origin[1] + j * resolution)``; ``origin`` is the world
+position of cell [0, 0], the map's south-west corner (as ROS's map origin is the
+lower-left pixel's pose).
+
+An 8-bit PNG has 256 grey levels: over a height range of a few metres each level is
+a centimetre step, which turns smooth slopes into stairs that the model climbs as
+steps. :class:`MapWarning` says so with the step size and the remedy (a 16-bit PNG or
+a ``.npy`` array).
 
 PNG heightmaps follow ROS map_server's idea of an image plus metadata: the grey level
 (0..max) maps linearly onto ``height_range`` [m]; the image's top row is the map's
@@ -12,6 +23,7 @@ northern edge (largest y), as an image is seen from above.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +34,19 @@ from .grid import ElevationMap
 
 class MapError(ValueError):
     """A map specification or file is wrong; the message names file or key, expected, found."""
+
+
+class MapWarning(UserWarning):
+    """A map loads but may mislead the planner (an 8-bit PNG's height steps)."""
+
+
+def png_bit_depth(path: Path) -> int | None:
+    """The bit depth of a PNG from its IHDR chunk (None if the file is not a PNG)."""
+    with open(path, "rb") as f:
+        head = f.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return head[24]
 
 
 def _number(spec, key, where, positive=False):
@@ -67,6 +92,17 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
             return generate(spec["generate"], f"{where}.generate")
         except GeneratorError as exc:
             raise MapError(str(exc)) from None
+    if "heights" in spec:
+        extra = set(spec) - {"heights", "resolution", "origin"}
+        if extra:
+            raise MapError(f"{where}: unknown key '{sorted(extra)[0]}' beside 'heights': expected resolution, origin")
+        try:
+            H = np.asarray(spec["heights"], dtype=float)
+        except (TypeError, ValueError):
+            raise MapError(f"{where}.heights: expected a 2-D array of heights in metres, "
+                           f"found {type(spec['heights']).__name__}") from None
+        return _checked(H, _number(spec, "resolution", where, positive=True), _origin(spec, where),
+                        f"{where}.heights", "heights")
     known = {"file", "resolution", "origin", "height_range"}
     extra = set(spec) - known
     if extra:
@@ -88,10 +124,28 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
         if not (isinstance(hr, (list, tuple)) and len(hr) == 2 and all(isinstance(a, (int, float)) for a in hr) and hr[0] <= hr[1]):
             raise MapError(f"{where}.height_range: expected [z_min, z_max] in metres for a PNG map, found {hr!r}")
         H = read_png_heights(path, float(hr[0]), float(hr[1]))
+        if png_bit_depth(path) == 8 and hr[1] > hr[0]:
+            import warnings
+            step = (float(hr[1]) - float(hr[0])) / 255.0
+            warnings.warn(MapWarning(
+                f"{path}: an 8-bit PNG: heights come in steps of {100 * step:.2g} cm over the height range "
+                f"[{hr[0]:g}, {hr[1]:g}] m, a {math.degrees(math.atan(step / res)):.1f} deg step between "
+                f"neighbouring cells; smooth slopes become stairs. Save the heights as a 16-bit PNG or a .npy "
+                f"array"), stacklevel=2)
     else:
         raise MapError(f"{where}.file: expected a .npy or .png file, found '{path.suffix or path.name}'")
-    if H.ndim != 2 or min(H.shape) < 2 or not np.issubdtype(H.dtype, np.number):
-        raise MapError(f"{path}: expected a 2-D array of heights of at least 2 x 2, found shape {H.shape} of {H.dtype}")
+    return _checked(H, res, origin, str(path), path.stem)
+
+
+MAX_CELLS = 25_000_000     # maps larger than this are refused (about 200 MB of heights)
+
+
+def _checked(H, res, origin, src: str, name: str) -> ElevationMap:
+    if H.ndim != 2 or min(H.shape) < 2 or not np.issubdtype(H.dtype, np.number) or np.iscomplexobj(H):
+        raise MapError(f"{src}: expected a 2-D array of real heights of at least 2 x 2, found shape {H.shape} of {H.dtype}")
+    if H.size > MAX_CELLS:
+        raise MapError(f"{src}: expected at most {MAX_CELLS // 1_000_000} million cells, found {H.shape[0]} x {H.shape[1]} "
+                       "(crop or coarsen the map)")
     if not np.all(np.isfinite(H)):
-        raise MapError(f"{path}: expected finite heights, found NaN or inf")
-    return ElevationMap(np.array(H, dtype=float), res, origin, name=path.stem)
+        raise MapError(f"{src}: expected finite heights, found NaN or inf")
+    return ElevationMap(np.array(H, dtype=float), res, origin, name=name)

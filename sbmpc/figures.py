@@ -115,13 +115,19 @@ def plot_compare(emap, plans: dict, scenario, path, title: str = "") -> None:
         axes[0].plot(d, tr["v"], color=c, label=label)
         axes[1].plot(d, tr["power_W"], color=c, lw=0.8)
         axes[2].plot(d, tr["energy_J"] - tr["energy_J"][0], color=c)
-    ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
+    found = [p for p in plans.values() if p.found]
+    if found:
+        ax.legend(loc="upper left", fontsize=8, framealpha=0.85)
+        axes[0].legend(fontsize=8)
+    else:
+        reason = next(iter(plans.values())).reason or ""
+        ax.text(0.5, 0.5, "no path\n" + reason[:80], transform=ax.transAxes, ha="center", va="center",
+                fontsize=10, bbox=dict(facecolor="white", alpha=0.85))
     ax.set_title(title)
     for a, lab in zip(axes, ("speed [m/s]", "battery power [W]", "energy used [J]")):
         a.set_ylabel(lab)
         a.grid(alpha=0.3)
     axes[-1].set_xlabel("distance along the path [m]")
-    axes[0].legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

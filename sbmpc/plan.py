@@ -462,8 +462,10 @@ def plan_both(world: World, progress=None) -> dict:
     """The time- and the energy-optimal plan of a world, {"time": Plan, "energy": Plan}.
 
     The implicit grid merges states, so a search can lose a path that the other search
-    kept: then the energy search's plan may cost more energy than the time search's.
-    Each plan is checked against the other on its own cost; the better one is kept and
+    kept: then the energy search's plan may cost more energy than the time search's,
+    or one search may find nothing where the other found a way. Each plan is checked
+    against the other on its own cost; the better one is kept, a search that found
+    nothing takes the other's plan (its own reason is kept in ``found_by``), and
     ``found_by`` says which search produced it (reported by ``sbmpc compare``)."""
     plans = {c: plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy")}
     t, e = plans["time"], plans["energy"]
@@ -472,10 +474,14 @@ def plan_both(world: World, progress=None) -> dict:
             plans["time"] = _adopt(e, "time", t)
         if t.energy_J < e.energy_J:
             plans["energy"] = _adopt(t, "energy", e)
+    elif t.found != e.found:
+        own, other = (e, t) if t.found else (t, e)
+        plans[own.cost] = _adopt(other, own.cost, own, why=f"its own search found no path: {own.reason}")
     return plans
 
 
-def _adopt(other: Plan, cost: str, own: Plan) -> Plan:
+def _adopt(other: Plan, cost: str, own: Plan, why: str | None = None) -> Plan:
     from dataclasses import replace as _replace
-    return _replace(other, cost=cost, found_by=f"{other.cost} search (better on {cost} than the {cost} search's own plan)",
+    note = why or f"better on {cost} than the {cost} search's own plan"
+    return _replace(other, cost=cost, found_by=f"{other.cost} search ({note})",
                     planning_time_s=own.planning_time_s + other.planning_time_s)

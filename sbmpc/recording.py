@@ -1,14 +1,19 @@
-"""Rerun recordings of plans: the terrain as a coloured mesh, the paths, the vehicle's pose
-animated along the ``time`` timeline, and time series of speed, wheel torques, power and
-energy. Saved to ``.rrd``; ``rerun FILE.rrd`` opens it on a desktop.
+"""Rerun recordings of plans: the terrain as a lit, coloured mesh, the paths, start and
+goal, the vehicle (its own footprint) animated along the ``time`` timeline, and time
+series of speed, wheel torques, currents, power and energy. Saved to ``.rrd`` with a
+blueprint (:func:`blueprint`: the 3-D view beside one time-series view per quantity,
+named with its unit, every plan in its path's colour); ``rerun FILE.rrd`` opens it on a
+desktop. The world is Z-up, right-handed (x east, y north), in metres.
 
 Entities (one set per plan label, e.g. ``time`` and ``energy``)::
 
-    terrain                      Mesh3D, static
+    terrain                      Mesh3D with vertex normals, static
+    markers/start, markers/goal  Points3D (labelled) and the goal disc's circle, static
     paths/<label>                LineStrips3D, static
     vehicle/<label>              Transform3D over time; vehicle/<label>/body Boxes3D
     plots/speed/<label>          Scalars [m/s]
     plots/tau_l/<label>, plots/tau_r/<label>   Scalars [N m]
+    plots/i_l/<label>, plots/i_r/<label>       Scalars [A]
     plots/power/<label>          Scalars [W]
     plots/energy/<label>         Scalars [J]
 
@@ -22,7 +27,22 @@ from pathlib import Path
 import numpy as np
 
 COLOURS = {"time": (230, 120, 30), "energy": (40, 170, 80)}
-SERIES = (("speed", "v"), ("tau_l", "tau_l"), ("tau_r", "tau_r"), ("power", "power_W"), ("energy", "energy_J"))
+# (entity, trajectory key, view title)
+SERIES = (("speed", "v", "speed [m/s]"), ("tau_l", "tau_l", "left torque [N m]"),
+          ("tau_r", "tau_r", "right torque [N m]"), ("i_l", "i_l", "left current [A]"),
+          ("i_r", "i_r", "right current [A]"), ("power", "power_W", "battery power [W]"),
+          ("energy", "energy_J", "energy used [J]"))
+
+
+def blueprint():
+    """The layout: the 3-D scene (terrain, paths, markers, vehicles) beside a column of
+    time-series views, one per quantity, titled with its unit."""
+    import rerun.blueprint as rrb
+    plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=title) for name, _, title in SERIES]
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Spatial3DView(origin="/", name="terrain, paths and vehicles"),
+                       rrb.Vertical(rrb.Grid(*plots, grid_columns=2)), column_shares=[3, 2]),
+        collapse_panels=True)
 
 
 def terrain_mesh(emap, max_side: int = 160):
@@ -52,13 +72,36 @@ def terrain_mesh(emap, max_side: int = 160):
     return verts, np.vstack([t1, t2]), (255 * rgb).astype(np.uint8)
 
 
-def _log_trajectory(rec, label: str, tr: dict, col, every_s: float) -> None:
+def terrain_normals(verts: np.ndarray, shape: tuple) -> np.ndarray:
+    """Unit vertex normals (n, 3) of a :func:`terrain_mesh` grid of ``shape`` (rows,
+    columns): (-dz/dx, -dz/dy, 1), normalised, from central differences."""
+    a, b = shape
+    X, Y, Z = (verts[:, k].reshape(a, b) for k in range(3))
+    dzdy = np.gradient(Z, Y[:, 0], axis=0) if a > 1 else np.zeros_like(Z)
+    dzdx = np.gradient(Z, X[0, :], axis=1) if b > 1 else np.zeros_like(Z)
+    n = np.stack([-dzdx, -dzdy, np.ones_like(Z)], axis=-1).reshape(-1, 3)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def body_half_sizes(vehicle) -> tuple:
+    """Half sizes [m] of a box around the vehicle: the wheels' extent (contact patches
+    plus a wheel radius fore and aft; track plus a patch width across; a wheel diameter
+    high). The P3-AT when no vehicle is given."""
+    if vehicle is None:
+        from dynamics import load_vehicle
+        vehicle = load_vehicle("p3at")
+    r = vehicle.wheel_radius
+    return (vehicle.patch_outer / 2.0 + r, vehicle.width / 2.0 + vehicle.patch_width / 2.0, r)
+
+
+def _log_trajectory(rec, label: str, tr: dict, col, every_s: float, vehicle=None) -> None:
     """A path (static), the vehicle animated along ``time`` and its time series."""
     import rerun as rr
     from scipy.spatial.transform import Rotation
     pts = np.c_[tr["x"], tr["y"], tr["z"] + 0.05]
-    rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.06]), static=True)
-    rec.log(f"vehicle/{label}/body", rr.Boxes3D(half_sizes=[[0.26, 0.25, 0.12]], centers=[[0, 0, 0.15]],
+    rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.06], labels=[label]), static=True)
+    hx, hy, hz = body_half_sizes(vehicle)
+    rec.log(f"vehicle/{label}/body", rr.Boxes3D(half_sizes=[[hx, hy, hz]], centers=[[0, 0, hz]],
                                                  colors=[col]), static=True)
     t = tr["t"] - tr["t"][0]
     step = max(1, int(round(every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
@@ -69,17 +112,34 @@ def _log_trajectory(rec, label: str, tr: dict, col, every_s: float) -> None:
     rec.send_columns(f"vehicle/{label}", indexes=[times],
                      columns=rr.Transform3D.columns(translation=np.c_[tr["x"][keep], tr["y"][keep], tr["z"][keep]],
                                                     quaternion=quats))
-    for name, key in SERIES:
+    for name, key, _ in SERIES:
+        if key not in tr:
+            continue
+        rec.log(f"plots/{name}/{label}", rr.SeriesLines(colors=[col], names=[label], widths=[1.5]), static=True)
         rec.send_columns(f"plots/{name}/{label}", indexes=[rr.TimeColumn("time", duration=t)],
                          columns=rr.Scalars.columns(scalars=np.asarray(tr[key], float)))
 
 
-def _open(path: Path, app: str, emap):
+def _open(path: Path, app: str, emap, scenario=None):
     import rerun as rr
     rec = rr.RecordingStream(app)
-    rec.save(str(path))
+    rec.save(str(path), default_blueprint=blueprint())
+    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     verts, tris, cols = terrain_mesh(emap)
-    rec.log("terrain", rr.Mesh3D(vertex_positions=verts, triangle_indices=tris, vertex_colors=cols), static=True)
+    a = len(np.unique(verts[:, 1]))
+    normals = terrain_normals(verts, (a, len(verts) // a))
+    rec.log("terrain", rr.Mesh3D(vertex_positions=verts, triangle_indices=tris, vertex_colors=cols,
+                                 vertex_normals=normals), static=True)
+    if scenario is not None:
+        s, g = scenario.start, scenario.goal
+        zs = emap.height(s["x"], s["y"])
+        rec.log("markers/start", rr.Points3D([[s["x"], s["y"], zs + 0.15]], colors=[(30, 30, 30)], radii=[0.15],
+                                             labels=["start"]), static=True)
+        ang = np.linspace(0.0, 2.0 * np.pi, 49)
+        ring = np.c_[g["x"] + g["radius"] * np.cos(ang), g["y"] + g["radius"] * np.sin(ang)]
+        rz = np.array([emap.height(x, y) for x, y in ring]) + 0.05
+        rec.log("markers/goal", rr.LineStrips3D([np.c_[ring, rz]], colors=[(20, 20, 20)], radii=[0.04],
+                                                labels=["goal"]), static=True)
     return rec
 
 
@@ -88,25 +148,28 @@ def _close(rec) -> None:
     rec.disconnect()
 
 
-def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: float = 0.1) -> Path:
-    """Write an .rrd of ``plans`` ({label: Plan}) over ``emap``; returns the path."""
+def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: float = 0.1, scenario=None,
+          vehicle=None) -> Path:
+    """Write an .rrd of ``plans`` ({label: Plan}) over ``emap`` (with the start and goal
+    of ``scenario`` and the box of ``vehicle`` when given); returns the path."""
     path = Path(path)
-    rec = _open(path, app, emap)
+    rec = _open(path, app, emap, scenario)
     for label, plan in plans.items():
         if plan.found:
-            _log_trajectory(rec, label, plan.trajectory, COLOURS.get(label, (60, 110, 220)), every_s)
+            _log_trajectory(rec, label, plan.trajectory, COLOURS.get(label, (60, 110, 220)), every_s, vehicle)
     _close(rec)
     return path
 
 
-def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: float = 0.1) -> Path:
+def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: float = 0.1, scenario=None,
+              vehicle=None) -> Path:
     """Write an .rrd of a receding-horizon run (:class:`sbmpc.receding.RunResult`): the
     executed path with the vehicle and its time series under the label ``executed``, and
     every plan of the run as a static path ``plans/<k>`` (0 the first plan) with its
     start marked at ``plans/<k>/start``."""
     import rerun as rr
     path = Path(path)
-    rec = _open(path, app, emap)
+    rec = _open(path, app, emap, scenario)
     for k, rp in enumerate(result.plans):
         if not rp.plan.found:
             continue
@@ -117,7 +180,7 @@ def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: f
         rec.log(f"plans/{k}/start", rr.Points3D([[tr["x"][0], tr["y"][0], tr["z"][0] + 0.1]], colors=[col],
                                                 radii=[0.08], labels=[rp.why]), static=True)
     if len(result.trajectory.get("t", ())) > 1:
-        _log_trajectory(rec, "executed", result.trajectory, (220, 50, 50), every_s)
+        _log_trajectory(rec, "executed", result.trajectory, (220, 50, 50), every_s, vehicle)
     _close(rec)
     return path
 

@@ -42,7 +42,9 @@ def test_user_file_and_roundtrip(tmp_path, p3at):
     ("mass: heavy\n", ["key 'mass'", "expected a number", "'heavy'"]),
     ("masss: 3\n", ["unknown key 'masss'", "expected one of"]),
     ("mass: [1, 2\n", ["malformed YAML", "line"]),
-    ("patch_inner: 0.5\n", ["patch_inner", "C < L"]),
+    ("base: p3at\npatch_inner: 0.5\n", ["patch_inner", "C < L"]),
+    ("mass: 40\n", ["expected every parameter or a 'base'", "found no inertia"]),
+    ("base: nosuchbot\nmass: 40\n", ["nosuchbot", "expected a shipped name"]),
     ("- 1\n", ["expected a mapping"]),
 ])
 def test_bad_files_name_file_key_expected_found(tmp_path, text, words):

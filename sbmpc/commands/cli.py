@@ -18,6 +18,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
                 "closed-loop dynamic model of Yu et al. (2010).",
                 epilog="--debug (anywhere on the line): show the traceback of an internal error.")
+    from .. import __version__
+    p.add_argument("--version", action="version", version=f"sbmpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     from . import diagnose, plan, run, simulate
     simulate.add_parser(sub)
@@ -38,8 +40,18 @@ def main(argv=None) -> int:
         argv.remove("--debug")
     parser = build_parser()
     args = parser.parse_args(argv)
+    import warnings
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, UserWarning) and not issubclass(category, DeprecationWarning):
+            print(f"sbmpc {args.command}: warning: {message}", file=sys.stderr)
     try:
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")                  # library chatter (numba, matplotlib)
+            from maps import MapWarning
+            warnings.simplefilter("always", MapWarning)      # the user's own input: one line each
+            warnings.showwarning = one_line
+            return int(args.func(args) or 0)
     except InputError as exc:
         print(f"sbmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2

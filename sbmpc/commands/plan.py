@@ -43,6 +43,20 @@ def add_backend_flags(p):
     p.add_argument("--threads", type=int, help="CPU threads for the edges (default: the scenario's; 0: every core)")
     p.add_argument("--batch", type=int, help="nodes expanded together (default: the scenario's; 0: 1 on the CPU, "
                    "64 on a GPU)")
+    p.add_argument("--max-expansions", type=int, help="node budget (default: the scenario's planner.max_expansions)")
+    p.add_argument("--time-budget", type=float, help="wall-clock budget [s] (default: the scenario's)")
+    p.add_argument("--start", help="start pose X,Y[,YAW_DEG] [m, m, deg] (default: the scenario's)")
+    p.add_argument("--goal", help="goal X,Y[,RADIUS] [m] (default: the scenario's)")
+
+
+def _numbers(text: str, flag: str, n_min: int, n_max: int, what: str) -> list:
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        vals = []
+    if not n_min <= len(vals) <= n_max or not all(-1e9 < v < 1e9 for v in vals):
+        raise InputError(f"{flag}: expected {what}, found {text!r:.60}")
+    return vals
 
 
 def _world(args):
@@ -62,8 +76,24 @@ def _world(args):
             over[key] = v
     if getattr(args, "device", None):
         over["device"] = args.device
+    if getattr(args, "max_expansions", None) is not None:
+        if not 1 <= args.max_expansions <= 10_000_000:
+            raise InputError(f"--max-expansions: expected an integer in [1, 10000000], found {args.max_expansions}")
+        over["max_expansions"] = args.max_expansions
+    if getattr(args, "time_budget", None) is not None:
+        if not 0.01 <= args.time_budget <= 86400:
+            raise InputError(f"--time-budget: expected seconds in [0.01, 86400], found {args.time_budget}")
+        over["time_budget_s"] = args.time_budget
     if over:
         scn = replace(scn, planner=replace(scn.planner, **over))
+    if getattr(args, "start", None):
+        v = _numbers(args.start, "--start", 2, 3, "X,Y or X,Y,YAW_DEG in metres and degrees")
+        scn = replace(scn, start=dict(scn.start, x=v[0], y=v[1], **({"yaw_deg": v[2]} if len(v) > 2 else {})))
+    if getattr(args, "goal", None):
+        v = _numbers(args.goal, "--goal", 2, 3, "X,Y or X,Y,RADIUS in metres")
+        if len(v) > 2 and not 0.01 <= v[2] <= 1000:
+            raise InputError(f"--goal: expected a radius in [0.01, 1000] m, found {v[2]:g}")
+        scn = replace(scn, goal=dict(scn.goal, x=v[0], y=v[1], **({"radius": v[2]} if len(v) > 2 else {})))
     from ..plan import device_note
     note = device_note(scn.planner)
     if note:
@@ -71,18 +101,43 @@ def _world(args):
     return WO.resolve(scn)
 
 
-class Progress:
-    """Progress lines on stderr for searches longer than ``after`` seconds."""
+def compile_note(quiet: bool = False) -> None:
+    """One line on stderr when numba's on-disk cache of the planner is missing (a fresh
+    install or changed source): the first plan then compiles for about a minute."""
+    if quiet:
+        return
+    try:
+        import os
+        from ..problems.skidsteer import expand_batch
+        from ..search.astar import run_search
+        cold = any(not os.path.exists(f._cache._cache_file._index_path) for f in (run_search, expand_batch))
+    except Exception:          # numba's cache internals moved: say nothing
+        return
+    if cold:
+        print("compiling the planner (first run only, about a minute) ...", file=sys.stderr, flush=True)
 
-    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0):
-        self.label, self.quiet, self.after, self.every = label, quiet, after, every
+
+class Progress:
+    """Progress lines on stderr for searches longer than ``after`` seconds: expansions
+    against the node budget, nodes, elapsed against the time budget. Only on a
+    terminal (a log or a pipe gets the summary alone), never with ``quiet``."""
+
+    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0, planner=None):
+        self.label, self.after, self.every = label, after, every
+        self.quiet = quiet or not sys.stderr.isatty()
         self.next = after
+        self.budget = getattr(planner, "max_expansions", None)
+        self.time_budget = getattr(planner, "time_budget_s", None)
 
     def __call__(self, iterations, nodes, elapsed):
         if self.quiet or elapsed < self.next:
             return
         self.next = elapsed + self.every
-        print(f"  {self.label}: {iterations} expansions, {nodes} nodes, {elapsed:.1f} s", file=sys.stderr, flush=True)
+        part = f"{iterations:,} expansions"
+        if self.budget:
+            part += f" of {self.budget:,} ({100.0 * iterations / self.budget:.0f} %)"
+        t = f"{elapsed:.1f} s" + (f" of {self.time_budget:g} s" if self.time_budget else "")
+        print(f"  {self.label}: {part}, {nodes:,} nodes, {t}", file=sys.stderr, flush=True)
 
 
 def summary(plan) -> str:
@@ -119,13 +174,15 @@ def run_plan(args) -> int:
     outs.file(args.rrd, "--rrd")
     world = _world(args)
     cost = args.cost or world.scenario.cost
-    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet))
+    compile_note(args.quiet)
+    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, planner=world.scenario.planner))
     print(summary(plan))
     if args.json:
         write_text(args.json, json.dumps(plan.to_json(), indent=1))
     if args.rrd:
         with atomic(args.rrd) as tmp:
-            recording.write(tmp, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}")
+            recording.write(tmp, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}",
+                            scenario=world.scenario, vehicle=world.vehicle)
     if not plan.found:
         raise NoResult(f"no path: {plan.reason}")
     return 0
@@ -151,8 +208,9 @@ def run_compare(args) -> int:
     Outputs(scenario_inputs(args.scenario)).folder(out, "--out", ("compare.json", "compare.png", "compare.rrd"))
     world = _world(args)
     out.mkdir(parents=True, exist_ok=True)
+    compile_note(args.quiet)
     t0 = time.perf_counter()
-    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet))
+    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, planner=world.scenario.planner))
     print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
     print(compare_table(plans))
     for c, p in plans.items():
@@ -167,10 +225,16 @@ def run_compare(args) -> int:
                            "energy_saved_J": t.energy_J - e.energy_J,
                            "holds": bool(t.travel_time_s <= e.travel_time_s + 1e-9 and e.energy_J <= t.energy_J + 1e-9)}
     write_text(out / "compare.json", json.dumps(doc, indent=1))
+    found = [c for c, p in plans.items() if p.found]
+    title = (f"{world.scenario.name}: time- vs energy-optimal" if len(found) == 2 and not any(p.found_by for p in plans.values())
+             else f"{world.scenario.name}: " + ("no path" if not found else
+                                                 ", ".join(f"{c}-optimal" + (f" (= the {plans[c].found_by.split(' search')[0]} plan)" if plans[c].found_by else "")
+                                                           for c in plans)))
     with atomic(out / "compare.png") as tmp:
-        plot_compare(world.emap, plans, world.scenario, tmp, title=f"{world.scenario.name}: time- vs energy-optimal")
+        plot_compare(world.emap, plans, world.scenario, tmp, title=title)
     with atomic(out / "compare.rrd") as tmp:
-        recording.write(tmp, world.emap, plans, app=f"sbmpc compare {world.scenario.name}")
+        recording.write(tmp, world.emap, plans, app=f"sbmpc compare {world.scenario.name}",
+                        scenario=world.scenario, vehicle=world.vehicle)
     print(f"wrote {out / 'compare.json'}, {out / 'compare.png'}, {out / 'compare.rrd'}")
     if not any(p.found for p in plans.values()):
         raise NoResult(f"no path: {plans['time'].reason}")

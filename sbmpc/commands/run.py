@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, scenario_inputs, write_text
-from .plan import Progress, _world, add_backend_flags
+from .plan import Progress, _world, add_backend_flags, compile_note
 
 
 def add_parsers(sub):
@@ -82,13 +82,15 @@ def run_run(args) -> int:
     if cost == "energy" and world.vehicle.regen:
         raise InputError(f"{args.vehicle or base}: energy cost needs a planning vehicle without regeneration "
                          "(regen: false), found regen: true")
+    compile_note(args.quiet)
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet))
     print(summary(res))
     if args.json:
         write_text(args.json, json.dumps(res.to_json(), indent=1))
     if args.rrd:
         with atomic(args.rrd) as tmp:
-            recording.write_run(tmp, world.emap, res, app=f"sbmpc run {world.scenario.name}")
+            recording.write_run(tmp, world.emap, res, app=f"sbmpc run {world.scenario.name}",
+                                scenario=world.scenario, vehicle=truth or world.vehicle)
     if res.status != "reached":
         raise NoResult(f"failed: {res.reason}")
     return 0

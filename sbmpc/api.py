@@ -1,0 +1,104 @@
+"""The Python way in: one call plans, compares or runs a scenario.
+
+    >>> import sbmpc
+    >>> plan = sbmpc.plan_scenario("scenarios/hill_tradeoff.yaml", cost="energy")
+    >>> plan.found, round(plan.energy_J)
+    >>> plan.trajectory["x"]                      # NumPy arrays, sampled every 0.05 s
+    >>> plans = sbmpc.compare_scenario("scenarios/hill_tradeoff.yaml")   # {"time": Plan, "energy": Plan}
+    >>> run = sbmpc.run_scenario("scenarios/flat.yaml", truth="p3at")
+
+A scenario is a YAML file, a dict with the file's keys, or a :class:`Scenario`. A map
+can come as a heights array: ``heights`` (2-D, [m], row j = y, column i = x) with
+``resolution`` [m] and ``origin`` (the world (x, y) of cell [0, 0]) replace the
+scenario's ``map``. Keyword ``planner`` settings (``max_expansions=...``,
+``threads=...``, ``device="cuda"``, ...) override the scenario's. Everything is
+validated as the command line validates it: a bad value raises
+:class:`sbmpc.errors.InputError` naming the key, what was expected and what was found.
+"""
+from __future__ import annotations
+
+from dataclasses import fields, replace
+from pathlib import Path
+
+from .errors import InputError
+
+
+def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner):
+    """A validated :class:`sbmpc.scenario.Scenario` from a path, a dict or a Scenario,
+    with an optional heights array for its map and planner overrides."""
+    from . import scenario as SC
+    if isinstance(scenario, SC.Scenario):
+        scn = scenario
+    elif isinstance(scenario, dict):
+        data = dict(scenario)
+        if heights is not None:      # (a stand-in for validation; the array replaces it below)
+            data["map"] = {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0}
+        scn = SC.parse(data, "<scenario dict>")
+    elif isinstance(scenario, (str, Path)):
+        scn = SC.load(scenario)
+    else:
+        raise InputError(f"scenario: expected a path, a dict or a Scenario, found {type(scenario).__name__}")
+    if heights is not None:
+        if resolution is None:
+            raise InputError("resolution: expected the cell size in metres of the heights array, found None")
+        scn = replace(scn, map_spec={"heights": heights, "resolution": resolution, "origin": list(origin)})
+    if planner:
+        known = {f.name for f in fields(SC.PlannerSettings)}
+        unknown = sorted(set(planner) - known)
+        if unknown:
+            raise InputError(f"planner.{unknown[0]}: expected one of the keys {', '.join(sorted(known))}, "
+                             "found an unknown key")
+        # validated as a scenario file's planner section would be
+        merged = {f.name: getattr(scn.planner, f.name) for f in fields(SC.PlannerSettings)}
+        merged.update(planner)
+        spec = {k: (list(v) if isinstance(v, tuple) else v) for k, v in merged.items() if v is not None}
+        probs = SC._Problems(str(scn.path or scn.name))
+        settings = SC._planner(spec, probs)
+        probs.raise_if_any()
+        scn = replace(scn, planner=settings)
+    return scn
+
+
+def load_world(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner):
+    """The scenario made concrete (:class:`sbmpc.world.World`: map, vehicle, terrains
+    loaded and the start and goal checked against the map)."""
+    from .world import resolve
+    return resolve(load_scenario(scenario, heights, resolution, origin, **planner))
+
+
+def plan_scenario(scenario, cost: str | None = None, heights=None, resolution=None, origin=(0.0, 0.0),
+                  progress=None, **planner):
+    """Plan a scenario for ``cost`` ('time' or 'energy'; default the scenario's): a
+    :class:`sbmpc.plan.Plan` (``found``, ``controls`` [(wl, wr, duration_s)],
+    ``trajectory`` {name: array}, ``travel_time_s``, ``energy_J``, ``reason`` when no
+    path was found). ``progress(expansions, nodes, elapsed_s)`` is called while it
+    searches."""
+    from .plan import plan
+    if cost not in (None, "time", "energy"):
+        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r}")
+    return plan(load_world(scenario, heights, resolution, origin, **planner), cost, progress=progress)
+
+
+def compare_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner) -> dict:
+    """The time- and the energy-optimal plans, {'time': Plan, 'energy': Plan} (as
+    ``sbmpc compare``: a search that found nothing takes the other's plan when that one
+    reaches the goal)."""
+    from .plan import plan_both
+    return plan_both(load_world(scenario, heights, resolution, origin, **planner))
+
+
+def run_scenario(scenario, cost: str | None = None, truth=None, heights=None, resolution=None,
+                 origin=(0.0, 0.0), **planner):
+    """A receding-horizon run (``sbmpc run``): plan, execute on ``truth`` (a vehicle
+    name, a vehicle YAML path or a :class:`dynamics.Vehicle`; default the planning
+    vehicle itself), re-plan where the vehicle leaves the prediction. Returns a
+    :class:`sbmpc.receding.RunResult`."""
+    from dynamics import ParameterError, Vehicle, load_vehicle
+    from . import receding
+    world = load_world(scenario, heights, resolution, origin, **planner)
+    if truth is not None and not isinstance(truth, Vehicle):
+        try:
+            truth = load_vehicle(truth)
+        except ParameterError as exc:
+            raise InputError(f"truth: {exc}") from None
+    return receding.run(world, cost, truth)

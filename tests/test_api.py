@@ -1,0 +1,139 @@
+"""The Python way in (sbmpc.plan_scenario & co.) and the command line's conveniences:
+overrides of start, goal and budgets, --version, vehicle files with a base, 8-bit PNG
+maps, compare when only one search finds a path."""
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sbmpc
+from sbmpc.commands.cli import main
+from sbmpc.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
+FLAT = ROOT / "scenarios" / "flat.yaml"
+
+
+def test_one_call_plans_a_file_and_the_trajectory_is_arrays():
+    plan = sbmpc.plan_scenario(FLAT)
+    assert plan.found and plan.check.reached
+    assert isinstance(plan.trajectory["x"], np.ndarray) and len(plan.trajectory["x"]) > 100
+    g = {"x": 16.0, "y": 9.0}
+    assert np.hypot(plan.trajectory["x"][-1] - g["x"], plan.trajectory["y"][-1] - g["y"]) <= 0.5 + 1e-9
+
+
+def test_a_heights_array_plans_like_the_same_map_from_a_file(tmp_path):
+    """A tilted plane as an array and as a .npy file: the same plan, control for control."""
+    H = np.fromfunction(lambda j, i: 0.02 * i * 0.25, (41, 61))          # 2 % grade eastwards
+    np.save(tmp_path / "h.npy", H)
+    scn = {"name": "tilt", "terrain": "asphalt", "start": {"x": 2.0, "y": 2.0}, "goal": {"x": 12.0, "y": 8.0, "radius": 0.5}}
+    a = sbmpc.plan_scenario(scn, heights=H, resolution=0.25, max_expansions=20_000)
+    b = sbmpc.plan_scenario(dict(scn, map={"file": str(tmp_path / "h.npy"), "resolution": 0.25}), max_expansions=20_000)
+    assert a.found and a.controls == b.controls
+    assert a.trajectory["z"][-1] > a.trajectory["z"][0] + 0.15           # it climbed the grade
+
+
+@pytest.mark.parametrize("kwargs, says", [
+    (dict(max_expansions=0), "planner.max_expansions"),
+    (dict(foo=1), "planner.foo"),
+    (dict(device="tpu"), "planner.device"),
+    (dict(cost="speed"), "cost"),
+])
+def test_bad_api_arguments_raise_one_input_error(kwargs, says):
+    with pytest.raises(InputError, match=says):
+        sbmpc.plan_scenario(FLAT, **kwargs)
+
+
+def test_the_api_validates_a_heights_map_as_the_command_line_does():
+    scn = {"name": "x", "start": {"x": 200.0, "y": 2.0}, "goal": {"x": 8.0, "y": 8.0, "radius": 0.5}}
+    with pytest.raises(InputError, match="start: expected"):
+        sbmpc.plan_scenario(scn, heights=np.zeros((41, 41)), resolution=0.25)
+    with pytest.raises(InputError, match="finite heights"):
+        sbmpc.plan_scenario(dict(scn, start={"x": 2.0, "y": 2.0}), heights=np.full((41, 41), np.nan), resolution=0.25)
+    with pytest.raises(InputError, match="resolution"):
+        sbmpc.plan_scenario(scn, heights=np.zeros((41, 41)))
+
+
+def test_command_line_overrides_start_goal_and_budgets(tmp_path, capsys):
+    out = tmp_path / "p.json"
+    assert main(["plan", str(FLAT), "--start", "3,3,45", "--goal", "10,8,0.4", "--max-expansions", "5000",
+                 "--time-budget", "30", "--json", str(out), "--quiet"]) == 0
+    import json
+    doc = json.loads(out.read_text())
+    tr = doc["trajectory"]
+    assert (tr["x"][0], tr["y"][0]) == (3.0, 3.0) and abs(tr["yaw"][0] - np.radians(45)) < 1e-9
+    assert np.hypot(tr["x"][-1] - 10, tr["y"][-1] - 8) <= 0.4 + 1e-9
+    capsys.readouterr()
+    assert main(["plan", str(FLAT), "--start", "3,x"]) == 2
+    assert "--start: expected X,Y" in capsys.readouterr().err
+    assert main(["plan", str(FLAT), "--max-expansions", "1", "--quiet"]) == 1
+    assert "node budget of 1 expansions" in capsys.readouterr().err
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.strip() == f"sbmpc {sbmpc.__version__}"
+
+
+def test_a_vehicle_file_inherits_only_from_a_named_base(tmp_path):
+    from dynamics import ParameterError, load_vehicle
+    p3at = load_vehicle("p3at")
+    part = tmp_path / "mybot.yaml"
+    part.write_text("name: mybot\nmass: 80\n")
+    with pytest.raises(ParameterError, match="'base'"):
+        load_vehicle(part)
+    part.write_text("base: p3at\nname: mybot\nmass: 80\n")
+    v = load_vehicle(part)
+    assert v.mass == 80.0 and v.wheel_radius == p3at.wheel_radius and v.name == "mybot"
+    assert "set in" in v.sources["mass"] and "from base p3at" in v.sources["wheel_radius"]
+    (tmp_path / "heavier.yaml").write_text("base: mybot.yaml\nmass: 90\n")      # a chain, relative to the file
+    assert load_vehicle(tmp_path / "heavier.yaml").mass == 90.0
+    (tmp_path / "loop.yaml").write_text("base: loop.yaml\nmass: 90\n")
+    with pytest.raises(ParameterError, match="chain"):
+        load_vehicle(tmp_path / "loop.yaml")
+
+
+def test_an_8_bit_png_map_warns_with_its_step_and_the_remedy(tmp_path, capsys):
+    from PIL import Image
+    from maps import MapWarning, load_map
+    img = (np.linspace(0, 255, 61)[None, :] * np.ones((41, 1))).astype(np.uint8)
+    Image.fromarray(img).save(tmp_path / "m8.png")
+    Image.fromarray(img.astype(np.uint16) * 257).save(tmp_path / "m16.png")
+    spec = {"resolution": 0.25, "height_range": [0.0, 2.5]}
+    with pytest.warns(MapWarning, match=r"8-bit PNG.*steps of 0.98 cm.*16-bit PNG or a .npy"):
+        load_map(dict(spec, file="m8.png"), tmp_path)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MapWarning)
+        m16 = load_map(dict(spec, file="m16.png"), tmp_path)
+    assert m16.heights.max() == pytest.approx(2.5)
+    scn = tmp_path / "s.yaml"
+    scn.write_text(FLAT.read_text().replace("generate: {size: [20, 12], resolution: 0.25, features: []}",
+                                            "{file: m8.png, resolution: 0.25, height_range: [0.0, 0.1]}")
+                   .replace("x: 16.0, y: 9.0", "x: 12.0, y: 8.0"))
+    assert main(["plan", str(scn), "--quiet"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sbmpc plan: warning: ") and "8-bit PNG" in err[0]
+
+
+def test_compare_takes_the_other_plan_when_one_search_finds_nothing():
+    from sbmpc import plan as PL, scenario as SC, world as WO
+    from sbmpc.plan import Plan, plan_both
+    world = WO.resolve(SC.load(FLAT))
+    real = PL.plan
+
+    def energy_fails(w, cost=None, **kw):
+        if cost == "energy":
+            return Plan(w.scenario.name, "energy", "no_path", "node budget of 3 expansions used up")
+        return real(w, cost, **kw)
+    PL.plan = energy_fails
+    try:
+        plans = plan_both(world)
+    finally:
+        PL.plan = real
+    t, e = plans["time"], plans["energy"]
+    assert t.found and e.found and e.cost == "energy" and e.controls == t.controls
+    assert "time search" in e.found_by and "node budget of 3" in e.found_by
