@@ -159,7 +159,7 @@ class Candidate:
 
 @dataclass
 class Diagnosis:
-    """The result of :func:`diagnose` (CONTRACTS.md diagnosis JSON via :meth:`to_json`)."""
+    """The result of :func:`diagnose` (docs/formats.md diagnosis JSON via :meth:`to_json`)."""
 
     channels: tuple
     scales: dict

@@ -1,4 +1,4 @@
-"""Measured runs: the run CSV of CONTRACTS.md, read and written.
+"""Measured runs: the run CSV of docs/formats.md, read and written.
 
 A header row of column names, optionally preceded by ``# key: value`` metadata lines
 (vehicle, terrain, slope_deg, note). Required columns: ``t``, ``wl_cmd``, ``wr_cmd``,

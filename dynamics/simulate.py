@@ -102,7 +102,7 @@ class Trajectory:
         return len(self.data["t"])
 
     def to_json(self) -> dict:
-        """The ``trajectory`` object of the plan/simulate JSON (CONTRACTS.md)."""
+        """The ``trajectory`` object of the plan/simulate JSON (docs/formats.md)."""
         keys = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r",
                 "power_W", "energy_J")
         return {k: [round(float(x), 6) for x in self.data[k]] for k in keys}

@@ -1,6 +1,6 @@
 """The ground: an elevation grid with an optional terrain layer, and compiled queries.
 
-Conventions (CONTRACTS.md): heights [m] in a 2-D array, row = y index, column = x index;
+Conventions (docs/formats.md): heights [m] in a 2-D array, row = y index, column = x index;
 ``origin`` is the world (x, y) of the centre of cell [0, 0]; ``resolution`` is metres per
 cell. x is east, y north, z up; yaw is counter-clockwise from +x.
 

@@ -114,7 +114,7 @@ TRAJECTORY_KEYS = ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_
 
 
 def trajectory_json(traj: dict) -> dict:
-    """The JSON ``trajectory`` object (CONTRACTS.md keys plus pitch and currents)."""
+    """The JSON ``trajectory`` object (docs/formats.md keys plus pitch and currents)."""
     return {k: [float(a) for a in traj[k]] for k in TRAJECTORY_KEYS if k in traj}
 
 def trajectory_span(tr: dict, key: str) -> float | None:
@@ -129,7 +129,7 @@ def trajectory_length(tr: dict) -> float | None:
 
 @dataclass
 class Plan:
-    """The result of planning one scenario for one cost (CONTRACTS.md plan JSON). The
+    """The result of planning one scenario for one cost (docs/formats.md plan JSON). The
     trajectory, travel time and energy are those of the controls driven at the vehicle's
     controller rate (``check``), not the search's coarser prediction."""
 

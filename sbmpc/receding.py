@@ -69,7 +69,7 @@ class Replan:
 
 @dataclass
 class RunResult:
-    """The outcome of a receding-horizon run (CONTRACTS.md ``sbmpc run`` JSON)."""
+    """The outcome of a receding-horizon run (docs/formats.md ``sbmpc run`` JSON)."""
 
     scenario: str
     cost: str

@@ -1,7 +1,7 @@
 """Scenario files: map, terrain (one or a layer of regions), vehicle, start, goal, cost and
 planner settings, validated with every problem reported at once by its key path.
 
-The minimum is CONTRACTS.md's; additions (all optional)::
+The minimum is docs/formats.md's; additions (all optional)::
 
     description: what the scenario shows
     map: {generate: {...}}          # or {file: x.png, resolution:, height_range: [lo, hi]}

@@ -13,9 +13,9 @@ from .files import Outputs, atomic, write_text
 
 def add_parsers(sub):
     p = sub.add_parser("diagnose", help="replay a measured run, find what the model gets wrong, name the cause",
-                       description="Replay the logged commands of a measured run (CSV of CONTRACTS.md) through the "
-                       "closed-loop model, fit every candidate model extension on the first 70 %% of the run, score "
-                       "it on the last 30 %%, and name the cause (or 'none').")
+                       description="Replay the logged commands of a measured run (CSV of docs/formats.md) through the "
+                       "closed-loop model, fit every candidate model extension on the first 70 % of the run, score "
+                       "it on the last 30 %, and name the cause (or 'none').")
     p.add_argument("run", type=Path, help="measured run CSV")
     p.add_argument("--vehicle", help="vehicle name or YAML (default: the run's '# vehicle:' or p3at)")
     p.add_argument("--terrain", help="terrain name or YAML (default: the run's '# terrain:' or vinyl)")
