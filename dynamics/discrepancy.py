@@ -276,6 +276,8 @@ def ljung_box(r: np.ndarray, lags: int = 20) -> float:
         return math.nan
     r = r - r.mean()
     den = float(np.dot(r, r))
+    if den <= 0.0:                 # a constant residual: no autocorrelation to test
+        return 0.0
     q = 0.0
     for k in range(1, lags + 1):
         rho = float(np.dot(r[k:], r[:-k])) / den
@@ -344,8 +346,12 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
 
 
 def _bic(r, k):
+    """Bayesian information criterion of residuals r with k parameters (a floor of 1e-300
+    on the mean square keeps an exact fit finite)."""
     n = r.size
-    return n * math.log(float(np.sum(r * r)) / n) + k * math.log(n)
+    if n == 0:
+        return math.nan
+    return n * math.log(max(float(np.sum(r * r)) / n, 1e-300)) + k * math.log(n)
 
 
 def _where(run, pred, chans, scales):
@@ -369,7 +375,7 @@ def _xcorr(run, pred, scales, max_lag_s=1.0):
     changes over lags of +-max_lag_s (a delay or lag shows as a peak at a positive lag)."""
     t = run.t
     dt = float(np.median(np.diff(t)))
-    L = int(round(max_lag_s / dt))
+    L = min(int(round(max_lag_s / dt)), len(t) // 2 - 1)     # lags shorter than half the run
     best = (0.0, 0.0)
     for c in ("l", "r"):
         r = (run[f"w{c}"] - pred[f"w{c}"]) / scales[f"w{c}"]

@@ -20,6 +20,10 @@ from pathlib import Path
 import numpy as np
 
 REQUIRED = ("t", "wl_cmd", "wr_cmd", "wl", "wr")
+MIN_STEP_S = 1e-5        # median sample spacing: at most 100 kHz ...
+MAX_STEP_S = 0.5         # ... and at least 2 Hz (a replay at the controller rate needs the commands)
+MAX_ROWS = 5_000_000     # rows of a run file (about 3 h at 500 Hz); SBMPC_MAX_RUN_ROWS raises it
+MAX_SPAN_S = 4 * 3600.0  # replayed time (sum of the segments' spans); SBMPC_MAX_RUN_S raises it
 OPTIONAL = ("tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw", "z", "pitch", "roll", "v_batt", "segment")
 GAP_FACTOR = 10.0
 
@@ -62,8 +66,13 @@ class Run:
             med = float(np.median(dt))
             breaks[1:] |= dt > GAP_FACTOR * med
         if "segment" in self.columns:
-            seg = self.columns["segment"]
-            breaks[1:] |= seg[1:] != seg[:-1]
+            seg = self.columns["segment"].copy()
+            ok = np.isfinite(seg)
+            if ok.any():          # a gap in the column continues the segment before it
+                idx = np.maximum.accumulate(np.where(ok, np.arange(n), 0))
+                seg = seg[idx]
+                seg[: int(np.argmax(ok))] = seg[int(np.argmax(ok))]
+                breaks[1:] |= seg[1:] != seg[:-1]
         starts = np.flatnonzero(breaks)
         stops = np.r_[starts[1:], n]
         return [(int(a), int(b)) for a, b in zip(starts, stops) if b - a >= 2]
@@ -75,13 +84,18 @@ class Run:
 def read_run(path: Path | str) -> Run:
     """Read a run CSV; raises :class:`RunError` with file and line on any problem. The
     file is only read."""
+    import os
     path = Path(path)
+    if path.is_dir():
+        raise RunError(f"{path}: expected a run CSV file, found a folder")
     if not path.is_file():
         raise RunError(f"{path}: expected a run CSV file, found no such file")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")        # (a byte-order mark, as spreadsheets write it)
     except UnicodeDecodeError:
         raise RunError(f"{path}: expected a text CSV file, found binary data") from None
+    max_rows = int(float(os.environ.get("SBMPC_MAX_RUN_ROWS", MAX_ROWS)))
+    max_span = float(os.environ.get("SBMPC_MAX_RUN_S", MAX_SPAN_S))
     lines = text.splitlines()
     meta: dict = {}
     i = 0
@@ -105,6 +119,9 @@ def read_run(path: Path | str) -> Run:
     for ln, row in enumerate(csv.reader(lines[i + 1:]), start=i + 2):
         if not row or all(not c.strip() for c in row):
             continue
+        if len(rows) >= max_rows:
+            raise RunError(f"{path}: expected at most {max_rows} rows, found more (split the log into files, "
+                           "or raise the limit with the environment variable SBMPC_MAX_RUN_ROWS)")
         if len(row) != len(header):
             raise RunError(f"{path} line {ln}: expected {len(header)} cells, found {len(row)}")
         vals = []
@@ -114,9 +131,13 @@ def read_run(path: Path | str) -> Run:
                 vals.append(math.nan)
                 continue
             try:
-                vals.append(float(c))
+                x = float(c)
             except ValueError:
-                raise RunError(f"{path} line {ln}, column {name}: expected a number, found {c!r}") from None
+                raise RunError(f"{path} line {ln}, column {name}: expected a number, found {c!r:.40}") from None
+            if not -1e12 < x < 1e12 and not math.isnan(x):
+                raise RunError(f"{path} line {ln}, column {name}: expected a finite number of at most 1e12, "
+                               f"found {c!r:.40}")
+            vals.append(x)
         rows.append(vals)
     if not rows:
         raise RunError(f"{path}: expected data rows after the header, found none")
@@ -131,7 +152,22 @@ def read_run(path: Path | str) -> Run:
         k = int(bad[0]) + 1
         raise RunError(f"{path} line {_line_of(lines, i, k)}, column t: expected time to increase, "
                        f"found {t[k]:g} after {t[k - 1]:g}")
-    return Run(cols, meta, str(path))
+    for name in REQUIRED[1:]:
+        n_ok = int(np.isfinite(cols[name]).sum())
+        if n_ok < max(2, len(t) // 2):
+            raise RunError(f"{path}, column {name}: expected numbers in at least half of the rows, "
+                           f"found {n_ok} of {len(t)}")
+    if len(t) > 1:
+        med = float(np.median(np.diff(t)))
+        if not MIN_STEP_S <= med <= MAX_STEP_S:
+            raise RunError(f"{path}, column t: expected a median sample spacing between {MIN_STEP_S:g} and "
+                           f"{MAX_STEP_S:g} s, found {med:.3g} s")
+    run = Run(cols, meta, str(path))
+    span = sum(float(t[b - 1] - t[a]) for a, b in run.segments())
+    if span > max_span:
+        raise RunError(f"{path}: expected at most {max_span:g} s of driving to replay, found {span:.0f} s "
+                       "(split the log, or raise the limit with the environment variable SBMPC_MAX_RUN_S)")
+    return run
 
 
 def _line_of(lines, header_index, k):

@@ -70,23 +70,58 @@ def blocked_cells(world: World) -> np.ndarray:
     return b
 
 
+CTG_MAX_CELLS = 1_000_000    # larger maps get a cost-to-go window around start and goal
+
+
+def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
+    """(j0, j1, i0, i1): the rows and columns the cost-to-go grid covers: the whole map
+    when it has at most ``max_cells`` cells, else a box around the start and the goal
+    (margin: half their distance, at least 10 m) cut to ``max_cells`` by shrinking the
+    margin. The grid is then a lower bound through the box's edges (cost_to_go)."""
+    e, scn = world.emap, world.scenario
+    ny, nx = e.shape
+    if nx * ny <= max_cells:
+        return 0, ny, 0, nx
+    ox, oy = e.origin
+    s, g = scn.start, scn.goal
+    margin = max(10.0, 0.5 * math.hypot(g["x"] - s["x"], g["y"] - s["y"]))
+    while True:
+        x0, x1 = min(s["x"], g["x"]) - margin, max(s["x"], g["x"]) + margin
+        y0, y1 = min(s["y"], g["y"]) - margin, max(s["y"], g["y"]) + margin
+        i0, i1 = max(0, int((x0 - ox) / e.resolution)), min(nx, int(math.ceil((x1 - ox) / e.resolution)) + 1)
+        j0, j1 = max(0, int((y0 - oy) / e.resolution)), min(ny, int(math.ceil((y1 - oy) / e.resolution)) + 1)
+        if (i1 - i0) * (j1 - j0) <= max_cells or margin < 2.0 * e.resolution:
+            return j0, j1, i0, i1
+        margin *= 0.7
+
+
 @functools.lru_cache(maxsize=8)
-def cost_to_go(world: World, cost: str) -> tuple:
+def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
-    over 8-neighbour steps, see :mod:`sbmpc.skidsteer`), and the slack [s or J] the
-    heuristic subtracts for the way from a pose to its nearest node. Unreachable nodes
-    get a large finite cost. Cached per (world, cost): planning and replaying share it."""
+    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), and the slack [s or J]
+    the heuristic subtracts for the way from a pose to its nearest node. Unreachable
+    nodes get a large finite cost. Cached per (world, cost): planning and replaying
+    share it.
+
+    On a map larger than ``max_cells`` the grid covers :func:`ctg_window` only (memory
+    and time grow with the cells: a 5000 x 5000 map needed over 8 GB): every cell on the
+    window's edge (not the map's) may also leave it, at the straight-line bound of the
+    rest (divided by the grid's detour factor, as every step is), so the window's values
+    stay lower bounds of the whole map's; outside the window the grid gives 0 and the
+    straight-line bound of the heuristic applies."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
     e, scn = world.emap, world.scenario
-    H = e.heights
+    j0, j1, i0, i1 = ctg_window(world, max_cells)
+    Hfull = e.heights
+    H = Hfull[j0:j1, i0:i1]
     ny, nx = H.shape
     res = e.resolution
     vb, froll, mg = _bounds(world)
-    ox, oy = e.origin
-    blocked = blocked_cells(world).ravel()
+    ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
+    blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:
-        mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer].ravel()
+        mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer[j0:j1, i0:i1]].ravel()
     else:
         mu = np.full(nx * ny, world.terrains[0].mu_roll)
     gy, gx = np.gradient(H, res)
@@ -113,19 +148,49 @@ def cost_to_go(world: World, cost: str) -> tuple:
             src.append(q)
             dst.append(p)
             w.append(wt / OCTILE + 1e-12)
-    G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(nx * ny, nx * ny)).tocsr()
     X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
     g = scn.goal
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
     if goal_nodes.size == 0:
-        return np.zeros((ny, nx)), 0.0
-    D = dijkstra(G_, indices=goal_nodes, min_only=True)
+        return np.zeros(e.shape), 0.0
+    # a source node (index nx * ny) joined to the goal at 0 and, on a window, to every
+    # cell of its inner edges at the straight-line bound from there
+    S = nx * ny
+    src.append(np.full(goal_nodes.size, S))
+    dst.append(goal_nodes)
+    w.append(np.full(goal_nodes.size, 1e-12))
+    edge = np.zeros((ny, nx), bool)
+    full_ny, full_nx = e.shape
+    if j0 > 0:
+        edge[0, :] = True
+    if j1 < full_ny:
+        edge[-1, :] = True
+    if i0 > 0:
+        edge[:, 0] = True
+    if i1 < full_nx:
+        edge[:, -1] = True
+    exits = np.flatnonzero(edge.ravel() & ~blocked)
+    if exits.size:
+        dist = np.maximum(np.hypot(X.ravel()[exits] - g["x"], Y.ravel()[exits] - g["y"]) - g["radius"], 0.0)
+        if cost == "time":
+            bound = dist / vb
+        else:
+            bound = np.maximum(0.0, froll * dist + mg * (_lowest_in_disc(e, g["x"], g["y"], g["radius"]) - H.ravel()[exits]))
+        src.append(np.full(exits.size, S))
+        dst.append(exits)
+        w.append(bound / OCTILE + 1e-12)
+    G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(S + 1, S + 1)).tocsr()
+    D = dijkstra(G_, indices=S)[:S]
     D[~np.isfinite(D)] = 1e12
     diag = res * math.sqrt(2.0)
     slack = diag / vb if cost == "time" else (froll_cell.max() * diag + mg * _max_rise(H, res, diag))
-    D = D.reshape(ny, nx)
-    D.setflags(write=False)        # cached and shared
-    return D, float(slack)
+    if (j0, j1, i0, i1) == (0, full_ny, 0, full_nx):
+        out = D.reshape(ny, nx)
+    else:
+        out = np.zeros(e.shape)
+        out[j0:j1, i0:i1] = D.reshape(ny, nx)
+    out.setflags(write=False)        # cached and shared
+    return out, float(slack)
 
 
 def _max_rise(H, res, dist):

@@ -156,3 +156,61 @@ def test_outputs_are_written_whole_or_not_at_all(tmp_path):
     with atomic(target) as tmp:
         tmp.write_text("new")
     assert target.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["p.json"]
+
+
+def _run_variant(work, name, edit_rows=None, meta_extra=(), header_extra=""):
+    lines = (work / "r.csv").read_text().splitlines()
+    h = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    cols = lines[h].split(",")
+    rows = [r.split(",") for r in lines[h + 1:]]
+    if edit_rows:
+        rows = edit_rows(cols, rows)
+    out = work / f"{name}.csv"
+    out.write_text("\n".join(lines[:h] + list(meta_extra) + [lines[h] + header_extra] + [",".join(r) for r in rows]) + "\n")
+    return out
+
+
+def _set(col, f):
+    def edit(cols, rows):
+        j = cols.index(col)
+        for k, r in enumerate(rows):
+            r[j] = f(k)
+        return rows
+    return edit
+
+
+@pytest.mark.parametrize("name, kw, says", [
+    ("spread", dict(edit_rows=lambda c, r: _set("t", lambda k: f"{k * 1e4:g}")(c, r[:200])), "median sample spacing"),
+    ("tiny", dict(edit_rows=_set("t", lambda k: f"{k * 1e-9:.12g}")), "median sample spacing"),
+    ("huge_t", dict(edit_rows=_set("t", lambda k: f"{1e300 + k * 1e290:g}")), "finite number of at most 1e12"),
+    ("no_cmd", dict(edit_rows=_set("wl_cmd", lambda k: "")), "column wl_cmd: expected numbers"),
+    ("nan_wl", dict(edit_rows=_set("wl", lambda k: "nan")), "column wl: expected numbers"),
+    ("slope_nan", dict(meta_extra=["# slope_deg: nan"]), "slope_deg"),
+    ("slope_90", dict(meta_extra=["# slope_deg: 90"]), "slope_deg"),
+    ("seg_each_row", dict(edit_rows=lambda c, r: [x + [str(k)] for k, x in enumerate(r)], header_extra=",segment"),
+     "segment of at least 20 samples"),
+])
+def test_hostile_runs_end_in_one_line_before_any_work(work, capsys, name, kw, says):
+    path = _run_variant(work, name, **kw)
+    before = path.read_bytes()
+    rc = main(["diagnose", str(path)])
+    assert says in one_line_error(capsys, 2, rc)
+    assert path.read_bytes() == before
+
+
+def test_awkward_but_valid_runs_are_diagnosed(work, capsys):
+    """A byte-order mark (spreadsheets), the least run (50 rows), all-zero signals and a
+    segment column with gaps: diagnosed, exit 0, no traceback."""
+    bom = work / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + (work / "r.csv").read_bytes())
+    short = _run_variant(work, "short", edit_rows=lambda c, r: r[:50])
+    zeros = _run_variant(work, "zeros", edit_rows=lambda c, r: _set("wl", lambda k: "0")(c, _set("wr", lambda k: "0")(
+        c, _set("wl_cmd", lambda k: "0")(c, _set("wr_cmd", lambda k: "0")(c, r)))))
+    gaps = _run_variant(work, "gaps", edit_rows=lambda c, r: [x + ["" if k % 7 else "1"] for k, x in enumerate(r)],
+                        header_extra=",segment")
+    for path in (bom, short, zeros, gaps):
+        rc = main(["diagnose", str(path)])
+        out = capsys.readouterr()
+        assert rc == 0 and "Traceback" not in out.err, (path.name, out.err)
+    from dynamics.runs import read_run
+    assert len(read_run(gaps).segments()) == 1           # gaps in the column continue the segment

@@ -86,13 +86,22 @@ def run_diagnose(args) -> int:
     outs.add_inputs([_file(run.meta.get("vehicle")), _file(run.meta.get("terrain"))])
     if len(run) < 50:
         raise InputError(f"{args.run}: expected at least 50 samples to diagnose, found {len(run)}")
+    segs = run.segments()
+    longest = max((b - a for a, b in segs), default=0)
+    if longest < 20:
+        raise InputError(f"{args.run}: expected a segment of at least 20 samples to replay, found {len(segs)} "
+                         f"segment(s) of at most {longest} (a 'segment' value per row, or gaps in t?)")
     vehicle, terrain = _load_models(args.vehicle, args.terrain, run)
     pitch = 0.0
     if "slope_deg" in run.meta:
         try:
-            pitch = math.radians(float(run.meta["slope_deg"]))
+            slope = float(run.meta["slope_deg"])
         except ValueError:
-            raise InputError(f"{args.run}: '# slope_deg:' expected a number, found {run.meta['slope_deg']!r}") from None
+            slope = math.nan
+        if not -45.0 <= slope <= 45.0:
+            raise InputError(f"{args.run}: '# slope_deg:' expected a grade in degrees within [-45, 45], "
+                             f"found {run.meta['slope_deg']!r:.40}")
+        pitch = math.radians(slope)
     t0 = time.perf_counter()
     d = diagnose(run, vehicle, terrain, pitch)
     elapsed = time.perf_counter() - t0

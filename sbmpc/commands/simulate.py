@@ -42,6 +42,9 @@ def _need(value, flag, what):
     return value
 
 
+MAX_STEPS = 20_000_000     # steps of one simulation (its trajectory keeps about 200 bytes a step)
+
+
 def run(args) -> int:
     from dynamics import ParameterError
     from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
@@ -61,6 +64,11 @@ def run(args) -> int:
         raise InputError("expected one manoeuvre (--radius, the ramp options, or --lemniscate), found several")
     if args.duration is not None and not (0 < args.duration <= 3600):
         raise InputError(f"--duration: expected seconds in (0, 3600], found {args.duration}")
+    steps = (args.duration or 21.0) / model.step_s
+    if steps > MAX_STEPS:
+        raise InputError(f"--duration / --dt: expected at most {MAX_STEPS:,} steps (about "
+                         f"{MAX_STEPS * 200 // 1_000_000_000} GB of trajectory), found {steps:,.0f}; "
+                         "shorten the run or use a longer step")
     if args.v is not None and abs(args.v) > 20:
         raise InputError(f"--v: expected a speed of at most 20 m/s in magnitude, found {args.v}")
     info: dict = {}
