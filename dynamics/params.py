@@ -188,8 +188,11 @@ def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = 
     sources: dict[str, str] = {}
     for key, raw in data.items():
         if key not in known or key == "sources":
-            allowed = ", ".join(k for k in known if k != "sources")
-            raise ParameterError(f"{src}: unknown key '{key}': expected one of {allowed}")
+            import difflib
+            allowed = [k for k in known if k != "sources"]
+            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ParameterError(f"{src}: unknown key '{key}'{hint}: expected one of base, {', '.join(allowed)}")
         if isinstance(raw, dict):
             if "value" not in raw:
                 raise ParameterError(f"{src}: key '{key}': expected a number or a mapping with 'value', found {raw!r}")
@@ -296,9 +299,12 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
         is_file = False
     if is_file:
         return _from_mapping(cls, _read_yaml(path), str(path), True, kind, path.parent, depth)
+    import difflib
+    close = difflib.get_close_matches(spec_s, sorted(shipped), n=1, cutoff=0.6)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
     raise ParameterError(
         f"{kind[:-1]} '{spec_s:.60}': expected a shipped name ({', '.join(sorted(shipped))}) or a path to a YAML file, "
-        "found neither")
+        f"found neither{hint}")
 
 
 def load_vehicle(spec: "str | Path | dict | Vehicle" = "p3at", base: Path | None = None) -> Vehicle:

@@ -169,6 +169,10 @@ class Scenario:
         return replace(self, cost=cost)
 
 
+class Verbatim(str):
+    """A 'found' text shown as is (not as a repr)."""
+
+
 def shown(value, limit: int = 60) -> str:
     """repr of a value for an error message, cut to ``limit`` characters."""
     r = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 30 else f"an integer of {len(str(abs(value)))} digits"
@@ -183,7 +187,7 @@ class _Problems:
         self.items: list[str] = []
 
     def add(self, key: str, expected: str, found):
-        self.items.append(f"{key}: expected {expected}, found {shown(found)}")
+        self.items.append(f"{key}: expected {expected}, found {found if isinstance(found, Verbatim) else shown(found)}")
 
     def raise_if_any(self):
         if len(self.items) == 1:
@@ -208,10 +212,18 @@ def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math
     return float(v)
 
 
+def did_you_mean(word, choices) -> str:
+    """' (did you mean X?)' for the closest of ``choices`` to ``word``, or ''."""
+    import difflib
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
 def _unknown(d: dict, known: set, where: str, probs: _Problems):
     for k in d:
         if k not in known:
-            probs.add(f"{where}.{k}" if where else str(k), f"one of the keys {', '.join(sorted(known))}", "an unknown key")
+            probs.add(f"{where}.{k}" if where else str(k), f"one of the keys {', '.join(sorted(known))}",
+                      Verbatim(f"an unknown key{did_you_mean(k, known)}"))
 
 
 def _point_list(v, n_min):
@@ -389,7 +401,52 @@ def load(path: Path | str) -> Scenario:
         raise InputError(f"{path}: cannot read the scenario: {exc.strerror}") from None
     except ValueError as exc:
         raise InputError(f"{path}: {exc}") from None
-    return parse(data, str(path), path)
+    try:
+        return parse(data, str(path), path)
+    except InputError as exc:
+        more = _file_problems(data, path)
+        if not more:
+            raise
+        msg = str(exc)
+        head, _, rest = msg.partition(": ")
+        items = rest.split("\n  ")[1:] if " problems:\n  " in rest else [rest]
+        items += more
+        raise InputError(f"{head}: {len(items)} problems:\n  " + "\n  ".join(items)) from None
+
+
+def _file_problems(data, path: Path) -> list:
+    """The map, vehicle and terrain problems of a scenario that also has problems of its
+    own (so that one run lists them all): each file or name is tried where the raw YAML
+    names it."""
+    from dynamics import ParameterError, load_terrain, load_vehicle
+    from maps.io import MapError, load_map
+    if not isinstance(data, dict):
+        return []
+    out = []
+    m = data.get("map")
+    if isinstance(m, dict):
+        try:
+            load_map(m, path.parent, "map")
+        except MapError as exc:
+            out.append(str(exc))
+        except Exception:                # its own problems are in the parse stage's list
+            pass
+    v = data.get("vehicle")
+    if isinstance(v, str):
+        try:
+            load_vehicle(v, path.parent)
+        except ParameterError as exc:
+            out.append(f"vehicle: {exc}")
+    t = data.get("terrain")
+    names = [t] if isinstance(t, str) else ([t.get("default")] + [r.get("terrain") for r in t.get("regions") or []
+                                                                   if isinstance(r, dict)]
+                                            if isinstance(t, dict) and isinstance(t.get("regions", []), list) else [])
+    for n in dict.fromkeys(x for x in names if isinstance(x, str)):
+        try:
+            load_terrain(n, path.parent)
+        except ParameterError as exc:
+            out.append(f"terrain: {exc}")
+    return out
 
 
 def terrain_layer(regions, default_index: int, names: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:

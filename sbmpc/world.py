@@ -54,16 +54,19 @@ class World:
 
 
 def resolve(scn: Scenario) -> World:
-    """Load the map, vehicle and terrains of a scenario; InputError on any problem."""
+    """Load the map, vehicle and terrains of a scenario; one InputError listing every
+    problem (map, vehicle, each terrain, start and goal) at once."""
     src = str(scn.path) if scn.path else scn.name
+    problems = []
+    emap = vehicle = None
     try:
         emap = load_map(scn.map_spec, scn.base, "map")
     except MapError as exc:
-        raise InputError(f"{src}: {exc}") from None
+        problems.append(str(exc))
     try:
         vehicle = load_vehicle(scn.vehicle, scn.base)
     except ParameterError as exc:
-        raise InputError(f"{src}: vehicle: {exc}") from None
+        problems.append(f"vehicle: {exc}")
     if isinstance(scn.terrain, str):
         names = [scn.terrain]
     else:
@@ -74,7 +77,10 @@ def resolve(scn: Scenario) -> World:
         try:
             terrains.append(load_terrain(n, scn.base))
         except ParameterError as exc:
-            raise InputError(f"{src}: terrain: {exc}") from None
+            problems.append(f"terrain: {exc}")
+    if problems:
+        raise InputError(f"{src}: " + (problems[0] if len(problems) == 1 else
+                                       f"{len(problems)} problems:\n  " + "\n  ".join(problems)))
     if not isinstance(scn.terrain, str):
         ny, nx = emap.shape
         ox, oy = emap.origin

@@ -94,3 +94,17 @@ def test_terrain_layer_rasterises_regions():
     L = SC.terrain_layer(regions, 0, ["a", "b", "c"], x, y)
     assert L[0, 0] == 1 and L[6, 6] == 2 and L[9, 0] == 0
     assert L[1, 7] == 1         # (3.5, 0.5) is inside the triangle
+
+
+def test_every_problem_of_a_scenario_at_once_with_did_you_mean(tmp_path, capsys):
+    """Unknown keys, a missing map file, a misspelt vehicle and terrain: one run lists
+    all four, each misspelling with the name it probably meant."""
+    s = tmp_path / "multi.yaml"
+    s.write_text("name: multi\nmap: {file: nosuch.png, resolution: 0.25}\nterrain: grasss\nvehicle: p3att\n"
+                 "start: {x: 1, y: 1}\ngoal: {x: 5, y: 5, radius: 0.5}\nplaner: {branching: 8}\n")
+    assert main(["plan", str(s)]) == 2
+    err = capsys.readouterr().err
+    assert "4 problems" in err and "Traceback" not in err
+    for part in ("did you mean 'planner'?", "map.file: expected an existing file", "did you mean 'p3at'?",
+                 "did you mean 'grass'?"):
+        assert part in err, part
