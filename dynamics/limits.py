@@ -43,3 +43,30 @@ def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
     if f(0.0) <= 0.0:
         return 0.0
     return brentq(f, 0.0, w_hi) * vehicle.wheel_radius
+
+
+TURN_RADII = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0)
+
+
+def tightest_turn(vehicle: Vehicle, terrain: Terrain, speeds=(0.3, 0.6, 1.0)) -> float:
+    """Smallest turning radius [m] of TURN_RADII (0: a pivot) that the vehicle holds at a
+    constant speed of ``speeds`` [m/s] on level ground: eq. 22's steady resistance of
+    each side (sliding friction of the turn plus rolling) within what its drive delivers
+    (eqs. 26, 27 and the current limit). ``inf`` when no radius up to 200 m can be held:
+    the drive saturates in any steady turn (a heavy vehicle on a grippy surface)."""
+    from .kinematics import wheel_speeds
+    from .resistance import steady_resistance
+    r = vehicle.wheel_radius
+    for R in TURN_RADII:
+        for v in speeds:
+            if R == 0.0:
+                w = v / r
+                wl, wr = -w, w
+            else:
+                wl, wr = wheel_speeds(v, 1.0 / R, r, vehicle.width, terrain.alpha)
+            if max(abs(wl), abs(wr)) > vehicle.no_load_speed:
+                continue
+            tl, tr = steady_resistance(wl, wr, vehicle, terrain)
+            if abs(tl) <= available_torque(vehicle, abs(wl)) and abs(tr) <= available_torque(vehicle, abs(wr)):
+                return R
+    return math.inf

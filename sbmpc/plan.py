@@ -19,7 +19,7 @@ from dynamics.resistance import friction_table
 from .heuristics import _bounds, _lowest_in_disc, cost_to_go, unreachable_reason
 from .problems import skidsteer as SS
 from .search.astar import Problem, Search, SearchResult
-from .world import FIXED_CONTROLS, World, _start, control_set
+from .world import FIXED_CONTROLS, World, _start, capability, control_set
 
 RECORD_EVERY = 0.05   # s: trajectory samples in the plan JSON
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
@@ -325,6 +325,31 @@ def _predicted(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
     return np.column_stack([traj["x"][b], traj["y"][b], traj["yaw"][b]])
 
 
+def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
+    """What to try after a failed search, from what it measured: the budget it used up,
+    the share of edges that stalled (the vehicle's limits against the map's slopes), the
+    vehicle's turning limit."""
+    ps = world.scenario.planner
+    out = []
+    if "node budget" in (res.reason or ""):
+        out.append(f"raise the node budget (planner.max_expansions or --max-expansions {2 * ps.max_expansions})")
+    elif "time budget" in (res.reason or ""):
+        out.append(f"raise the time budget (planner.time_budget_s or --time-budget {2 * ps.time_budget_s:g})")
+    stalled = res.invalid.get(SS.CODES[SS.STALL - 1], 0)
+    if res.edges and stalled > 0.3 * res.edges:
+        from dynamics.limits import steepest_grade
+        g = max(steepest_grade(world.vehicle, t) for t in world.terrains)
+        e = world.emap
+        gy, gx = np.gradient(e.heights, e.resolution)
+        steep = math.degrees(math.atan(float(np.hypot(gx, gy).max())))
+        out.append(f"{100 * stalled / res.edges:.0f} % of the edges stalled: the {world.vehicle.name} holds at most "
+                   f"{math.degrees(g):.1f} deg here and the map's slopes reach {steep:.1f} deg (a stronger vehicle, "
+                   f"a gentler map, or a map without height steps)")
+    if limit_note:
+        out.append(limit_note)
+    return ("; to try: " + "; ".join(out)) if out else ""
+
+
 def _threads(ps) -> int:
     """Threads for the search's edges: the scenario's, or with 0 every core numba uses."""
     if ps.threads:
@@ -367,6 +392,8 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     t0 = time.perf_counter()
     X0 = _start(world, start)
     why = unreachable_reason(world, (float(X0[K.S_X]), float(X0[K.S_Y])))
+    fatal, limit_note = capability(world)
+    why = why or fatal
     if why is not None:
         return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0)
     inc = _incumbent(world, cost, X0, incumbent) if incumbent else None
@@ -387,7 +414,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
         found_by = ("previous plan (warm start: the search found nothing cheaper than its remaining "
                     f"{inc[0]:.4g} {'s' if cost == 'time' else 'J'} within its budgets)")
     else:
-        return Plan(world.scenario.name, cost, "no_path", res.reason,
+        return Plan(world.scenario.name, cost, "no_path", res.reason + _remedy(world, res, limit_note),
                     planning_time_s=time.perf_counter() - t0, **common)
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):

@@ -3,6 +3,7 @@ wheel-speed range and control set the planner samples, and the planner state at 
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -148,3 +149,34 @@ def start_state(world: World) -> np.ndarray:
 def _start(world: World, start) -> np.ndarray:
     """The planner state to start from: ``start`` (contiguous float64) or the scenario's."""
     return start_state(world) if start is None else np.ascontiguousarray(start, float)
+
+
+@functools.lru_cache(maxsize=32)
+def _limits(vehicle: Vehicle, terrains: tuple) -> tuple:
+    from dynamics.limits import steepest_grade, tightest_turn
+    grade = max(steepest_grade(vehicle, t) for t in terrains)
+    turn = min((tightest_turn(vehicle, t), t.name) for t in terrains)
+    return grade, turn
+
+
+def capability(world: World) -> tuple:
+    """What the vehicle cannot do on this world, from the model's steady state, before any
+    search: (fatal, note). ``fatal``: it cannot hold a constant speed even on level
+    ground on any of the terrains (no plan can exist); ``note``: it cannot hold a steady
+    turn tighter than half the map's smaller side (its drives saturate in a skid turn).
+    Either is None when it does not apply."""
+    v = world.vehicle
+    grade, (R, tname) = _limits(v, world.terrains)
+    names = ", ".join(t.name for t in world.terrains)
+    fatal = None
+    if grade < 0:
+        fatal = (f"the {v.name} cannot hold a constant speed even on level {names}: rolling resistance needs "
+                 f"more torque than its drive delivers ({v.continuous_torque:.3g} N m per side)")
+    x0, x1, y0, y1 = world.emap.extent
+    side = min(x1 - x0, y1 - y0)
+    note = None
+    if R > 0.5 * side:
+        held = "any radius up to 200 m" if math.isinf(R) else f"a radius tighter than {R:g} m"
+        note = (f"the {v.name} cannot hold a steady turn of {held} on {tname} (its drives saturate in a skid "
+                f"turn) on this {x1 - x0:g} x {y1 - y0:g} m map: expect few ways to the goal")
+    return fatal, note

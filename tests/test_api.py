@@ -137,3 +137,24 @@ def test_compare_takes_the_other_plan_when_one_search_finds_nothing():
     t, e = plans["time"], plans["energy"]
     assert t.found and e.found and e.cost == "energy" and e.controls == t.controls
     assert "time search" in e.found_by and "node budget of 3" in e.found_by
+
+
+def test_what_the_vehicle_cannot_do_is_said_before_searching(tmp_path, capsys):
+    """A drive too weak to hold level ground: no path, without a search. The Warthog on
+    a 30 x 20 m asphalt map: one note that it cannot hold a steady turn (its drives
+    saturate), and the failure names it among the remedies."""
+    (tmp_path / "weak.yaml").write_text("base: p3at\nname: weak\ncurrent_limit: 0.05\n")
+    scn = {"name": "weak", "map": {"generate": {"size": [20, 12], "resolution": 0.25, "features": []}},
+           "terrain": "asphalt", "vehicle": str(tmp_path / "weak.yaml"),
+           "start": {"x": 2.0, "y": 2.0}, "goal": {"x": 16.0, "y": 9.0, "radius": 0.5}}
+    plan = sbmpc.plan_scenario(scn)
+    assert not plan.found and "cannot hold a constant speed even on level asphalt" in plan.reason
+    assert plan.nodes_expanded == 0
+    wart = tmp_path / "wflat.yaml"
+    wart.write_text(FLAT.read_text().replace("vehicle: p3at", "vehicle: warthog").replace("terrain: vinyl", "terrain: asphalt")
+                    .replace("size: [20, 12]", "size: [30, 20]"))
+    rc = main(["plan", str(wart), "--max-expansions", "300", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert err.startswith("note: the warthog cannot hold a steady turn") and "drives saturate" in err
+    assert "to try: raise the node budget" in err

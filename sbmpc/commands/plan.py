@@ -98,7 +98,11 @@ def _world(args):
     note = device_note(scn.planner)
     if note:
         print(f"note: {note}", file=sys.stderr)
-    return WO.resolve(scn)
+    world = WO.resolve(scn)
+    _, limit = WO.capability(world)
+    if limit:
+        print(f"note: {limit}", file=sys.stderr)
+    return world
 
 
 def compile_note(quiet: bool = False) -> None:
