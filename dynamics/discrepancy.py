@@ -40,6 +40,8 @@ from .simulate import Model, simulate
 from .synth import apply
 
 MARGIN = 0.10          # least held-out gain that names a cause
+TIE = 0.02             # gains closer than this to the named cause's: a rival within noise
+AT_BOUND = 0.01        # a fit within this fraction of its range from a bound "ends at the bound"
 TRAIN_FRACTION = 0.7
 FIT_WINDOW_S = 120.0   # s: fits use at most the first 120 s of the training part (speed)
 REPLAY_DT = 0.001      # s: the controller period of the P3-AT; the replay uses the vehicle's own
@@ -155,6 +157,21 @@ class Candidate:
     gain: float
     bic_delta: float
     whiteness_q: float
+    at_bound: tuple = ()      # parameters whose fit ended at a bound of the candidate's range
+
+
+def at_bound(effect: str, params: dict) -> tuple:
+    """The parameters of a fitted candidate that ended at (within AT_BOUND of its range
+    from) a bound: the fit may want a value the candidate does not allow. A bound of 0
+    (no delay, no lag, no sag) is the model without the effect, not a limit."""
+    names, lo, hi, _, _ = CANDIDATES[effect]
+    out = []
+    for n, a, b in zip(names, lo, hi):
+        x = params[n]
+        tol = AT_BOUND * (b - a)
+        if (a != 0.0 and x - a <= tol) or (b != 0.0 and b - x <= tol):
+            out.append(n)
+    return tuple(out)
 
 
 @dataclass
@@ -175,6 +192,7 @@ class Diagnosis:
     extended_pitch_deg: float = 0.0
     extended_terrain: Terrain | None = None
     pose: dict = field(default_factory=dict)     # {"baseline": RPE, "extended": RPE} on the held-out part
+    rivals: tuple = ()     # other candidates within TIE of the named cause's gain (also above MARGIN)
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -183,8 +201,9 @@ class Diagnosis:
                          "whiteness_q": self.baseline_whiteness_q, "where": self.where, "xcorr": self.xcorr},
             "candidates": [{"effect": c.effect, "params": c.params, "stderr": c.stderr,
                             "heldout_error": c.heldout_error, "gain": c.gain, "bic_delta": c.bic_delta,
-                            "whiteness_q": c.whiteness_q} for c in self.candidates],
+                            "whiteness_q": c.whiteness_q, "at_bound": list(c.at_bound)} for c in self.candidates],
             "cause": self.cause,
+            "rivals": list(self.rivals),
             "gain": self.gain,
             "margin": MARGIN,
             "channels": list(self.channels),
@@ -414,9 +433,10 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         pred = replay(run, v, ter, p)
         err = _error(run, pred, chans, scales, held)
         r_train = _residuals(run, pred, chans, scales, train)
-        cands.append(Candidate(eff, {n: float(a) for n, a in zip(names, x)}, {n: float(s) for n, s in zip(names, se)},
+        params = {n: float(a) for n, a in zip(names, x)}
+        cands.append(Candidate(eff, params, {n: float(s) for n, s in zip(names, se)},
                                err, 1.0 - err / base_err, _bic(r_train, len(names)) - bic0,
-                               ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held])))
+                               ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound(eff, params)))
     cands.sort(key=lambda c: -c.gain)
     best = cands[0] if cands else None
     named = best is not None and best.gain >= MARGIN and best.bic_delta < -10.0
@@ -431,6 +451,7 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         pose["baseline"] = pe
         ext = replay(run, ext_v, ext_t, math.radians(ext_p) + pitch) if named else base
         pose["extended"] = pose_error(run, ext, held)
+    rivals = tuple(c.effect for c in cands[1:] if named and c.gain >= MARGIN and best.gain - c.gain < TIE)
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
                      best.gain if named else 0.0, _where(run, base, chans, scales), _xcorr(run, base, scales),
-                     ext_v, ext_p, ext_t, pose)
+                     ext_v, ext_p, ext_t, pose, rivals)

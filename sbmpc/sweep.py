@@ -37,7 +37,6 @@ import copy
 import hashlib
 import itertools
 import json
-import math
 import time
 import traceback
 from dataclasses import replace

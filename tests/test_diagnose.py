@@ -143,3 +143,16 @@ def test_pose_error_is_reported_and_falls_with_the_extension():
     assert pose_error(run, exact)["trans_rmse_m"] == 0.0
     no_pose = Run({k: run[k] for k in ("t", "wl_cmd", "wr_cmd", "wl", "wr")})
     assert pose_error(no_pose, exact) is None
+
+
+def test_fits_at_a_bound_and_rivals_are_named():
+    """A fit that ends at the edge of its candidate's range is flagged (a bound of 0, the
+    model without the effect, is not); rivals within 0.02 of the named cause's gain are
+    named with it."""
+    from dynamics.discrepancy import CANDIDATES, at_bound
+    assert at_bound("turning_friction", {"mu_scale": 0.1002}) == ("mu_scale",)
+    assert at_bound("wheel_radius", {"scale_left": 1.0, "scale_right": 0.701}) == ("scale_right",)
+    assert at_bound("command_delay", {"delay_s": 0.0}) == ()
+    assert at_bound("viscous_friction", {"c_Nms": -0.9959}) == ("c_Nms",)
+    assert at_bound("grade", {"grade_deg": 3.0}) == ()
+    assert set(CANDIDATES) >= {"turning_friction", "wheel_radius"}

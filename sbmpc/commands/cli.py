@@ -21,12 +21,13 @@ def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
     p.add_argument("--version", action="version", version=f"sbmpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    from . import diagnose, plan, run, simulate, sweep
+    from . import diagnose, importer, plan, run, simulate, sweep
     simulate.add_parser(sub)
     plan.add_parsers(sub)
     diagnose.add_parsers(sub)
     run.add_parsers(sub)
     sweep.add_parsers(sub)
+    importer.add_parsers(sub)
     return p
 
 

@@ -115,10 +115,13 @@ def run_diagnose(args) -> int:
     print(f"baseline held-out error {d.baseline_error:.2f} (1 = sensor noise)")
     print(f"{'candidate':18s} {'held-out':>9s} {'gain':>7s} {'BIC change':>11s}  parameters (± standard error)")
     for c in d.candidates:
-        ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
+        ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" + (" (at its bound)" if k in c.at_bound else "")
+                       for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}")
     print(f"cause: {d.cause}" + (f" (held-out gain {d.gain:.2f})" if d.cause != "none" else
                                  f" (no candidate gains {100 * MARGIN:.0f} % on held-out data)"))
+    for line in caveats(d):
+        print(f"caveat: {line}")
     pose_line = _pose_line(d.pose)
     if pose_line:
         print(pose_line)
@@ -141,6 +144,20 @@ def run_diagnose(args) -> int:
         write_report(args.report, run, vehicle, terrain, pitch, d, doc, replay)
         print(f"wrote {args.report / 'report.md'}")
     return 0
+
+
+def caveats(d) -> list:
+    """What weakens the named cause: its fit ended at a bound of the candidate's range,
+    or other candidates explain the held-out data within noise of it."""
+    out = []
+    named = next((c for c in d.candidates if c.effect == d.cause), None)
+    if named is not None and named.at_bound:
+        out.append(f"the {d.cause} fit ended at the bound of {', '.join(named.at_bound)} (the data may want more than "
+                   "the candidate allows, or the cause is another effect it imitates)")
+    if d.rivals:
+        out.append(f"{', '.join(d.rivals)} explain{'s' if len(d.rivals) == 1 else ''} the held-out data within "
+                   f"noise of {d.cause} (gains within 0.02): the data cannot tell them apart")
+    return out
 
 
 def _pose_line(pose: dict) -> str:
