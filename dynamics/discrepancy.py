@@ -158,6 +158,8 @@ class Candidate:
     bic_delta: float
     whiteness_q: float
     at_bound: tuple = ()      # parameters whose fit ended at a bound of the candidate's range
+    fitted_on: str = "channels"   # or "pose": fitted to the relative pose errors
+    pose_gain: float | None = None   # 1 - held-out RPE extended / baseline (the better of heading, translation)
 
 
 def at_bound(effect: str, params: dict) -> tuple:
@@ -201,7 +203,8 @@ class Diagnosis:
                          "whiteness_q": self.baseline_whiteness_q, "where": self.where, "xcorr": self.xcorr},
             "candidates": [{"effect": c.effect, "params": c.params, "stderr": c.stderr,
                             "heldout_error": c.heldout_error, "gain": c.gain, "bic_delta": c.bic_delta,
-                            "whiteness_q": c.whiteness_q, "at_bound": list(c.at_bound)} for c in self.candidates],
+                            "whiteness_q": c.whiteness_q, "at_bound": list(c.at_bound), "fitted_on": c.fitted_on,
+                            "pose_gain": c.pose_gain} for c in self.candidates],
             "cause": self.cause,
             "rivals": list(self.rivals),
             "gain": self.gain,
@@ -239,14 +242,9 @@ def _error(run, pred, chans, scales, mask):
 POSE_WINDOW_S = 2.0   # s: window of the relative pose error
 
 
-def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S) -> dict | None:
-    """Relative pose error (RPE, the odometry benchmarks' metric) of a replay over
-    windows of ``window_s`` [s] within segments: how far the predicted motion over a
-    window, seen from its start pose, differs from the measured one. Returns
-    {"window_s", "trans_rmse_m", "rot_rmse_rad", "trans_per_m"} (trans_per_m: the
-    translation error per metre driven), or None when the run has no pose or no window.
-    Windows start where ``mask`` is true. A pose held between updates (fewer than 90 %
-    of the samples change it) is compared only between update samples."""
+def pose_residuals(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S):
+    """Per window (see :func:`pose_error`): the translation error [m], the heading error
+    [rad] and the distance driven [m] of the measured motion, or None without a pose."""
     if not all(c in run for c in ("x", "y", "yaw")):
         return None
     t = run.t
@@ -277,14 +275,87 @@ def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S)
     mx, my, myaw = rel(run["x"], run["y"], run["yaw"])
     px, py, pyaw = rel(pred["x"], pred["y"], pred["yaw"])
     et = np.hypot(mx - px, my - py)
-    er = np.abs(np.remainder(myaw - pyaw + np.pi, 2 * np.pi) - np.pi)
+    er = np.remainder(myaw - pyaw + np.pi, 2 * np.pi) - np.pi
     good = np.isfinite(et) & np.isfinite(er)
     if not good.any():
         return None
-    dist = np.hypot(mx, my)[good]
+    return et[good], er[good], np.hypot(mx, my)[good]
+
+
+def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S) -> dict | None:
+    """Relative pose error (RPE, the odometry benchmarks' metric) of a replay over
+    windows of ``window_s`` [s] within segments: how far the predicted motion over a
+    window, seen from its start pose, differs from the measured one. Returns
+    {"window_s", "trans_rmse_m", "rot_rmse_rad", "trans_per_m"} (trans_per_m: the
+    translation error per metre driven), or None when the run has no pose or no window.
+    Windows start where ``mask`` is true. A pose held between updates (fewer than 90 %
+    of the samples change it) is compared only between update samples."""
+    r = pose_residuals(run, pred, mask, window_s)
+    if r is None:
+        return None
+    et, er, dist = r
+    good = np.ones(et.size, bool)
     return {"window_s": window_s, "trans_rmse_m": float(np.sqrt(np.mean(et[good] ** 2))),
             "rot_rmse_rad": float(np.sqrt(np.mean(er[good] ** 2))),
             "trans_per_m": float(np.sum(et[good]) / max(float(np.sum(dist)), 1e-9))}
+
+
+POSE_GAIN = 0.5     # a pose-only cause must halve the held-out relative pose error ...
+POSE_CHANNEL_SLACK = 0.02   # ... without worsening the other channels by more than this
+
+
+def _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, base_err, bic0, pe_base):
+    """The wheel_radius candidate fitted to the pose (:func:`fit_wheel_radius_to_pose`),
+    scored on the held-out part on the channels and on the relative pose error."""
+    names = CANDIDATES["wheel_radius"][0]
+    x, se = fit_wheel_radius_to_pose(run, vehicle, terrain, pitch, train)
+    v, ter, p = _model_for("wheel_radius", x, vehicle, terrain, names)
+    pred = replay(run, v, ter, p + pitch)
+    pe = pose_error(run, pred, held)
+    if pe is None:
+        return None
+    g_rot = 1.0 - pe["rot_rmse_rad"] / max(pe_base["rot_rmse_rad"], 1e-12)
+    g_tr = 1.0 - pe["trans_rmse_m"] / max(pe_base["trans_rmse_m"], 1e-12)
+    pose_gain = max(g_rot, g_tr) if min(g_rot, g_tr) >= -0.1 else min(g_rot, g_tr)
+    err = _error(run, pred, chans, scales, held)
+    params = {n: float(a) for n, a in zip(names, x)}
+    return Candidate("wheel_radius", params, {n: float(a) for n, a in zip(names, se)}, err, 1.0 - err / base_err,
+                     _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
+                     ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound("wheel_radius", params),
+                     "pose", float(pose_gain))
+
+
+def fit_wheel_radius_to_pose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float, train) -> tuple:
+    """The wheel radius scales that best explain the training part's relative pose
+    errors (per window: heading in units of its noise, translation in units of its
+    noise, both estimated from the baseline's residual spread at the smallest windows),
+    by least squares: a tyre's radius shows in the ground motion (the pose), not in the
+    wheel speeds the other channels measure. Returns (x, standard errors)."""
+    names, lo, hi, x0, _ = CANDIDATES["wheel_radius"]
+    last = int(np.flatnonzero(train)[-1]) + 1
+    last = min(last, int(np.searchsorted(run.t, run.t[0] + FIT_WINDOW_S)) + 1)
+    part = run.slice(0, last)
+    tmask = train[:last]
+    s_rot = max(noise_scale(part["yaw"]) * math.sqrt(2.0), 1e-4)
+    s_tr = max(math.hypot(noise_scale(part["x"]), noise_scale(part["y"])) * math.sqrt(2.0), 1e-4)
+
+    def fun(x):
+        v, ter, p = _model_for("wheel_radius", x, vehicle, terrain, names)
+        r = pose_residuals(part, replay(part, v, ter, p + pitch), tmask)
+        if r is None:
+            return np.zeros(1)
+        et, er, _ = r
+        return np.r_[er / s_rot, et / s_tr]
+    res = least_squares(fun, np.array(x0, float), bounds=(np.array(lo), np.array(hi)), diff_step=1e-3,
+                        x_scale="jac", max_nfev=40)
+    J = res.jac
+    m, k = J.shape
+    s2 = float(np.sum(res.fun ** 2)) / max(m - k, 1)
+    try:
+        se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(k, math.nan)
+    return res.x, se
 
 
 def ljung_box(r: np.ndarray, lags: int = 20) -> float:
@@ -440,6 +511,24 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     cands.sort(key=lambda c: -c.gain)
     best = cands[0] if cands else None
     named = best is not None and best.gain >= MARGIN and best.bic_delta < -10.0
+    pe_base = pose_error(run, base, held)
+    if pe_base is not None and "wheel_radius" in (effects or tuple(CANDIDATES)):
+        # a tyre's radius shows in the ground motion, which the wheel speeds, torques and
+        # currents barely see: with a pose, the wheel_radius candidate is fitted to it and
+        # judged on it (it replaces the channel fit); it is the cause when it halves the
+        # held-out pose error without worsening the channels, unless the channels name
+        # another effect
+        c = _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, base_err, bic0, pe_base)
+        if c is not None:
+            cands = [x for x in cands if x.effect != "wheel_radius"] + [c]
+            cands.sort(key=lambda x: -x.gain)
+            if c.pose_gain >= POSE_GAIN and c.gain >= -POSE_CHANNEL_SLACK and (not named or best.effect == "wheel_radius"):
+                cands.remove(c)
+                cands.insert(0, c)
+                best, named = c, True
+            elif named and best.effect == "wheel_radius":      # the channels' verdict without the pose's support
+                best = cands[0]
+                named = best.gain >= MARGIN and best.bic_delta < -10.0
     ext_v, ext_t, ext_p = vehicle, terrain, 0.0
     if named:
         ext_v, ext_t, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
@@ -452,6 +541,7 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         ext = replay(run, ext_v, ext_t, math.radians(ext_p) + pitch) if named else base
         pose["extended"] = pose_error(run, ext, held)
     rivals = tuple(c.effect for c in cands[1:] if named and c.gain >= MARGIN and best.gain - c.gain < TIE)
+    gain = (best.pose_gain if best.fitted_on == "pose" else best.gain) if named else 0.0
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
-                     best.gain if named else 0.0, _where(run, base, chans, scales), _xcorr(run, base, scales),
+                     gain, _where(run, base, chans, scales), _xcorr(run, base, scales),
                      ext_v, ext_p, ext_t, pose, rivals)

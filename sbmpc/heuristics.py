@@ -153,12 +153,9 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
     if goal_nodes.size == 0:
         return np.zeros(e.shape), 0.0
-    # a source node (index nx * ny) joined to the goal at 0 and, on a window, to every
-    # cell of its inner edges at the straight-line bound from there
+    # on a window, a source node (index nx * ny) joined to the goal at 0 and to every
+    # cell of the window's inner edges at the straight-line bound from there
     S = nx * ny
-    src.append(np.full(goal_nodes.size, S))
-    dst.append(goal_nodes)
-    w.append(np.full(goal_nodes.size, 1e-12))
     edge = np.zeros((ny, nx), bool)
     full_ny, full_nx = e.shape
     if j0 > 0:
@@ -179,8 +176,15 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         src.append(np.full(exits.size, S))
         dst.append(exits)
         w.append(bound / OCTILE + 1e-12)
+    if exits.size:
+        src.append(np.full(goal_nodes.size, S))
+        dst.append(goal_nodes)
+        w.append(np.zeros(goal_nodes.size))       # (explicit zeros are edges to csgraph)
     G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(S + 1, S + 1)).tocsr()
-    D = dijkstra(G_, indices=S)[:S]
+    if exits.size:
+        D = dijkstra(G_, indices=S)[:S]
+    else:
+        D = dijkstra(G_, indices=goal_nodes, min_only=True)[:S]
     D[~np.isfinite(D)] = 1e12
     diag = res * math.sqrt(2.0)
     slack = diag / vb if cost == "time" else (froll_cell.max() * diag + mg * _max_rise(H, res, diag))

@@ -156,3 +156,30 @@ def test_fits_at_a_bound_and_rivals_are_named():
     assert at_bound("viscous_friction", {"c_Nms": -0.9959}) == ("c_Nms",)
     assert at_bound("grade", {"grade_deg": 3.0}) == ()
     assert set(CANDIDATES) >= {"turning_friction", "wheel_radius"}
+
+
+def _speeds_and_pose_only(run):
+    keep = ("t", "wl_cmd", "wr_cmd", "wl", "wr", "x", "y", "yaw")
+    return Run({k: run[k] for k in keep if k in run.columns}, run.meta, run.source)
+
+
+@pytest.mark.parametrize("seed", [5, 8])
+def test_a_tyre_seen_only_in_the_pose_is_found(seed):
+    """With wheel speeds and pose only (no torques, no currents), a smaller tyre leaves
+    the wheel speeds as commanded: only the ground motion shows it. The wheel_radius
+    candidate fitted to the relative pose errors finds it and its size."""
+    run, hidden = synth_run("wheel_radius", seed, duration=DURATION)
+    run = _speeds_and_pose_only(run)
+    d = diagnose(run, P3AT, VINYL)
+    assert d.cause == "wheel_radius", [(c.effect, round(c.gain, 3), c.pose_gain) for c in d.candidates[:3]]
+    best = next(c for c in d.candidates if c.effect == "wheel_radius")
+    assert best.fitted_on == "pose" and best.pose_gain >= 0.5
+    for name in ("scale_left", "scale_right"):
+        assert best.params[name] == pytest.approx(hidden[name], abs=0.015), (best.params, hidden)
+
+
+@pytest.mark.parametrize("seed", [21, 22])
+def test_no_false_alarm_from_the_pose(seed):
+    run, _ = synth_run("none", seed, duration=DURATION)
+    d = diagnose(_speeds_and_pose_only(run), P3AT, VINYL)
+    assert d.cause == "none", [(c.effect, round(c.gain, 3), c.pose_gain) for c in d.candidates[:3]]

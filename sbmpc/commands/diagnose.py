@@ -117,9 +117,14 @@ def run_diagnose(args) -> int:
     for c in d.candidates:
         ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" + (" (at its bound)" if k in c.at_bound else "")
                        for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
-        print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}")
-    print(f"cause: {d.cause}" + (f" (held-out gain {d.gain:.2f})" if d.cause != "none" else
-                                 f" (no candidate gains {100 * MARGIN:.0f} % on held-out data)"))
+        pose = f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else ""
+        print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}{pose}")
+    named = next((c for c in d.candidates if c.effect == d.cause), None)
+    in_pose = named is not None and named.fitted_on == "pose"
+    print(f"cause: {d.cause}" + (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
+                                 f"{': seen only in the pose' if in_pose else ''})" if d.cause != "none" else
+                                 f" (no candidate gains {100 * MARGIN:.0f} % on held-out data, nor halves the "
+                                 "pose error)"))
     for line in caveats(d):
         print(f"caveat: {line}")
     pose_line = _pose_line(d.pose)
