@@ -21,13 +21,14 @@ def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
     p.add_argument("--version", action="version", version=f"sbmpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    from . import diagnose, importer, plan, run, simulate, sweep
+    from . import diagnose, importer, plan, run, schema, simulate, sweep
     simulate.add_parser(sub)
     plan.add_parsers(sub)
     diagnose.add_parsers(sub)
     run.add_parsers(sub)
     sweep.add_parsers(sub)
     importer.add_parsers(sub)
+    schema.add_parsers(sub)
     return p
 
 
@@ -63,6 +64,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"sbmpc {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:            # the reader went away (| head): not an error of ours
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as exc:
         if debug:
             raise

@@ -1,0 +1,149 @@
+"""JSON Schemas (draft 2020-12) of the files sbmpc reads and writes: ``scenario`` (the
+YAML, as data), ``plan``, ``compare``, ``run``, ``diagnosis``. ``sbmpc schema NAME``
+prints one. The scenario schema's numeric ranges are the validator's own tables
+(:data:`sbmpc.scenario._SETTING_RANGES`, ``_RUN_RANGES``), so the two cannot drift
+apart; the output schemas are checked against real outputs by the tests.
+"""
+from __future__ import annotations
+
+NUM = {"type": "number"}
+NUM_OR_NULL = {"type": ["number", "null"]}
+STR_OR_NULL = {"type": ["string", "null"]}
+
+
+def _obj(props: dict, required=(), extra: bool = True) -> dict:
+    out = {"type": "object", "properties": props}
+    if required:
+        out["required"] = list(required)
+    if not extra:
+        out["additionalProperties"] = False
+    return out
+
+
+def _ranges(table: dict) -> dict:
+    props = {}
+    for key, (typ, lo, hi) in table.items():
+        props[key] = {"type": "integer" if typ is int else "number", "minimum": lo, "maximum": hi}
+    return props
+
+
+def scenario() -> dict:
+    from .scenario import _RUN_RANGES, _SETTING_RANGES, TRIGGERS
+    point = {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2}
+    region = _obj({"terrain": {"type": "string"},
+                   "rect": {"type": "array", "items": NUM, "minItems": 4, "maxItems": 4},
+                   "circle": {"type": "array", "items": NUM, "minItems": 3, "maxItems": 3},
+                   "polygon": {"type": "array", "items": point, "minItems": 3}}, ("terrain",), extra=False)
+    planner = _ranges(_SETTING_RANGES)
+    planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
+                    "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]}})
+    run = _ranges(_RUN_RANGES)
+    run["trigger"] = {"enum": list(TRIGGERS)}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",
+        **_obj({
+            "name": {"type": "string", "minLength": 1},
+            "description": {"type": "string"},
+            "map": {"oneOf": [
+                _obj({"file": {"type": "string"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
+                      "origin": point, "height_range": point}, ("file", "resolution"), extra=False),
+                _obj({"generate": {"type": "object"}}, ("generate",), extra=False),
+                _obj({"heights": {"type": "array"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
+                      "origin": point}, ("heights", "resolution"), extra=False)]},
+            "terrain": {"oneOf": [{"type": "string"},
+                                  _obj({"default": {"type": "string"}, "regions": {"type": "array", "items": region}},
+                                       ("default",), extra=False)]},
+            "vehicle": {"type": "string"},
+            "start": _obj({"x": NUM, "y": NUM, "yaw_deg": NUM, "v": {"type": "number", "minimum": -2, "maximum": 2}},
+                          ("x", "y"), extra=False),
+            "goal": _obj({"x": NUM, "y": NUM, "radius": {"type": "number", "minimum": 0.01, "maximum": 1e4,
+                                                          "default": 0.5}},
+                         ("x", "y"), extra=False),
+            "cost": {"enum": ["time", "energy"]},
+            "planner": _obj(planner, extra=False),
+            "run": _obj(run, extra=False),
+        }, ("map", "start", "goal"), extra=False)}
+
+
+def _trajectory() -> dict:
+    from .plan import TRAJECTORY_KEYS
+    return _obj({k: {"type": "array", "items": NUM} for k in TRAJECTORY_KEYS},
+                ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"))
+
+
+def plan() -> dict:
+    check = _obj({"dt": NUM, "reached": {"type": "boolean"}, "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL,
+                  "reason": STR_OR_NULL, "miss_m": NUM_OR_NULL, "drift_allowance_m": NUM_OR_NULL},
+                 ("dt", "reached"))
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema", "$id": "sbmpc.plan/1", "title": "sbmpc plan JSON",
+        **_obj({
+            "schema": {"const": "sbmpc.plan/1"}, "scenario": {"type": "string"}, "cost": {"enum": ["time", "energy"]},
+            "status": {"enum": ["found", "no_path"]}, "reason": STR_OR_NULL,
+            "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL, "length_m": NUM_OR_NULL,
+            "planning_time_s": NUM, "nodes_expanded": {"type": "integer"}, "edges_simulated": {"type": "integer"},
+            "controls": {"type": "array", "items": _obj({"wl": NUM, "wr": NUM, "duration_s": NUM},
+                                                        ("wl", "wr", "duration_s"), extra=False)},
+            "trajectory": {"oneOf": [_trajectory(), {"type": "object", "maxProperties": 0}]},
+            "nodes": {"type": "integer"}, "invalid_edges": {"type": "object", "additionalProperties": {"type": "integer"}},
+            "found_by": {"type": "string"}, "controller_rate_check": {"oneOf": [check, {"type": "null"}]},
+            "repairs": {"type": "integer"},
+        }, ("schema", "scenario", "cost", "status", "reason", "travel_time_s", "energy_J", "planning_time_s",
+            "nodes_expanded", "edges_simulated", "controls", "trajectory"))}
+
+
+def compare() -> dict:
+    summary = plan()
+    summary = {k: v for k, v in summary.items() if k not in ("$schema", "$id", "title")}
+    summary["required"] = [r for r in summary["required"] if r != "trajectory"]
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": "sbmpc.compare/1",
+            "title": "sbmpc compare.json",
+            **_obj({"schema": {"const": "sbmpc.compare/1"}, "scenario": {"type": "string"},
+                    "plans": _obj({"time": summary, "energy": summary}, ("time", "energy")),
+                    "total_time_s": NUM,
+                    "tradeoff": _obj({"time_saved_s": NUM, "energy_saved_J": NUM, "holds": {"type": "boolean"}},
+                                     ("time_saved_s", "energy_saved_J", "holds"))},
+                   ("schema", "scenario", "plans"))}
+
+
+def run() -> dict:
+    pe = _obj({"travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL, "length_m": NUM_OR_NULL})
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": "sbmpc.run/1", "title": "sbmpc run JSON",
+            **_obj({"schema": {"const": "sbmpc.run/1"}, "scenario": {"type": "string"}, "cost": {"enum": ["time", "energy"]},
+                    "vehicle": {"type": "string"}, "truth": {"type": "string"},
+                    "status": {"enum": ["reached", "failed"]}, "reason": STR_OR_NULL,
+                    "replans": {"type": "integer"}, "planning_time_s": NUM, "travel_time_s": NUM_OR_NULL,
+                    "energy_J": NUM_OR_NULL, "predicted": pe, "executed": pe,
+                    "prediction_error": _obj({"travel_time": NUM_OR_NULL, "energy": NUM_OR_NULL}),
+                    "stalls": {"type": "integer"}, "periods": {"type": "integer"},
+                    "trigger": {"enum": ["tolerance", "every"]}},
+                   ("schema", "scenario", "cost", "vehicle", "truth", "status", "reason", "replans",
+                    "travel_time_s", "energy_J", "predicted", "executed"))}
+
+
+def diagnosis() -> dict:
+    from dynamics.discrepancy import CANDIDATES
+    cand = _obj({"effect": {"enum": list(CANDIDATES)}, "params": {"type": "object", "additionalProperties": NUM},
+                 "stderr": {"type": "object"}, "heldout_error": NUM, "gain": NUM, "bic_delta": NUM_OR_NULL,
+                 "whiteness_q": NUM_OR_NULL, "at_bound": {"type": "array", "items": {"type": "string"}},
+                 "fitted_on": {"enum": ["channels", "pose"]}, "pose_gain": NUM_OR_NULL},
+                ("effect", "params", "heldout_error", "gain"))
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": "sbmpc.diagnosis/1",
+            "title": "sbmpc diagnosis JSON",
+            **_obj({"schema": {"const": "sbmpc.diagnosis/1"},
+                    "baseline": _obj({"heldout_error": NUM, "rmse": {"type": "object"}}, ("heldout_error", "rmse")),
+                    "candidates": {"type": "array", "items": cand},
+                    "cause": {"enum": ["none"] + list(CANDIDATES)}, "gain": NUM, "margin": NUM,
+                    "rivals": {"type": "array", "items": {"type": "string"}},
+                    "channels": {"type": "array", "items": {"type": "string"}},
+                    "extended_vehicle": STR_OR_NULL, "run": {"type": "string"}, "diagnosis_time_s": NUM},
+                   ("schema", "baseline", "candidates", "cause", "gain"))}
+
+
+SCHEMAS = {"scenario": scenario, "plan": plan, "compare": compare, "run": run, "diagnosis": diagnosis}
+
+
+def get(name: str) -> dict:
+    """The JSON Schema of ``name`` (one of :data:`SCHEMAS`)."""
+    return SCHEMAS[name]()

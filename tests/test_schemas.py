@@ -1,0 +1,60 @@
+"""The JSON Schemas shipped in the package (sbmpc schema NAME) describe what the
+commands really read and write: every shipped scenario validates, broken ones do not,
+and real plan, compare, run and diagnosis outputs validate."""
+import json
+from pathlib import Path
+
+import pytest
+
+jsonschema = pytest.importorskip("jsonschema")
+
+from dynamics.params import read_yaml_text
+from sbmpc import schemas
+from sbmpc.commands.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCEN = ROOT / "scenarios"
+
+
+def valid(name, doc):
+    jsonschema.Draft202012Validator(schemas.get(name)).validate(doc)
+
+
+@pytest.mark.parametrize("name", list(schemas.SCHEMAS))
+def test_schemas_are_valid_json_schemas_and_print(name, capsys):
+    jsonschema.Draft202012Validator.check_schema(schemas.get(name))
+    assert main(["schema", name]) == 0
+    assert json.loads(capsys.readouterr().out)["$id"].startswith(f"sbmpc.{name}")
+
+
+@pytest.mark.parametrize("path", sorted(SCEN.glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_shipped_scenario_validates(path):
+    valid("scenario", read_yaml_text(path))
+
+
+@pytest.mark.parametrize("change", [
+    {"planer": {}}, {"cost": "speed"}, {"planner": {"branching": 1000}}, {"goal": {"x": 1}},
+    {"planner": {"device": "tpu"}}, {"run": {"trigger": "sometimes"}},
+])
+def test_broken_scenarios_fail_the_schema_and_the_validator(change, tmp_path):
+    from sbmpc import scenario as SC
+    from sbmpc.errors import InputError
+    doc = dict(read_yaml_text(SCEN / "flat.yaml"), **change)
+    with pytest.raises(jsonschema.ValidationError):
+        valid("scenario", doc)
+    with pytest.raises(InputError):
+        SC.parse(doc, "doc")
+
+
+def test_outputs_validate(tmp_path, capsys):
+    assert main(["plan", str(SCEN / "flat.yaml"), "--json", str(tmp_path / "p.json"), "--quiet"]) == 0
+    valid("plan", json.loads((tmp_path / "p.json").read_text()))
+    assert main(["plan", str(SCEN / "unreachable.yaml"), "--json", str(tmp_path / "u.json"), "--quiet"]) == 1
+    valid("plan", json.loads((tmp_path / "u.json").read_text()))
+    assert main(["compare", str(SCEN / "runup_ramp.yaml"), "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    valid("compare", json.loads((tmp_path / "c" / "compare.json").read_text()))
+    assert main(["run", str(SCEN / "flat.yaml"), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
+    valid("run", json.loads((tmp_path / "r.json").read_text()))
+    assert main(["synth", "--effect", "none", "--duration", "20", "--out", str(tmp_path / "s.csv")]) == 0
+    assert main(["diagnose", str(tmp_path / "s.csv"), "--json", str(tmp_path / "d.json")]) == 0
+    valid("diagnosis", json.loads((tmp_path / "d.json").read_text()))
