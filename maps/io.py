@@ -6,6 +6,16 @@ A map specification is the ``map:`` section of a scenario (paths relative to ``b
     map: {file: maps/valley.png, resolution: 0.5, origin: [0, 0], height_range: [0.0, 6.0]}
     map: {generate: {size: [60, 60], resolution: 0.25, seed: 3, features: [...]}}
     map: {heights: <2-D array>, resolution: 0.25, origin: [0, 0]}     # from Python
+    map: {file: dem.tif}                       # GeoTIFF / DEM (pip install 'sbmpc[geotiff]')
+    map: {file: dem.tif, origin: [0, 0], nodata: wall}
+
+A GeoTIFF (read with rasterio) brings its own resolution and position: its first band
+is the heights [m], its pixels must be square and north-up, its CRS projected (metres;
+a geographic CRS in degrees is refused), and ``origin`` defaults to the centre of its
+south-west pixel in the file's coordinates (give ``origin: [0, 0]`` to work in a local
+frame). Cells without data (the file's nodata value or NaN) are refused unless
+``nodata: wall`` turns them into a wall 100 m above the highest cell, which no plan
+crosses.
 
 Heights are rows of y and columns of x: ``H[j, i]`` is the height [m] at
 ``(origin[0] + i * resolution, origin[1] + j * resolution)``; ``origin`` is the world
@@ -103,17 +113,22 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
                            f"found {type(spec['heights']).__name__}") from None
         return _checked(H, _number(spec, "resolution", where, positive=True), _origin(spec, where),
                         f"{where}.heights", "heights")
-    known = {"file", "resolution", "origin", "height_range"}
+    known = {"file", "resolution", "origin", "height_range", "nodata"}
     extra = set(spec) - known
     if extra:
         raise MapError(f"{where}: unknown key '{sorted(extra)[0]}': expected {', '.join(sorted(known | {'generate'}))}")
     if not isinstance(spec.get("file"), str):
         raise MapError(f"{where}.file: expected a path to a .npy or .png file, found {spec.get('file')!r}")
     path = base / spec["file"]
-    res = _number(spec, "resolution", where, positive=True)
-    origin = _origin(spec, where)
     if not path.is_file():
         raise MapError(f"{where}.file: expected an existing file, found no file at '{path}'")
+    if path.suffix.lower() in (".tif", ".tiff"):
+        H, res, origin = read_geotiff(path, spec, where)
+        return _checked(H, res, origin, str(path), path.stem)
+    if "nodata" in spec:
+        raise MapError(f"{where}.nodata: expected only with a GeoTIFF map, found it with '{path.suffix}'")
+    res = _number(spec, "resolution", where, positive=True)
+    origin = _origin(spec, where)
     if path.suffix.lower() == ".npy":
         try:
             H = np.load(path, allow_pickle=False)
@@ -133,8 +148,44 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
                 f"neighbouring cells; smooth slopes become stairs. Save the heights as a 16-bit PNG or a .npy "
                 f"array"), stacklevel=2)
     else:
-        raise MapError(f"{where}.file: expected a .npy or .png file, found '{path.suffix or path.name}'")
+        raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
     return _checked(H, res, origin, str(path), path.stem)
+
+
+def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
+    """(heights with row 0 = south, resolution [m], origin) of a GeoTIFF (module doc)."""
+    try:
+        import rasterio
+    except ImportError:
+        raise MapError(f"{path}: reading GeoTIFF maps needs rasterio (pip install 'sbmpc[geotiff]')") from None
+    try:
+        with rasterio.open(path) as ds:
+            band = ds.read(1, masked=True)
+            tr, crs = ds.transform, ds.crs
+    except rasterio.errors.RasterioError as exc:
+        raise MapError(f"{path}: expected a GeoTIFF, found a file that cannot be read as one ({exc})") from None
+    if crs is not None and crs.is_geographic:
+        raise MapError(f"{path}: expected a projected CRS in metres, found {crs.to_string()} (degrees): "
+                       "reproject the DEM first (e.g. gdalwarp -t_srs to a UTM zone)")
+    if tr.b != 0.0 or tr.d != 0.0 or not math.isclose(tr.a, -tr.e, rel_tol=1e-6) or tr.a <= 0:
+        raise MapError(f"{path}: expected square, north-up pixels, found the transform {tuple(tr)[:6]}")
+    res = float(tr.a)
+    if "resolution" in spec and not math.isclose(_number(spec, "resolution", where, positive=True), res, rel_tol=1e-6):
+        raise MapError(f"{where}.resolution: expected the GeoTIFF's own {res:g} m (or nothing), found {spec['resolution']}")
+    H = np.ma.filled(band.astype(float), np.nan)
+    H = np.flipud(H)                                  # row 0 = the southern edge
+    ny = H.shape[0]
+    origin = _origin(spec, where) if "origin" in spec else (float(tr.c + 0.5 * tr.a), float(tr.f + (ny - 0.5) * tr.e))
+    bad = ~np.isfinite(H)
+    if bad.any():
+        mode = spec.get("nodata", "error")
+        if mode != "wall":
+            raise MapError(f"{path}: {int(bad.sum())} cells without data (nodata); expected none, or "
+                           f"'{where}.nodata: wall' to make them impassable")
+        if bad.all():
+            raise MapError(f"{path}: expected some cells with data, found none")
+        H[bad] = float(np.nanmax(H)) + 100.0
+    return H, res, origin
 
 
 MAX_CELLS = 25_000_000     # maps larger than this are refused (about 200 MB of heights)

@@ -47,7 +47,8 @@ def scenario() -> dict:
             "description": {"type": "string"},
             "map": {"oneOf": [
                 _obj({"file": {"type": "string"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
-                      "origin": point, "height_range": point}, ("file", "resolution"), extra=False),
+                      "origin": point, "height_range": point, "nodata": {"enum": ["wall", "error"]}},
+                     ("file",), extra=False),
                 _obj({"generate": {"type": "object"}}, ("generate",), extra=False),
                 _obj({"heights": {"type": "array"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
                       "origin": point}, ("heights", "resolution"), extra=False)]},

@@ -105,3 +105,41 @@ def test_terrain_layer_lookup():
     assert m.terrain_index(-3, 0) == -1
     with pytest.raises(ValueError, match="terrain layer"):
         ElevationMap(H, 1.0, terrain_layer=layer, terrain_names=("asphalt",))
+
+
+def _geotiff(path, H, x0=500000.0, y_top=4000000.0, res=0.5, crs="EPSG:32633", nodata=None):
+    rasterio = pytest.importorskip("rasterio")
+    from rasterio.transform import from_origin
+    with rasterio.open(path, "w", driver="GTiff", height=H.shape[0], width=H.shape[1], count=1, dtype="float32",
+                       crs=crs, transform=from_origin(x0, y_top, res, res), nodata=nodata) as ds:
+        ds.write(H.astype("float32"), 1)
+    return path
+
+
+def test_a_geotiff_dem_loads_north_up_with_its_own_resolution_and_origin(tmp_path):
+    """Rows of a GeoTIFF run north to south; the map's row 0 is the south. The origin is
+    the south-west pixel's centre in the file's coordinates, or the one given."""
+    H = np.zeros((6, 8))
+    H[0, :] = 2.0                                   # the northern row of the file
+    p = _geotiff(tmp_path / "dem.tif", H)
+    m = load_map({"file": "dem.tif"}, tmp_path)
+    assert m.resolution == 0.5 and m.shape == (6, 8)
+    assert m.origin == pytest.approx((500000.25, 4000000.0 - 6 * 0.5 + 0.25))
+    assert np.all(m.heights[-1] == 2.0) and np.all(m.heights[0] == 0.0)
+    local = load_map({"file": "dem.tif", "origin": [0, 0]}, tmp_path)
+    assert local.origin == (0.0, 0.0)
+    with pytest.raises(MapError, match="GeoTIFF's own 0.5 m"):
+        load_map({"file": "dem.tif", "resolution": 0.25}, tmp_path)
+
+
+def test_geotiff_nodata_and_degrees_are_handled(tmp_path):
+    H = np.ones((5, 5))
+    H[2, 2] = -9999.0
+    _geotiff(tmp_path / "hole.tif", H, nodata=-9999.0)
+    with pytest.raises(MapError, match="1 cells without data"):
+        load_map({"file": "hole.tif"}, tmp_path)
+    m = load_map({"file": "hole.tif", "nodata": "wall"}, tmp_path)
+    assert m.heights[2, 2] == pytest.approx(101.0) and np.isfinite(m.heights).all()
+    _geotiff(tmp_path / "geo.tif", np.ones((4, 4)), x0=10.0, y_top=50.0, res=0.001, crs="EPSG:4326")
+    with pytest.raises(MapError, match="projected CRS in metres"):
+        load_map({"file": "geo.tif"}, tmp_path)
