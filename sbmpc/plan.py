@@ -350,12 +350,14 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
     return ("; to try: " + "; ".join(out)) if out else ""
 
 
-def _threads(ps) -> int:
-    """Threads for the search's edges: the scenario's, or with 0 every core numba uses."""
+def _threads(ps):
+    """Threads for the search's edges: the scenario's, or with 0 "auto" (every core numba
+    uses, unless measurements during the search find the serial expander faster: cores
+    busy with other work)."""
     if ps.threads:
         return ps.threads
     import numba
-    return numba.config.NUMBA_NUM_THREADS
+    return "auto" if numba.config.NUMBA_NUM_THREADS > 1 else 1
 
 
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:

@@ -238,3 +238,30 @@ def test_open_set_pops_by_f_then_push_order(fs, renumber_at):
     got = _heap_order(f, renumber_at)
     want = sorted(range(len(fs)), key=lambda i: (fs[i], i))
     np.testing.assert_array_equal(got, want)
+
+
+def test_auto_threads_keep_the_faster_expander_and_measure_again():
+    """threads "auto": the first rounds alternate parallel and serial expansion and keep
+    the faster per edge; every RECHECK rounds it measures again (a core taken by other
+    work makes the parallel expander the slower one)."""
+    import time as _time
+    from sbmpc.search.astar import _Chooser
+    calls = []
+    slow = {"parallel": 0.002, "serial": 0.0}
+
+    def parallel(k):
+        calls.append("p")
+        _time.sleep(slow["parallel"])
+
+    def serial(k):
+        calls.append("s")
+        _time.sleep(slow["serial"])
+    c = _Chooser(parallel, serial)
+    for _ in range(2 * c.TRIES + 10):
+        c(16)
+    assert c.choices == ["serial"] and calls[-10:] == ["s"] * 10
+    assert calls[:2 * c.TRIES] == ["p", "s"] * c.TRIES
+    slow.update(parallel=0.0, serial=0.002)
+    for _ in range(c.RECHECK - (2 * c.TRIES + 10) + 2 * c.TRIES + 5):
+        c(16)
+    assert c.choices == ["serial", "parallel"] and calls[-5:] == ["p"] * 5

@@ -232,3 +232,11 @@ def test_parallel_edges_give_the_serial_plan_and_a_batch_stays_close():
     assert parallel.controls == serial.controls
     assert parallel.nodes_expanded == serial.nodes_expanded
     assert batched.travel_time_s <= 1.01 * serial.travel_time_s
+
+
+def test_auto_threads_give_the_serial_plan():
+    from dataclasses import replace
+    scn = SC.load(SCEN / "runup_ramp.yaml")
+    plans = [PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, threads=t))), "time") for t in (1, 0)]
+    assert plans[0].found and plans[0].controls == plans[1].controls
+    assert PL._threads(replace(scn.planner, threads=0)) in ("auto", 1)

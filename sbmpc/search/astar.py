@@ -769,12 +769,13 @@ class Search:
 
         ``batch`` > 1: take the ``batch`` best open nodes at a time (in the serial
         search's order, up to a goal) and simulate all their edges as one batch
-        (``Problem.expand_batch``, on ``threads`` threads), then merge their children in
+        (``Problem.expand_batch``, on ``threads`` threads; "auto": every core, or the
+        serial expander when measurements say the cores are busy), then merge their children in
         the same order. With batch 1 the search is the serial A*, with ``threads`` > 1
         its edges run in parallel (the same nodes are expanded); a larger batch expands
         some nodes the serial search would have skipped (the children of the batch's
         first nodes could not yet be seen), in exchange for more edges at a time."""
-        if batch > 1 or (threads or 1) > 1:
+        if batch > 1 or threads == "auto" or (threads or 1) > 1:
             return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
         p = self.problem
         t0 = time.perf_counter()
@@ -809,16 +810,20 @@ class Search:
         BR = np.zeros(E, np.int64)
         CH = np.zeros((E, ns))
         CO = np.zeros(E)
+        def serial(k):
+            expand_nodes(self._fa, p.params, p.data, self.work, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb],
+                         CO[:k * nb])
         if p.expand_batch is not None:
+            import numba
             if threads is not None:
-                import numba
-                numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-            def expand(k):
+                n = numba.config.NUMBA_NUM_THREADS if threads == "auto" else int(threads)
+                numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+
+            def batched(k):
                 p.expand_batch(p.params, p.data, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb], CO[:k * nb])
+            expand = _Chooser(batched, serial) if threads == "auto" else batched
         else:
-            def expand(k):
-                expand_nodes(self._fa, p.params, p.data, self.work, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb],
-                             CO[:k * nb])
+            expand = serial
         run = _batch_entry()
         t0 = time.perf_counter()
         pending = 0
@@ -879,6 +884,42 @@ class Search:
             why += f"; {int(cnt[C_DEPTHCUT])} nodes at the depth limit {p.max_depth}"
         empty = np.zeros(0, np.int64)
         return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty, **common)
+
+
+class _Chooser:
+    """``threads: auto``: expand with the parallel batch expander or the serial one,
+    whichever is faster here and now. Both give the same children bit for bit (one
+    edge function), so the choice changes the time, never the plan. The first
+    2 x TRIES rounds alternate the two and keep the one with the smaller median time per
+    edge (the first round of each is a warm-up and not counted); the choice is measured
+    again every RECHECK rounds (other work may have taken or freed cores: with both
+    cores busy elsewhere, parallel rounds ran many times slower than serial ones)."""
+
+    TRIES = 12
+    RECHECK = 2048
+
+    def __init__(self, parallel, serial):
+        self.modes = (parallel, serial)
+        self.calls = 0
+        self.times = ([], [])
+        self.best = 0
+        self.choices = []
+
+    def __call__(self, k):
+        phase = self.calls % self.RECHECK
+        self.calls += 1
+        if phase < 2 * self.TRIES:
+            m = phase % 2
+            t0 = time.perf_counter()
+            self.modes[m](k)
+            if phase >= 2:
+                self.times[m].append((time.perf_counter() - t0) / max(k, 1))
+            if phase == 2 * self.TRIES - 1:
+                self.best = 0 if np.median(self.times[0]) <= np.median(self.times[1]) else 1
+                self.choices.append("parallel" if self.best == 0 else "serial")
+                self.times = ([], [])
+            return
+        self.modes[self.best](k)
 
 
 def _pow2(n: int) -> int:
