@@ -188,6 +188,49 @@ def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
     return H, res, origin
 
 
+def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "terrain.raster") -> np.ndarray:
+    """Integer terrain classes on the map's grid, from a ``.npy`` array (row 0 = south,
+    as heights), a PNG (grey levels as integers; top row = north) or a GeoTIFF (band 1,
+    top row = north). It must have the map's ``shape`` (rows, columns)."""
+    path = Path(base) / file
+    if not path.is_file():
+        raise MapError(f"{where}.file: expected an existing file, found no file at '{path}'")
+    suf = path.suffix.lower()
+    if suf == ".npy":
+        try:
+            C = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as exc:
+            raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
+    elif suf == ".png":
+        from PIL import Image
+        try:
+            with Image.open(path) as im:
+                C = np.flipud(np.asarray(im))
+        except OSError as exc:
+            raise MapError(f"{path}: expected a PNG image, found a file that cannot be read as one ({exc})") from None
+        if C.ndim == 3:
+            raise MapError(f"{path}: expected a single-channel (grey) class image, found {C.shape[2]} channels")
+    elif suf in (".tif", ".tiff"):
+        try:
+            import rasterio
+        except ImportError:
+            raise MapError(f"{path}: reading GeoTIFF rasters needs rasterio (pip install 'sbmpc[geotiff]')") from None
+        try:
+            with rasterio.open(path) as ds:
+                C = np.flipud(ds.read(1))
+        except rasterio.errors.RasterioError as exc:
+            raise MapError(f"{path}: expected a GeoTIFF, found a file that cannot be read as one ({exc})") from None
+    else:
+        raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
+    if C.ndim != 2 or tuple(C.shape) != tuple(shape):
+        raise MapError(f"{path}: expected classes on the map's grid, {shape[0]} x {shape[1]} cells, found shape {C.shape}")
+    if not np.issubdtype(C.dtype, np.integer):
+        if not (np.all(np.isfinite(C)) and np.all(C == np.round(C))):
+            raise MapError(f"{path}: expected integer classes, found {C.dtype} values with fractions or NaN")
+        C = np.round(C)
+    return C.astype(np.int64)
+
+
 MAX_CELLS = 25_000_000     # maps larger than this are refused (about 200 MB of heights)
 
 

@@ -244,10 +244,20 @@ def _terrain(spec, probs: _Problems):
     if not isinstance(spec, dict):
         probs.add("terrain", "a terrain name, a path to a terrain YAML, or {default:, regions:}", spec)
         return "vinyl"
-    _unknown(spec, {"default", "regions"}, "terrain", probs)
+    _unknown(spec, {"default", "regions", "raster"}, "terrain", probs)
     default = spec.get("default")
     if not isinstance(default, str):
         probs.add("terrain.default", "a terrain name or path", default)
+    raster = spec.get("raster")
+    if raster is not None:
+        ok = (isinstance(raster, dict) and set(raster) <= {"file", "classes"} and isinstance(raster.get("file"), str)
+              and isinstance(raster.get("classes"), dict) and raster["classes"]
+              and all(isinstance(k, int) and not isinstance(k, bool) and isinstance(v, str)
+                      for k, v in raster["classes"].items()))
+        if not ok:
+            probs.add("terrain.raster", "{file: a .npy, .png or .tif of integer classes on the map's grid, "
+                      "classes: {integer: terrain name or path}}", raster)
+            raster = None
     regions = []
     raw = spec.get("regions", [])
     if not isinstance(raw, list):
@@ -275,7 +285,10 @@ def _terrain(spec, probs: _Problems):
             probs.add(f"{w}.{k}", want, v)
             continue
         regions.append(Region(str(r.get("terrain")), k, tuple(map(tuple, v)) if k == "polygon" else tuple(v)))
-    return {"default": default if isinstance(default, str) else "vinyl", "regions": regions}
+    out = {"default": default if isinstance(default, str) else "vinyl", "regions": regions}
+    if raster is not None:
+        out["raster"] = {"file": raster["file"], "classes": dict(raster["classes"])}
+    return out
 
 
 def _numeric_settings(spec: dict, ranges: dict, where: str, probs: _Problems) -> dict:
@@ -449,11 +462,14 @@ def _file_problems(data, path: Path) -> list:
     return out
 
 
-def terrain_layer(regions, default_index: int, names: list, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Raster of terrain indices (into ``names``) over the grid of cell centres (x, y)."""
+def terrain_layer(regions, default_index: int, names: list, x: np.ndarray, y: np.ndarray,
+                  base: np.ndarray | None = None) -> np.ndarray:
+    """Raster of terrain indices (into ``names``) over the grid of cell centres (x, y):
+    ``base`` (a class raster already mapped to indices) or the default everywhere, the
+    regions drawn on top in their order."""
     from matplotlib.path import Path as MplPath
     X, Y = np.meshgrid(x, y)
-    layer = np.full(X.shape, default_index, dtype=np.int64)
+    layer = np.full(X.shape, default_index, dtype=np.int64) if base is None else base.astype(np.int64).copy()
     for r in regions:
         k = names.index(r.terrain)
         if r.kind == "rect":

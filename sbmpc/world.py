@@ -14,7 +14,7 @@ from dynamics import ParameterError, kernels as K
 from dynamics.params import Terrain, Vehicle, load_terrain, load_vehicle
 from dynamics.simulate import Model
 from maps import ElevationMap
-from maps.io import MapError, load_map
+from maps.io import MapError, load_class_raster, load_map
 
 from .errors import InputError
 from .problems import skidsteer as SS
@@ -68,10 +68,12 @@ def resolve(scn: Scenario) -> World:
         vehicle = load_vehicle(scn.vehicle, scn.base)
     except ParameterError as exc:
         problems.append(f"vehicle: {exc}")
+    raster = None if isinstance(scn.terrain, str) else scn.terrain.get("raster")
     if isinstance(scn.terrain, str):
         names = [scn.terrain]
     else:
-        names = [scn.terrain["default"]] + [r.terrain for r in scn.terrain["regions"]]
+        names = ([scn.terrain["default"]] + (list(raster["classes"].values()) if raster else [])
+                 + [r.terrain for r in scn.terrain["regions"]])
         names = list(dict.fromkeys(names))
     terrains = []
     for n in names:
@@ -85,8 +87,17 @@ def resolve(scn: Scenario) -> World:
     if not isinstance(scn.terrain, str):
         ny, nx = emap.shape
         ox, oy = emap.origin
+        base = None
+        if raster:
+            try:
+                C = load_class_raster(raster["file"], scn.base, emap.shape)
+            except MapError as exc:
+                raise InputError(f"{src}: {exc}") from None
+            base = np.zeros(C.shape, np.int64)          # classes not listed: the default terrain
+            for cls, name in raster["classes"].items():
+                base[C == cls] = names.index(name)
         layer = terrain_layer(scn.terrain["regions"], 0, names, ox + emap.resolution * np.arange(nx),
-                              oy + emap.resolution * np.arange(ny))
+                              oy + emap.resolution * np.arange(ny), base)
         emap = ElevationMap(emap.heights, emap.resolution, emap.origin, layer, tuple(names), emap.name)
     world = World(scn, emap, vehicle, tuple(terrains))
     problems = []

@@ -8,7 +8,8 @@ from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
 from sbmpc.errors import InputError
 
-SHIPPED = sorted((Path(__file__).resolve().parents[1] / "scenarios").glob("*.yaml"))
+SCEN_DIR = Path(__file__).resolve().parents[1] / "scenarios"
+SHIPPED = sorted(SCEN_DIR.glob("*.yaml"))
 
 GOOD = {
     "name": "t", "map": {"generate": {"size": [10, 10], "resolution": 0.25, "features": []}},
@@ -108,3 +109,35 @@ def test_every_problem_of_a_scenario_at_once_with_did_you_mean(tmp_path, capsys)
     for part in ("did you mean 'planner'?", "map.file: expected an existing file", "did you mean 'p3at'?",
                  "did you mean 'grass'?"):
         assert part in err, part
+
+
+def test_a_terrain_class_raster_sets_the_terrain_of_every_cell(tmp_path):
+    """terrain.raster: integer classes on the map's grid (.npy rows from the south, PNG
+    rows from the north), each listed class a terrain, the others the default, regions
+    on top; a raster of the wrong shape is refused with both shapes."""
+    import numpy as np
+    from PIL import Image
+    from sbmpc import world as WO
+    C = np.zeros((49, 81), np.int64)
+    C[:, 41:] = 1                                   # the eastern half
+    C[:10, :] = 7                                   # a class not listed: the default
+    np.save(tmp_path / "classes.npy", C)
+    Image.fromarray(np.flipud(C).astype(np.uint8)).save(tmp_path / "classes.png")
+    base = (SCEN_DIR / "flat.yaml").read_text().replace("terrain: vinyl", "terrain: {default: vinyl, raster: "
+                                                        "{file: FILE, classes: {1: grass}}, regions: "
+                                                        "[{terrain: asphalt, circle: [2, 10, 1]}]}")
+    layers = []
+    for f in ("classes.npy", "classes.png"):
+        (tmp_path / "s.yaml").write_text(base.replace("FILE", f))
+        w = WO.resolve(SC.load(tmp_path / "s.yaml"))
+        assert [t.name for t in w.terrains] == ["vinyl", "grass", "asphalt"]
+        L = w.emap.terrain_layer
+        assert L[20, 60] == 1 and L[20, 20] == 0 and L[5, 60] == 0
+        assert L[40, 8] == 2                          # the region (2, 10) m, on top
+        assert w.terrain_at(15.0, 5.0).name == "grass" and w.terrain_at(5.0, 5.0).name == "vinyl"
+        layers.append(L)
+    assert np.array_equal(*layers)
+    np.save(tmp_path / "small.npy", C[:10, :10])
+    (tmp_path / "s.yaml").write_text(base.replace("FILE", "small.npy"))
+    with pytest.raises(InputError, match="49 x 81 cells, found shape"):
+        WO.resolve(SC.load(tmp_path / "s.yaml"))

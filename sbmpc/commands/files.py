@@ -141,6 +141,10 @@ def scenario_inputs(path: Path) -> list[Path]:
             for r in v.get("regions") or []:
                 if isinstance(r, dict) and isinstance(r.get("terrain"), str):
                     names.append(r["terrain"])
+            ras = v.get("raster")
+            if isinstance(ras, dict):
+                names += [x for x in (ras.get("file"),) if isinstance(x, str)]
+                names += [x for x in (ras.get("classes") or {}).values() if isinstance(x, str)]
     for n in names:
         for cand in (base / n, base / f"{n}.yaml", Path(n)):
             try:
