@@ -214,3 +214,73 @@ def test_awkward_but_valid_runs_are_diagnosed(work, capsys):
         assert rc == 0 and "Traceback" not in out.err, (path.name, out.err)
     from dynamics.runs import read_run
     assert len(read_run(gaps).segments()) == 1           # gaps in the column continue the segment
+
+
+# ---- fuzzing: random mutations of a valid scenario and run CSV -------------------------
+from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+
+_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.integers(-10**400, 10**400),
+                    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12),
+                    st.lists(st.integers(-5, 30), max_size=5), st.dictionaries(st.text(max_size=5), st.integers(), max_size=3))
+_PATHS = st.sampled_from([("name",), ("map",), ("map", "generate"), ("map", "generate", "size"),
+                          ("map", "generate", "resolution"), ("map", "generate", "features"), ("terrain",),
+                          ("vehicle",), ("start",), ("start", "x"), ("start", "v"), ("goal",), ("goal", "radius"),
+                          ("goal", "x"), ("cost",), ("planner",), ("planner", "branching"), ("planner", "dt"),
+                          ("planner", "cell_xy"), ("planner", "wheel_speeds"), ("run",), ("run", "trigger"),
+                          ("extra_key",)])
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(edits=st.lists(st.tuples(_PATHS, _VALUES), min_size=1, max_size=3))
+def test_fuzzed_scenarios_never_crash(tmp_path, capsys, edits):
+    """Random values at random keys of the flat scenario: exit 0 (still valid), 1 (no
+    path) or 2 (one message naming the problems); never 3 or a traceback, and the file
+    is left as it was. Plans are cut to 200 expansions and 10 s."""
+    import copy
+    import yaml
+    doc = copy.deepcopy(yaml.safe_load((SCEN / "flat.yaml").read_text()))
+    for path, value in edits:
+        node = doc
+        for k in path[:-1]:
+            if not isinstance(node.get(k), dict):
+                node[k] = {}
+            node = node[k]
+        node[path[-1]] = value
+    s = tmp_path / "fuzz.yaml"
+    try:
+        s.write_text(yaml.safe_dump(doc))
+    except (ValueError, OverflowError):
+        return
+    before = s.read_bytes()
+    rc = main(["plan", str(s), "--quiet", "--max-expansions", "200", "--time-budget", "10"])
+    err = capsys.readouterr().err
+    assert rc in (0, 1, 2), err
+    assert "Traceback" not in err and "internal error" not in err
+    assert s.read_bytes() == before
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(row=st.integers(0, 60), col=st.sampled_from(["t", "wl_cmd", "wr_cmd", "wl", "wr", "x", "yaw"]),
+       value=st.one_of(st.sampled_from(["", "nan", "inf", "-inf", "1e308", "abc", "0x10", "1,2", '"', "\x00"]),
+                       st.floats(allow_nan=True, allow_infinity=True).map(repr)))
+def test_fuzzed_run_csvs_never_crash(tmp_path, capsys, row, col, value):
+    """One cell of a synthetic run replaced by junk: diagnosed (0) or one message (2)."""
+    src = tmp_path / "r.csv"
+    if not src.exists():
+        assert main(["synth", "--effect", "none", "--duration", "3", "--out", str(src)]) == 0
+        capsys.readouterr()
+    lines = src.read_text().splitlines()
+    h = next(i for i, line in enumerate(lines) if not line.startswith("#"))
+    cols = lines[h].split(",")
+    if col not in cols:
+        return
+    k = min(h + 1 + row, len(lines) - 1)
+    cells = lines[k].split(",")
+    cells[cols.index(col)] = value
+    lines[k] = ",".join(cells)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    rc = main(["diagnose", str(bad)])
+    err = capsys.readouterr().err
+    assert rc in (0, 2), err
+    assert "Traceback" not in err and "internal error" not in err
