@@ -482,8 +482,9 @@ def _xcorr(run, pred, scales, max_lag_s=1.0):
 
 
 def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
-             effects: tuple | None = None) -> Diagnosis:
-    """Diagnose a measured run (module doc)."""
+             effects: tuple | None = None, progress=None) -> Diagnosis:
+    """Diagnose a measured run (module doc). ``progress(i, n, effect)`` is called before
+    each candidate's fit."""
     chans = channels(run)
     scales = {c: noise_scale(run[c]) for c in chans}
     t = run.t
@@ -496,7 +497,10 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     q0 = ljung_box(((run["wl"] - base["wl"]) / scales["wl"])[held])
     rmse = {c: float(np.sqrt(np.nanmean(((run[c] - base[c]))[held] ** 2))) for c in chans}
     cands = []
-    for eff in effects or tuple(CANDIDATES):
+    todo = effects or tuple(CANDIDATES)
+    for i, eff in enumerate(todo):
+        if progress is not None:
+            progress(i, len(todo), eff)
         names = CANDIDATES[eff][0]
         x, se = fit_candidate(eff, run, vehicle, terrain, chans, scales, train)
         v, ter, p = _model_for(eff, x, vehicle, terrain, names)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import math
 import time
 from pathlib import Path
@@ -103,7 +104,11 @@ def run_diagnose(args) -> int:
                              f"found {run.meta['slope_deg']!r:.40}")
         pitch = math.radians(slope)
     t0 = time.perf_counter()
-    d = diagnose(run, vehicle, terrain, pitch)
+
+    def progress(i, n, effect):
+        if sys.stderr.isatty():
+            print(f"  fitting {effect} ({i + 1}/{n}), {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+    d = diagnose(run, vehicle, terrain, pitch, progress=progress)
     elapsed = time.perf_counter() - t0
     out_vehicle = args.vehicle_out
     if out_vehicle is None and args.report is not None:
