@@ -60,6 +60,21 @@ CANDIDATES = {
 }
 
 
+def _least_squares(fun, x0, lo, hi, diff_step: float, max_nfev: int) -> tuple:
+    """Bounded least squares of the residual vector ``fun(x)``: (x, standard errors from
+    the Jacobian at the optimum, NaN where it is singular)."""
+    res = least_squares(fun, np.clip(np.asarray(x0, float), lo, hi), bounds=(np.asarray(lo, float), np.asarray(hi, float)),
+                        diff_step=diff_step, x_scale="jac", max_nfev=max_nfev)
+    J = res.jac
+    m, k = J.shape
+    s2 = float(np.sum(res.fun ** 2)) / max(m - k, 1)
+    try:
+        se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(k, math.nan)
+    return res.x, se
+
+
 def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=None, max_nfev: int = 30):
     """Least-squares calibration of vehicle fields ({name: (low, high)}) on the wheel-speed
     (and torque or current) replay of ``run`` (restricted to ``mask``). Returns the
@@ -76,16 +91,9 @@ def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=N
         v = vehicle.replace(**dict(zip(names, map(float, x))))
         return _residuals(run, replay(run, v, terrain), chans, scales, mask)
 
-    res = least_squares(fun, np.clip(x0, lo, hi), bounds=(lo, hi), diff_step=1e-2, x_scale="jac",
-                        max_nfev=max_nfev)
-    J = res.jac
-    s2 = float(np.sum(res.fun ** 2)) / max(J.shape[0] - J.shape[1], 1)
-    try:
-        se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
-    except np.linalg.LinAlgError:
-        se = np.full(len(names), math.nan)
-    v = vehicle.replace(**dict(zip(names, map(float, res.x))))
-    return v, {n: (float(a), float(e)) for n, a, e in zip(names, res.x, se)}
+    x, se = _least_squares(fun, x0, lo, hi, 1e-2, max_nfev)
+    v = vehicle.replace(**dict(zip(names, map(float, x))))
+    return v, {n: (float(a), float(e)) for n, a, e in zip(names, x, se)}
 
 
 def channels(run: Run) -> tuple:
@@ -294,10 +302,9 @@ def pose_error(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S)
     if r is None:
         return None
     et, er, dist = r
-    good = np.ones(et.size, bool)
-    return {"window_s": window_s, "trans_rmse_m": float(np.sqrt(np.mean(et[good] ** 2))),
-            "rot_rmse_rad": float(np.sqrt(np.mean(er[good] ** 2))),
-            "trans_per_m": float(np.sum(et[good]) / max(float(np.sum(dist)), 1e-9))}
+    return {"window_s": window_s, "trans_rmse_m": float(np.sqrt(np.mean(et ** 2))),
+            "rot_rmse_rad": float(np.sqrt(np.mean(er ** 2))),
+            "trans_per_m": float(np.sum(et) / max(float(np.sum(dist)), 1e-9))}
 
 
 POSE_GAIN = 0.5     # a pose-only cause must halve the held-out relative pose error ...
@@ -346,16 +353,7 @@ def fit_wheel_radius_to_pose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch
             return np.zeros(1)
         et, er, _ = r
         return np.r_[er / s_rot, et / s_tr]
-    res = least_squares(fun, np.array(x0, float), bounds=(np.array(lo), np.array(hi)), diff_step=1e-3,
-                        x_scale="jac", max_nfev=40)
-    J = res.jac
-    m, k = J.shape
-    s2 = float(np.sum(res.fun ** 2)) / max(m - k, 1)
-    try:
-        se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
-    except np.linalg.LinAlgError:
-        se = np.full(k, math.nan)
-    return res.x, se
+    return _least_squares(fun, x0, lo, hi, 1e-3, 40)
 
 
 def ljung_box(r: np.ndarray, lags: int = 20) -> float:
@@ -422,17 +420,7 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
         m = fun([x]).size
         se = math.sqrt(2.0 * c0 / max(m - 1, 1) / curv) if curv > 0 else math.nan
         return np.array([x]), np.array([se])
-    res = least_squares(fun, np.array(x0, float), bounds=(np.array(lo), np.array(hi)), diff_step=1e-3,
-                        x_scale="jac", max_nfev=40)
-    J = res.jac
-    m, k = J.shape
-    s2 = float(np.sum(res.fun ** 2)) / max(m - k, 1)
-    try:
-        cov = np.linalg.inv(J.T @ J) * s2
-        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    except np.linalg.LinAlgError:
-        se = np.full(k, math.nan)
-    return res.x, se
+    return _least_squares(fun, x0, lo, hi, 1e-3, 40)
 
 
 def _bic(r, k):

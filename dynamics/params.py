@@ -188,11 +188,9 @@ def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = 
     sources: dict[str, str] = {}
     for key, raw in data.items():
         if key not in known or key == "sources":
-            import difflib
             allowed = [k for k in known if k != "sources"]
-            close = difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)
-            hint = f" (did you mean '{close[0]}'?)" if close else ""
-            raise ParameterError(f"{src}: unknown key '{key}'{hint}: expected one of base, {', '.join(allowed)}")
+            raise ParameterError(f"{src}: unknown key '{key}'{did_you_mean(key, allowed)}: expected one of base, "
+                                 f"{', '.join(allowed)}")
         if isinstance(raw, dict):
             if "value" not in raw:
                 raise ParameterError(f"{src}: key '{key}': expected a number or a mapping with 'value', found {raw!r}")
@@ -219,6 +217,13 @@ def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = 
         own = {k: sources.get(k, f"set in {src}") for k in values if k not in ("name", "description")}
         return _validated(cls(**merged, sources={**inherited, **own}), src)
     return _validated(cls(**values, sources=sources), src)
+
+
+def did_you_mean(word, choices) -> str:
+    """' (did you mean X?)' for the closest of ``choices`` to ``word``, or ''."""
+    import difflib
+    close = difflib.get_close_matches(str(word), sorted(str(c) for c in choices), n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 MAX_YAML_BYTES = 4_000_000   # parameter and scenario files larger than this are refused
@@ -299,12 +304,9 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
         is_file = False
     if is_file:
         return _from_mapping(cls, _read_yaml(path), str(path), True, kind, path.parent, depth)
-    import difflib
-    close = difflib.get_close_matches(spec_s, sorted(shipped), n=1, cutoff=0.6)
-    hint = f" (did you mean '{close[0]}'?)" if close else ""
     raise ParameterError(
         f"{kind[:-1]} '{spec_s:.60}': expected a shipped name ({', '.join(sorted(shipped))}) or a path to a YAML file, "
-        f"found neither{hint}")
+        f"found neither{did_you_mean(spec_s, shipped)}")
 
 
 def load_vehicle(spec: "str | Path | dict | Vehicle" = "p3at", base: Path | None = None) -> Vehicle:

@@ -152,18 +152,22 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
     return _checked(H, res, origin, str(path), path.stem)
 
 
-def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
-    """(heights with row 0 = south, resolution [m], origin) of a GeoTIFF (module doc)."""
+def _read_tif(path: Path) -> tuple:
+    """(band 1 as a masked array, affine transform, CRS) of a GeoTIFF, read with rasterio."""
     try:
         import rasterio
     except ImportError:
-        raise MapError(f"{path}: reading GeoTIFF maps needs rasterio (pip install 'sbmpc[geotiff]')") from None
+        raise MapError(f"{path}: reading GeoTIFF files needs rasterio (pip install 'sbmpc[geotiff]')") from None
     try:
         with rasterio.open(path) as ds:
-            band = ds.read(1, masked=True)
-            tr, crs = ds.transform, ds.crs
+            return ds.read(1, masked=True), ds.transform, ds.crs
     except rasterio.errors.RasterioError as exc:
         raise MapError(f"{path}: expected a GeoTIFF, found a file that cannot be read as one ({exc})") from None
+
+
+def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
+    """(heights with row 0 = south, resolution [m], origin) of a GeoTIFF (module doc)."""
+    band, tr, crs = _read_tif(path)
     if crs is not None and crs.is_geographic:
         raise MapError(f"{path}: expected a projected CRS in metres, found {crs.to_string()} (degrees): "
                        "reproject the DEM first (e.g. gdalwarp -t_srs to a UTM zone)")
@@ -211,15 +215,7 @@ def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "t
         if C.ndim == 3:
             raise MapError(f"{path}: expected a single-channel (grey) class image, found {C.shape[2]} channels")
     elif suf in (".tif", ".tiff"):
-        try:
-            import rasterio
-        except ImportError:
-            raise MapError(f"{path}: reading GeoTIFF rasters needs rasterio (pip install 'sbmpc[geotiff]')") from None
-        try:
-            with rasterio.open(path) as ds:
-                C = np.flipud(ds.read(1))
-        except rasterio.errors.RasterioError as exc:
-            raise MapError(f"{path}: expected a GeoTIFF, found a file that cannot be read as one ({exc})") from None
+        C = np.flipud(np.ma.getdata(_read_tif(path)[0]))
     else:
         raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
     if C.ndim != 2 or tuple(C.shape) != tuple(shape):

@@ -16,7 +16,7 @@ import numpy as np
 from dynamics import kernels as K
 from dynamics.resistance import friction_table
 
-from .heuristics import _bounds, _lowest_in_disc, cost_to_go, unreachable_reason
+from .heuristics import _bounds, _lowest_in_disc, _max_rise, cost_to_go, unreachable_reason
 from .problems import skidsteer as SS
 from .search.astar import Problem, Search, SearchResult
 from .world import FIXED_CONTROLS, World, _start, capability, control_set
@@ -339,9 +339,7 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
     if res.edges and stalled > 0.3 * res.edges:
         from dynamics.limits import steepest_grade
         g = max(steepest_grade(world.vehicle, t) for t in world.terrains)
-        e = world.emap
-        gy, gx = np.gradient(e.heights, e.resolution)
-        steep = math.degrees(math.atan(float(np.hypot(gx, gy).max())))
+        steep = math.degrees(math.atan(_max_rise(world.emap.heights, world.emap.resolution, 1.0)))
         out.append(f"{100 * stalled / res.edges:.0f} % of the edges stalled: the {world.vehicle.name} holds at most "
                    f"{math.degrees(g):.1f} deg here and the map's slopes reach {steep:.1f} deg (a stronger vehicle, "
                    f"a gentler map, or a map without height steps)")

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynamics.params import read_yaml_text
+from dynamics.params import did_you_mean, read_yaml_text
 
 from .errors import InputError
 
@@ -210,13 +210,6 @@ def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math
         probs.add(f"{where}.{key}", what, v)
         return math.nan
     return float(v)
-
-
-def did_you_mean(word, choices) -> str:
-    """' (did you mean X?)' for the closest of ``choices`` to ``word``, or ''."""
-    import difflib
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
 
 
 def _unknown(d: dict, known: set, where: str, probs: _Problems):

@@ -56,7 +56,8 @@ KNOWN = {"scenarios", "families", "costs", "seeds", "planner", "variants", "robu
 def load_spec(path: Path) -> dict:
     """A sweep spec, validated (every problem at once), paths resolved against its folder."""
     from dynamics.params import read_yaml_text
-    from .scenario import did_you_mean, shown
+    from dynamics.params import did_you_mean
+    from .scenario import shown
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: expected a sweep spec YAML file, found no such file")

@@ -39,11 +39,6 @@ def add_parsers(sub):
     s.set_defaults(func=run_synth)
 
 
-def _file(spec):
-    """The file a vehicle or terrain value names, if it names one (else a shipped name)."""
-    return Path(spec) if isinstance(spec, str) and spec and Path(spec).is_file() else None
-
-
 def _load_models(vehicle, terrain, run=None):
     from dynamics import ParameterError, load_terrain, load_vehicle
     v = vehicle or (run.meta.get("vehicle") if run is not None else None) or "p3at"
@@ -59,7 +54,7 @@ def run_synth(args) -> int:
     from dynamics.synth import synth_run
     if not 1.0 <= args.duration <= 3600.0:
         raise InputError(f"--duration: expected seconds in [1, 3600], found {args.duration}")
-    Outputs([_file(args.vehicle), _file(args.terrain)]).file(args.out, "--out")
+    Outputs([args.vehicle, args.terrain]).file(args.out, "--out")
     vehicle, terrain = _load_models(args.vehicle, args.terrain)
     run, params = synth_run(args.effect, args.seed, vehicle, terrain, duration=args.duration)
     with atomic(args.out) as tmp:
@@ -72,7 +67,7 @@ def run_diagnose(args) -> int:
     from dynamics.discrepancy import MARGIN, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
-    outs = Outputs([args.run, _file(args.vehicle), _file(args.terrain)])
+    outs = Outputs([args.run, args.vehicle, args.terrain])
     outs.file(args.json, "--json")
     outs.file(args.vehicle_out, "--vehicle-out")
     if args.report is not None:
@@ -84,7 +79,7 @@ def run_diagnose(args) -> int:
         run = read_run(args.run)
     except RunError as exc:
         raise InputError(str(exc)) from None
-    outs.add_inputs([_file(run.meta.get("vehicle")), _file(run.meta.get("terrain"))])
+    outs.add_inputs([run.meta.get("vehicle"), run.meta.get("terrain")])
     if len(run) < 50:
         raise InputError(f"{args.run}: expected at least 50 samples to diagnose, found {len(run)}")
     segs = run.segments()

@@ -20,6 +20,17 @@ from pathlib import Path
 from ..errors import InputError
 
 
+def _is_file(p) -> bool:
+    """Whether ``p`` (a path, a string such as a vehicle name, or None) names an existing
+    file; a name too long for a path is not one."""
+    if not isinstance(p, (str, Path)) or not str(p):
+        return False
+    try:
+        return Path(p).is_file()
+    except OSError:
+        return False
+
+
 def _same(a: Path, b: Path) -> bool:
     try:
         return a.exists() and b.exists() and os.path.samefile(a, b)
@@ -28,8 +39,8 @@ def _same(a: Path, b: Path) -> bool:
 
 
 class Outputs:
-    """Output paths of a command, checked against its ``inputs`` (existing files only
-    are compared; missing ones cannot be overwritten)."""
+    """Output paths of a command, checked against its ``inputs`` (any values that may
+    name files: existing files only are compared; missing ones cannot be overwritten)."""
 
     def __init__(self, inputs=()):
         self.inputs: list[Path] = []
@@ -37,12 +48,11 @@ class Outputs:
         self.add_inputs(inputs)
 
     def add_inputs(self, paths) -> None:
+        """Add the inputs among ``paths``: values that name existing files (a shipped
+        vehicle name, None or a missing path is skipped)."""
         for p in paths:
-            if p is None:
-                continue
-            p = Path(p)
-            if p.is_file():
-                self.inputs.append(p)
+            if _is_file(p):
+                self.inputs.append(Path(p))
         for path, flag in self.declared:
             self._not_an_input(path, flag)
 
@@ -146,10 +156,5 @@ def scenario_inputs(path: Path) -> list[Path]:
                 names += [x for x in (ras.get("file"),) if isinstance(x, str)]
                 names += [x for x in (ras.get("classes") or {}).values() if isinstance(x, str)]
     for n in names:
-        for cand in (base / n, base / f"{n}.yaml", Path(n)):
-            try:
-                if cand.is_file():
-                    out.append(cand)
-            except OSError:        # a name too long for a path: not a file
-                pass
+        out += [cand for cand in (base / n, base / f"{n}.yaml", Path(n)) if _is_file(cand)]
     return out

@@ -60,14 +60,9 @@ def summary(res) -> str:
     return "\n".join(lines)
 
 
-def _vehicle_file(spec):
-    """The file a --truth / --vehicle value names, if it names one."""
-    return Path(spec) if spec and Path(spec).is_file() else None
-
-
 def run_run(args) -> int:
     from .. import receding, recording
-    outs = Outputs(scenario_inputs(args.scenario) + [_vehicle_file(args.truth), _vehicle_file(args.vehicle)])
+    outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
     world = _world(args)

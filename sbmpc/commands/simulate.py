@@ -50,7 +50,7 @@ def run(args) -> int:
     from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
     from dynamics.simulate import Model, simulate
 
-    outs = Outputs([Path(v) for v in (args.vehicle, args.terrain) if v and Path(v).is_file()])
+    outs = Outputs([args.vehicle, args.terrain])
     outs.file(args.json, "--json")
     outs.file(args.plot, "--plot")
     try:
