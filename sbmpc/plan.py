@@ -19,7 +19,8 @@ from dynamics.resistance import friction_table
 from .heuristics import _bounds, _lowest_in_disc, _max_rise, cost_to_go, unreachable_reason
 from .problems import skidsteer as SS
 from .search.astar import Problem, Search, SearchResult
-from .world import FIXED_CONTROLS, World, _start, capability, control_set
+from .polish import Polished, polish
+from .world import FIXED_CONTROLS, World, _start, capability, control_set, wheel_speed_range
 
 RECORD_EVERY = 0.05   # s: trajectory samples in the plan JSON
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
@@ -147,6 +148,7 @@ class Plan:
     found_by: str = ""            # the search that produced the controls (compare may adopt the other's)
     check: Check | None = None    # the controls replayed at the controller rate
     repairs: int = 0              # re-plans from where the controller-rate replay parted from the search
+    polish: "Polished | None" = None   # the local search over the found controls (sbmpc.polish)
 
     @property
     def found(self) -> bool:
@@ -184,6 +186,7 @@ class Plan:
             "found_by": self.found_by or f"{self.cost} search",
             "controller_rate_check": self.check.to_json() if self.check else None,
             "repairs": self.repairs,
+            "polish": self.polish.to_json() if self.polish else None,
         }
 
 
@@ -239,6 +242,7 @@ DRIFT_PER_M = 0.005  # of the distance driven: how far the controller-rate repla
 PART_M = 0.05        # m: a plan's controller-rate replay has parted from the search's
 PART_DEG = 2.0       # prediction once its pose differs by this much (dynamics.convergence)
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
+POLISH_GOAL_MARGIN = 0.1   # m (at most half the goal radius): the polish aims this far inside the goal disc
 APPROACH_CONTROLS = 3   # a plan that only passes the goal within the drift allowance is
 APPROACH_SLACK = 0.05   # re-planned from this many controls before its end (or from where
                         # it parted) and the result kept when it enters the goal disc at
@@ -420,6 +424,13 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else _predicted(world, cost, controls, X0)
+    pol = None
+    if res.status == "found" and ps.polishes(cost):
+        pol = _polished(world, cost, prob, X0, controls, t0 + budget)
+        if pol is not None:
+            controls = pol.controls
+            pred = _predicted(world, cost, controls, X0)
+    common["polish"] = pol
     controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps)
     common["repairs"] = repairs
     if not chk.reached:
@@ -435,6 +446,33 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     traj = {name: v[idx].copy() for name, v in fine.items()}
     return Plan(world.scenario.name, cost, "found", None, controls, traj,
                 planning_time_s=time.perf_counter() - t0, found_by=found_by, check=chk, **common)
+
+
+def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float):
+    """The polish of searched ``controls`` (:mod:`sbmpc.polish`), or None when it gained
+    nothing, or when its controls, driven at the controller rate, do not reach the goal
+    (or only pass it where the searched ones entered it) or cost more there than the
+    searched ones: the polish is judged where every plan is. The polish aims at the goal
+    disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
+    path only grazes its target, and a plan that grazes the disc at the planner's step
+    may pass just outside it at 1 kHz."""
+    lo, hi = wheel_speed_range(world)
+    params = prob.params.copy()
+    r = world.scenario.goal["radius"]
+    for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
+        params[SS.Q_GR] = r - margin
+        pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
+        if pol is not None:
+            break
+    if pol is None or pol.gain <= 0.0:
+        return None
+    new = _controller_rate(world, cost, pol.controls, X0)[0]
+    old = _controller_rate(world, cost, controls, X0)[0]
+    if not new.reached or (new.miss_m > 0.0 and old.reached and old.miss_m == 0.0):
+        return None
+    if old.reached and _cost(old, cost) <= _cost(new, cost):
+        return None
+    return pol
 
 
 def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,

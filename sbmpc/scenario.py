@@ -54,7 +54,10 @@ class PlannerSettings:
     one batch (1: the serial search's order; more expands some nodes the serial search
     would not, which changes the plan slightly; 0: 1 on the CPU, 64 on a GPU); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
-    one-line note and the CPU).
+    one-line note and the CPU); polish_time, polish_energy: after the search, polish
+    the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on
+    by default for energy, whose plans the sampled speeds and the seed otherwise move
+    by several per cent).
     """
 
     branching: int = 16
@@ -75,9 +78,14 @@ class PlannerSettings:
     batch: int = 0
     threads: int = 0
     device: str = "cpu"
+    polish_time: bool = False
+    polish_energy: bool = True
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
+
+    def polishes(self, cost: str) -> bool:
+        return self.polish_time if cost == "time" else self.polish_energy
 
 
 @dataclass(frozen=True)
@@ -325,6 +333,12 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
             probs.add("planner.device", "'cpu' or 'cuda'", spec["device"])
         else:
             kw["device"] = spec["device"]
+    for key in ("polish_time", "polish_energy"):
+        if key in spec:
+            if not isinstance(spec[key], bool):
+                probs.add(f"planner.{key}", "true or false", spec[key])
+            else:
+                kw[key] = spec[key]
     if kw.get("dt", 0.01) > kw.get("period_s", 1.0):
         probs.add("planner.dt", "a step no longer than planner.period_s", kw.get("dt"))
     return PlannerSettings(**kw)

@@ -36,7 +36,8 @@ def scenario() -> dict:
                    "polygon": {"type": "array", "items": point, "minItems": 3}}, ("terrain",), extra=False)
     planner = _ranges(_SETTING_RANGES)
     planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
-                    "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]}})
+                    "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]},
+                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}
     return {
@@ -94,6 +95,7 @@ def plan() -> dict:
             "nodes": {"type": "integer"}, "invalid_edges": {"type": "object", "additionalProperties": {"type": "integer"}},
             "found_by": {"type": "string"}, "controller_rate_check": {"oneOf": [check, {"type": "null"}]},
             "repairs": {"type": "integer"},
+            "polish": {"type": ["object", "null"]},
         }, ("schema", "scenario", "cost", "status", "reason", "travel_time_s", "energy_J", "planning_time_s",
             "nodes_expanded", "edges_simulated", "controls", "trajectory"))}
 

@@ -231,3 +231,71 @@ def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
         if end < 0 or (end == IN_GOAL and e < cmd_l.shape[0] - 1):
             return rows, S, end, e
     return rows, S, end, -1
+
+
+# ---- control sequences (the polish of a found plan: sbmpc.polish) -----------------
+NOT_REACHED = 4.0     # returned negated: the sequence ended outside the goal disc
+PRUNED = np.inf       # returned when the cost so far already reaches the bound
+
+
+@njit(cache=True, error_model="numpy")
+def sequence_cost(params, data, state, ctrl, first, extra, bound, out):
+    """Drive the controls ``ctrl[first:]`` ((n, 3): desired wheel speeds [rad/s] and
+    durations [s]) from ``state``, the last one held up to ``extra`` steps longer, until
+    the vehicle enters the goal disc; ``out`` receives the end state. Returns (cost,
+    controls used, duration of the last one [s]): the time [s] or energy [J] spent from
+    ``state``; a negative code when an edge fails or the sequence ends outside the goal
+    (-NOT_REACHED); PRUNED when the cost reaches ``bound`` on the way (time and energy
+    never decrease along a drive, so such a sequence cannot beat it)."""
+    for d in range(out.shape[0]):
+        out[d] = state[d]
+    O = np.empty(K.NO)
+    rec = np.empty((0, K.NR))
+    dt = params[Q_DT]
+    energy = params[Q_COST] != COST_TIME
+    n = ctrl.shape[0]
+    for k in range(first, n):
+        steps = max(1, int(round(ctrl[k, 2] / dt)))
+        if k == n - 1:
+            steps += extra
+        t0 = out[K.S_T]
+        end, _ = edge(params, data, out, ctrl[k, 0], ctrl[k, 1], steps, rec, 0, O)
+        if end < 0:
+            return float(end), k - first + 1, out[K.S_T] - t0
+        c = out[K.S_E] - state[K.S_E] if energy else out[K.S_T] - state[K.S_T]
+        if end == IN_GOAL:
+            return c, k - first + 1, out[K.S_T] - t0
+        if c >= bound:
+            return PRUNED, k - first + 1, out[K.S_T] - t0
+    return -NOT_REACHED, n - first, 0.0
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def sequence_costs(params, data, state, ctrl, first, moves, extra, bound, costs, used, last):
+    """:func:`sequence_cost` of many variants of ``ctrl`` from ``state`` at control
+    ``first``, in parallel over numba's threads: variant m replaces the wheel speeds of
+    controls ``first`` and ``first + 1`` by ``moves[m]`` (wl, wr, wl', wr')."""
+    for m in prange(moves.shape[0]):
+        seq = ctrl.copy()
+        seq[first, 0] = moves[m, 0]
+        seq[first, 1] = moves[m, 1]
+        if first + 1 < seq.shape[0]:
+            seq[first + 1, 0] = moves[m, 2]
+            seq[first + 1, 1] = moves[m, 3]
+        out = np.empty(state.shape[0])
+        costs[m], used[m], last[m] = sequence_cost(params, data, state, seq, first, extra, bound, out)
+
+
+@njit(cache=True, error_model="numpy")
+def sequence_states(params, data, state, ctrl, states):
+    """The states (n, NX) at the starts of the controls ``ctrl`` (n, 3) driven from
+    ``state`` (each for its duration; no goal test): states[k] before control k."""
+    O = np.empty(K.NO)
+    rec = np.empty((0, K.NR))
+    S = state.copy()
+    dt = params[Q_DT]
+    for k in range(ctrl.shape[0]):
+        for d in range(S.shape[0]):
+            states[k, d] = S[d]
+        if k < ctrl.shape[0] - 1:
+            edge(params, data, S, ctrl[k, 0], ctrl[k, 1], max(1, int(round(ctrl[k, 2] / dt))), rec, 0, O)

@@ -1,0 +1,152 @@
+"""Polish a found plan: a local search over its control sequence.
+
+The search picks every control from the few wheel-speed pairs it samples at a node
+(``planner.branching``, from a seeded Halton sequence) and merges nearby states on its
+grid, so its plan is the best *over those samples*: two seeds give two sample sets and,
+for the energy cost, plans whose speed profiles differ by several per cent. The polish
+moves the plan towards the continuous optimum nearby: a compass (pattern) search over
+the sequence, each trial driven through the same closed-loop model at the planner's
+step from the state where it changes, to the goal.
+
+At each control i, in order, it tries these moves (each a trial sequence, simulated in
+parallel over numba's threads):
+
+* both wheel speeds scaled by 1 + s and by 1 - s (faster or slower);
+* the turn changed: s x the top speed added to one wheel and taken from the other;
+* controls i and i + 1 swapped (a turn earlier or later), and both replaced by their
+  mean (a turn spread over two periods);
+
+and keeps the best trial when it reaches the goal disc for less than the plan's cost
+(time or energy); the last control is held longer or cut where the vehicle enters the
+disc. Sweeps over the sequence repeat until one improves nothing (at most
+``MAX_SWEEPS``), for s = 0.1, 0.03 and 0.01 of the top speed in turn. A trial whose cost
+already reaches the best on the way is cut there (time and energy never decrease along a
+drive). Every wheel speed stays within the range the search samples. The result depends
+only on the plan and the model, never on the clock (the time budget only stops it early).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynamics import kernels as K
+
+from .problems import skidsteer as SS
+
+STEPS = (0.1, 0.03, 0.01)   # move sizes, x the top of the sampled wheel-speed range
+MAX_SWEEPS = 4              # sweeps over the sequence per move size
+MIN_GAIN = 1e-6             # relative: smaller improvements are not taken
+
+
+@dataclass(frozen=True)
+class Polished:
+    """The result of :func:`polish`: controls [(wl, wr, duration_s)], their cost at the
+    planner's step, the given controls' cost there (None: they did not reach the goal
+    there), trials simulated, seconds spent."""
+
+    controls: list
+    cost: float
+    cost_before: float | None
+    trials: int
+    seconds: float
+
+    @property
+    def gain(self) -> float:
+        """Relative cost saved at the planner's step (0: nothing found)."""
+        if self.cost_before is None:
+            return 1.0
+        return 1.0 - self.cost / self.cost_before if self.cost_before > 0 else 0.0
+
+    def to_json(self) -> dict:
+        return {"cost_before": self.cost_before, "cost_after": self.cost, "trials": self.trials,
+                "seconds": round(self.seconds, 3)}
+
+
+def _moves(ctrl: np.ndarray, i: int, s: float, top: float, lo: float, hi: float) -> np.ndarray:
+    """The trial wheel speeds (m, 4) of controls i and i + 1 (module doc)."""
+    n = len(ctrl)
+    wl, wr = ctrl[i, 0], ctrl[i, 1]
+    nl, nr = (ctrl[i + 1, 0], ctrl[i + 1, 1]) if i + 1 < n else (0.0, 0.0)
+    d = s * top
+    out = []
+    for a, b in ((wl * (1 + s), wr * (1 + s)), (wl * (1 - s), wr * (1 - s)), (wl + d, wr - d), (wl - d, wr + d)):
+        a, b = min(max(a, lo), hi), min(max(b, lo), hi)
+        if (a, b) != (wl, wr):
+            out.append((a, b, nl, nr))
+    if i + 2 < n and (wl, wr) != (nl, nr):          # two full periods (not the cut last one)
+        out.append((nl, nr, wl, wr))
+        ml, mr = 0.5 * (wl + nl), 0.5 * (wr + nr)
+        out.append((ml, mr, ml, mr))
+    return np.array(out, float).reshape(-1, 4)
+
+
+def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo: float, hi: float,
+           deadline: float | None = None) -> Polished | None:
+    """Polish ``controls`` [(wl, wr, duration_s)] driven from the planner state ``start``
+    on the problem (params, data) of :mod:`sbmpc.problems.skidsteer` (module doc); wheel
+    speeds kept in [lo, hi] [rad/s]. ``deadline``: a ``time.perf_counter()`` value at
+    which to stop early. When the controls do not reach the goal disc of ``params`` (the
+    last held up to one period longer), the first trial that does is taken; None when
+    none does."""
+    t0 = time.perf_counter()
+    ctrl = np.array([tuple(c) for c in controls], float).reshape(-1, 3)
+    extra = int(params[SS.Q_NSTEP])        # the last control may be held one period longer
+    out = np.empty_like(start)
+    c0, used, last = SS.sequence_cost(params, data, start, ctrl, 0, extra, np.inf, out)
+    reached = 0.0 <= c0 < np.inf
+    if reached:
+        ctrl = ctrl[:used].copy()
+        ctrl[-1, 2] = round(last, 9)
+    best = c0 if reached else np.inf        # else the first trial that reaches the goal is taken
+    trials = 0
+    top = max(abs(lo), abs(hi))
+    energy = params[SS.Q_COST] != SS.COST_TIME
+    col = K.S_E if energy else K.S_T
+    stop = False
+    for s in STEPS:
+        for _ in range(MAX_SWEEPS):
+            improved = False
+            states = np.empty((len(ctrl), start.size))
+            SS.sequence_states(params, data, start, ctrl, states)
+            i = 0
+            while i < len(ctrl):
+                if deadline is not None and time.perf_counter() > deadline:
+                    stop = True
+                    break
+                moves = _moves(ctrl, i, s, top, lo, hi)
+                m = len(moves)
+                if m:
+                    prefix = states[i, col] - start[col]
+                    costs = np.empty(m)
+                    used = np.empty(m, np.int64)
+                    lasts = np.empty(m)
+                    SS.sequence_costs(params, data, states[i], ctrl, i, moves, extra, best - prefix,
+                                      costs, used, lasts)
+                    trials += m
+                    ok = np.flatnonzero((costs >= 0.0) & np.isfinite(costs))
+                    if ok.size:
+                        j = ok[np.argmin(costs[ok])]
+                        if prefix + costs[j] < best * (1.0 - MIN_GAIN):
+                            best = prefix + costs[j]
+                            ctrl[i, :2] = moves[j, :2]
+                            if i + 1 < len(ctrl):
+                                ctrl[i + 1, :2] = moves[j, 2:]
+                            ctrl = ctrl[:i + used[j]].copy()
+                            ctrl[-1, 2] = round(lasts[j], 9)
+                            SS.sequence_states(params, data, start, ctrl, states[:len(ctrl)])
+                            states = states[:len(ctrl)]
+                            improved = True
+                i += 1
+            if stop or not improved:
+                break
+        if stop:
+            break
+    if best == np.inf:
+        return None
+    return Polished([(float(a), float(b), float(d)) for a, b, d in ctrl], float(best),
+                    float(c0) if reached else None, trials, time.perf_counter() - t0)
+
+
+__all__ = ["Polished", "STEPS", "MAX_SWEEPS", "polish"]
