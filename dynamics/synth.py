@@ -104,15 +104,18 @@ def excitation(seed: int, duration: float, vehicle: Vehicle, dt: float) -> tuple
 
 
 def synth_run(effect: str, seed: int, vehicle: Vehicle | None = None, terrain: Terrain | None = None,
-              duration: float = 90.0, params: dict | None = None, noise: bool = True) -> tuple:
+              duration: float = 90.0, params: dict | None = None, noise: bool = True,
+              step_s: float | None = None) -> tuple:
     """(Run, hidden parameters): a synthetic measured run with ``effect`` hidden (its
-    parameters drawn from ``seed`` unless given)."""
+    parameters drawn from ``seed`` unless given). ``step_s``: the truth's integration
+    step [s] (default the controller period, as the diagnosis replays; a coarser step
+    integrates the same model differently: the continuous loop, two-stage SDIRK)."""
     from .params import load_terrain, load_vehicle
     vehicle = vehicle or load_vehicle("p3at")
     terrain = terrain or load_terrain("vinyl")
     params = hidden(effect, seed) if params is None else params
     truth, ground, pitch = apply(vehicle, effect, params, terrain)
-    model = Model(truth, ground)
+    model = Model(truth, ground, step_s)
     dt = model.step_s
     cl, cr = excitation(seed, duration, vehicle, dt)
     tr = simulate(model, cl, cr, state=model.state(0.0, 0.0, pitch), pitch=pitch, record_dt=1.0 / RATE)

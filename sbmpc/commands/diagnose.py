@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import json
-import sys
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -64,7 +64,7 @@ def run_synth(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    from dynamics.discrepancy import MARGIN, diagnose, replay
+    from dynamics.discrepancy import EVIDENCE, MARGIN, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
     outs = Outputs([args.run, args.vehicle, args.terrain])
@@ -113,18 +113,26 @@ def run_diagnose(args) -> int:
     print(f"{args.run}: {len(run)} samples, {len(run.segments())} segment(s), channels {', '.join(d.channels)}; "
           f"diagnosed in {elapsed:.1f} s")
     print(f"baseline held-out error {d.baseline_error:.2f} (1 = sensor noise)")
-    print(f"{'candidate':18s} {'held-out':>9s} {'gain':>7s} {'BIC change':>11s}  parameters (± standard error)")
+    print(f"{'candidate':18s} {'held-out':>9s} {'gain':>7s} {'BIC change':>11s} {'held-out BIC':>12s}  "
+          "parameters (± standard error)")
     for c in d.candidates:
         ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" + (" (at its bound)" if k in c.at_bound else "")
                        for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
         pose = f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else ""
-        print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f}  {ps}{pose}")
+        ev = "" if math.isnan(c.evidence) else f"{c.evidence:.0f}"
+        print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f} {ev:>12s}  {ps}{pose}")
     named = next((c for c in d.candidates if c.effect == d.cause), None)
     in_pose = named is not None and named.fitted_on == "pose"
-    print(f"cause: {d.cause}" + (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
-                                 f"{': seen only in the pose' if in_pose else ''})" if d.cause != "none" else
-                                 f" (no candidate gains {100 * MARGIN:.0f} % on held-out data, nor halves the "
-                                 "pose error)"))
+    if d.cause == "none":
+        why = (f" (no candidate gains {100 * MARGIN:.0f} % on held-out data with very strong evidence (BIC "
+               f"falls by more than {EVIDENCE:g} on both parts), nor halves the pose error)")
+    elif d.decided_on == "training":
+        why = (f" (the held-out part cannot test it: its prediction there moves by {named.reach:.3f} noise units; "
+               f"training evidence {named.train_evidence:.0f})")
+    else:
+        why = (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
+               + (": seen only in the pose" if in_pose else f", held-out BIC change {named.evidence:.0f}") + ")")
+    print(f"cause: {d.cause}{why}")
     for line in caveats(d):
         print(f"caveat: {line}")
     pose_line = _pose_line(d.pose)
