@@ -197,6 +197,9 @@ class _Problems:
     def add(self, key: str, expected: str, found):
         self.items.append(f"{key}: expected {expected}, found {found if isinstance(found, Verbatim) else shown(found)}")
 
+    def add_line(self, line: str):
+        self.items.append(line)
+
     def raise_if_any(self):
         if len(self.items) == 1:
             raise InputError(f"{self.src}: {self.items[0]}")
@@ -403,7 +406,41 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     planner = _planner(data.get("planner"), probs)
     run = _run(data.get("run"), probs)
     probs.raise_if_any()
+    for line in schema_problems(data):
+        probs.add_line(line)
+    probs.raise_if_any()
     return Scenario(name, map_spec, terrain, vehicle, start, goal, cost, planner, desc, path, run)
+
+
+def _as_json(x, key=None):
+    """Scenario data as JSON Schema sees it: tuples as lists, NumPy scalars as numbers, a
+    map's ``heights`` (a NumPy array from Python: checked by the map reader) as []."""
+    if key == "heights":
+        return []
+    if isinstance(x, dict):
+        return {k: _as_json(v, k) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_as_json(v) for v in x]
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def schema_problems(data) -> list:
+    """The scenario JSON Schema (``sbmpc schema scenario``, :mod:`sbmpc.schemas`) run over
+    scenario data: one line per violation, 'key.path: message (schema)'. The hand-written
+    checks of :func:`parse` run first and say more (did-you-mean, what was found); the
+    schema is the second, formal check of the same rules, so a file the schema refuses
+    is never planned."""
+    import jsonschema
+    from .schemas import scenario
+    v = jsonschema.Draft202012Validator(scenario())
+    out = []
+    for e in sorted(v.iter_errors(_as_json(data)), key=lambda e: list(map(str, e.absolute_path))):
+        where = ".".join(str(k) for k in e.absolute_path) or "(the file)"
+        msg = e.message if len(e.message) <= 200 else e.message[:197] + "..."
+        out.append(f"{where}: {msg} (schema)")
+    return out
 
 
 def load(path: Path | str) -> Scenario:

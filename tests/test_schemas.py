@@ -46,6 +46,27 @@ def test_broken_scenarios_fail_the_schema_and_the_validator(change, tmp_path):
         SC.parse(doc, "doc")
 
 
+def test_the_validator_runs_the_schema(monkeypatch, tmp_path, capsys):
+    """The scenario loader runs the schema after its own checks: a rule only the schema
+    holds (here a stricter stand-in requiring a description) refuses the file with the
+    schema's words, exit 2, one message."""
+    from sbmpc import scenario as SC
+    from sbmpc.errors import InputError
+    strict = schemas.scenario()
+    strict["required"] = strict["required"] + ["description"]
+    monkeypatch.setattr(schemas, "scenario", lambda: strict)
+    doc = read_yaml_text(SCEN / "flat.yaml")
+    doc.pop("description", None)
+    with pytest.raises(InputError, match=r"'description' is a required property \(schema\)"):
+        SC.parse(doc, "doc")
+    f = tmp_path / "s.yaml"
+    f.write_text("\n".join(line for line in (SCEN / "flat.yaml").read_text().splitlines()
+                           if not line.startswith("description")))
+    assert main(["plan", str(f), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "(schema)" in err and "Traceback" not in err
+
+
 def test_outputs_validate(tmp_path, capsys):
     assert main(["plan", str(SCEN / "flat.yaml"), "--json", str(tmp_path / "p.json"), "--quiet"]) == 0
     valid("plan", json.loads((tmp_path / "p.json").read_text()))
