@@ -38,8 +38,12 @@ import sys, time, math
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 from sbmpc import plan as PL, scenario as SC
-from sbmpc import world as WO
-from sbmpc.problems import skidsteer as SS
+try:                                   # the layout since the search's refactor
+    from sbmpc import world as WO
+    from sbmpc.problems import skidsteer as SS
+except ImportError:                    # a baseline from before it (world and problem in plan.py)
+    WO = PL
+    from sbmpc import skidsteer as SS
 from dynamics import kernels as K
 world = WO.resolve(SC.load(sys.argv[2]))
 prob = PL.problem(world, "energy")
