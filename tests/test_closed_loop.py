@@ -198,7 +198,8 @@ def test_planner_edges_converge_to_the_controller_rate():
     commands over the whole sampled range (pivots included), grades up to the steepest
     sustainable one + 5 degrees, compared with the 1 kHz digital PID. The explicit PID
     at 20 ms agreed on energy for about 70 % of such edges and turned a grass pivot by
-    82 degrees instead of 0.3."""
+    82 degrees instead of 0.3; the implicit step without sub-steps at wheel-speed
+    reversals, for 95 %."""
     from dynamics.convergence import compare, random_edges, shipped_models
     rng = np.random.default_rng(11)
     stall, energy, pose, n, compared = 0, 0, 0, 0, 0
@@ -210,9 +211,10 @@ def test_planner_edges_converge_to_the_controller_rate():
         pose += a.pose_ok()[both].sum()
         n += len(a.stall_ref)
         compared += both.sum()
-    # measured (seed 11): stall 238/240, energy 145/152, pose 152/152
+    # measured (seed 11): stall 237/240, energy 150/151, pose 151/151 (energy 145/152
+    # before the sub-steps at wheel-speed reversals)
     assert stall / n >= 0.98
-    assert energy / compared >= 0.85 and pose / compared >= 0.98
+    assert energy / compared >= 0.98 and pose / compared >= 0.98
 
 
 def test_grass_pivot_at_the_planners_step_turns_as_at_the_controller_rate():

@@ -69,10 +69,11 @@ def test_time_optimal_is_never_slower_and_energy_optimal_never_costs_more(plans,
 
 def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     """hills_field's energy search with a weight of 2 (grass, a 110 s plan driven open
-    loop) predicts a path that the vehicle, driven at 1 kHz, leaves: about 80 s in it is
-    0.8 m off and stalls on a flank the prediction skirted. The plan reported is spliced
-    from a re-plan where the two parted, and that one holds at 1 kHz; without repairs the
-    same search is not reported as found."""
+    loop) predicts a path that the vehicle, driven at 1 kHz, leaves: it drifts off the
+    prediction and ends beyond the open-loop allowance from the goal (before the
+    kernel's sub-steps at wheel-speed reversals, it stalled on a flank about 80 s in).
+    The plan reported is spliced from a re-plan where the two parted, and that one holds
+    at 1 kHz; without repairs the same search is not reported as found."""
     from dataclasses import replace
     import sbmpc.plan as mod
     scn = SC.load(SCEN / "hills_field.yaml")
@@ -86,7 +87,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     finally:
         mod.MAX_REPAIRS = saved
     assert not q.found and "controller rate" in q.reason
-    assert "stalled" in q.reason or "tipped over" in q.reason
+    assert any(w in q.reason for w in ("stalled", "tipped over", "outside the goal disc"))
 
 
 def test_steep_hill_every_plan_goes_around(plans):

@@ -1,7 +1,6 @@
 """The polish of a found plan (sbmpc.polish): a local search over its controls that
 never makes a plan dearer, keeps the wheel speeds in the sampled range, reproduces its
-own cost when replayed, and, judged at the controller rate, narrows the spread of the
-energy plans over Halton seeds."""
+own cost when replayed, and, judged at the controller rate, makes energy plans cheaper."""
 from dataclasses import replace
 from pathlib import Path
 
@@ -81,17 +80,18 @@ def test_polish_never_makes_a_plan_dearer(flat, noise, cost):
     assert _replayed_cost(world, cost, pol.controls) == pytest.approx(pol.cost, abs=1e-9)
 
 
-def test_polished_energy_plans_are_cheaper_and_closer_across_seeds():
-    """flat.yaml's energy plans for Halton seeds 0-3 at the controller rate: the polish
-    makes each cheaper, and their spread narrower (it was 5.7 % over seeds 0-7 without)."""
+def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
+    """flat.yaml's energy plans for Halton seeds 0-3, driven at 1 kHz: the polish makes
+    each cheaper than the search's own plan, the median by at least 2 %. (It does not
+    bring every seed to one optimum: a local search ends in the basin it starts in, so
+    the spread over seeds stays a few per cent: docs/planner.md.)"""
     on, off = [], []
     for seed in range(4):
         p = PL.plan(_world(seed), "energy")
         q = PL.plan(_world(seed, polish_energy=False), "energy")
-        assert p.found and q.found and p.check.reached
+        assert p.found and q.found and p.check.reached and p.check.miss_m == 0.0
         assert p.polish is not None and q.polish is None
         assert p.energy_J < q.energy_J
         on.append(p.energy_J)
         off.append(q.energy_J)
-    spread = lambda e: (max(e) - min(e)) / min(e)
-    assert spread(on) < 0.03 and spread(on) < spread(off)
+    assert np.median(on) < 0.98 * np.median(off)
