@@ -41,7 +41,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from ._jit import jit, jit_inline
+from ._jit import jit_inline
 
 from .params import G, Terrain, Vehicle
 
