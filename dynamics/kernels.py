@@ -279,7 +279,7 @@ def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
             _step(P, table, S, cmd_l, cmd_r, pitch, h, open_loop, O, False)
 
 
-@jit_inline
+@jit
 def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
     """One step of :func:`step`. With ``check``, a coarse step whose wheel speeds change
     sign is not taken: S is left as it was and the result is False (else True).
