@@ -467,8 +467,10 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     if pol is None or pol.gain <= 0.0:
         return None
     new = _controller_rate(world, cost, pol.controls, X0)[0]
+    if not new.reached:
+        return None
     old = _controller_rate(world, cost, controls, X0)[0]
-    if not new.reached or (new.miss_m > 0.0 and old.reached and old.miss_m == 0.0):
+    if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
         return None
     if old.reached and _cost(old, cost) <= _cost(new, cost):
         return None

@@ -105,11 +105,11 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
     energy = params[SS.Q_COST] != SS.COST_TIME
     col = K.S_E if energy else K.S_T
     stop = False
+    states = np.empty((len(ctrl), start.size))     # states[i]: before control i (kept current)
+    SS.sequence_states(params, data, start, ctrl, states)
     for s in STEPS:
         for _ in range(MAX_SWEEPS):
             improved = False
-            states = np.empty((len(ctrl), start.size))
-            SS.sequence_states(params, data, start, ctrl, states)
             i = 0
             while i < len(ctrl):
                 if deadline is not None and time.perf_counter() > deadline:
@@ -135,8 +135,8 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
                                 ctrl[i + 1, :2] = moves[j, 2:]
                             ctrl = ctrl[:i + used[j]].copy()
                             ctrl[-1, 2] = round(lasts[j], 9)
-                            SS.sequence_states(params, data, start, ctrl, states[:len(ctrl)])
-                            states = states[:len(ctrl)]
+                            states = states[:len(ctrl)]      # the prefix up to i is unchanged
+                            SS.sequence_states(params, data, states[i], ctrl[i:], states[i:])
                             improved = True
                 i += 1
             if stop or not improved:
