@@ -4,6 +4,8 @@ what does an edge cost?
     python bench/bench_edges.py                    # writes bench/results/edges.json
     python bench/bench_edges.py --baseline d8bfefd # cost per edge against that commit too
 
+Agreement per terrain for --seed, and over --seeds seeds (default 4: 4 800 edges).
+
 Convergence: ``--per-terrain`` random edges (default 200) on every shipped terrain,
 ``dynamics.convergence.random_edges``: entry at rest, moving and turning; commands over
 the planner's whole sampled range (pivots included); grades up to the steepest
@@ -71,21 +73,31 @@ print(dt / (len(states) * C.shape[0]))
 '''
 
 
-def convergence(per_terrain: int, dt: float, period: float, seed: int) -> dict:
-    from dynamics.convergence import compare, random_edges, shipped_models
+def convergence(per_terrain: int, dt: float, period: float, seed: int, seeds: int = 1) -> dict:
+    """Per terrain for ``seed``; "all" over every terrain; with seeds > 1 also
+    "all_seeds" over every terrain and the seeds seed .. seed + seeds - 1."""
+    from dynamics.convergence import Agreement, compare, random_edges, shipped_models
+    cat = lambda parts, f: np.concatenate([getattr(a, f) for a in parts])
+    fields = ("stall_ref", "stall_agrees", "energy_ref", "energy_err", "pos_err", "yaw_err")
     out = {}
     agg = []
-    for m in shipped_models():
-        edges = random_edges(m, per_terrain, np.random.default_rng(seed))
-        a = compare(edges, dt, period)
-        out[m.terrain.name] = a.summary()
-        agg.append(a)
-        print(m.terrain.name, out[m.terrain.name], flush=True)
-    cat = lambda f: np.concatenate([getattr(a, f) for a in agg])
-    from dynamics.convergence import Agreement
-    total = Agreement(*(cat(f) for f in ("stall_ref", "stall_agrees", "energy_ref", "energy_err", "pos_err", "yaw_err")))
-    out["all"] = total.summary()
-    print("all", out["all"], flush=True)
+    for k in range(seeds):
+        part = []
+        for m in shipped_models():
+            edges = random_edges(m, per_terrain, np.random.default_rng(seed + k))
+            a = compare(edges, dt, period)
+            part.append(a)
+            if k == 0:
+                out[m.terrain.name] = a.summary()
+                print(m.terrain.name, out[m.terrain.name], flush=True)
+        if k == 0:
+            out["all"] = Agreement(*(cat(part, f) for f in fields)).summary()
+            print("all", out["all"], flush=True)
+        agg += part
+    if seeds > 1:
+        out["all_seeds"] = dict(Agreement(*(cat(agg, f) for f in fields)).summary(),
+                                seeds=list(range(seed, seed + seeds)))
+        print("all seeds", out["all_seeds"], flush=True)
     return out
 
 
@@ -127,6 +139,7 @@ def main() -> int:
     ap.add_argument("--dt", type=float, default=0.02)
     ap.add_argument("--period", type=float, default=1.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", type=int, default=4, help="also aggregate this many seeds from --seed")
     ap.add_argument("--baseline", default=None, help="git revision to time against")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--nodes", type=int, default=300)
@@ -134,7 +147,8 @@ def main() -> int:
     t0 = time.perf_counter()
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
            "dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,
-           "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed)}
+           "seeds": args.seeds,
+           "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed, args.seeds)}
     res["cost"] = edge_cost(args.baseline, args.rounds, args.nodes)
     print("cost", res["cost"], flush=True)
     res["bench_s"] = round(time.perf_counter() - t0, 1)

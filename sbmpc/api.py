@@ -72,7 +72,8 @@ def plan_scenario(scenario, cost: str | None = None, heights=None, resolution=No
     :class:`sbmpc.plan.Plan` (``found``, ``controls`` [(wl, wr, duration_s)],
     ``trajectory`` {name: array}, ``travel_time_s``, ``energy_J``, ``reason`` when no
     path was found). ``progress(expansions, nodes, elapsed_s)`` is called while it
-    searches."""
+    searches (a callback with a fourth parameter also gets the best plan's cost so
+    far, or None)."""
     from .plan import plan
     if cost not in (None, "time", "energy"):
         raise InputError(f"cost: expected 'time' or 'energy', found {cost!r}")

@@ -123,25 +123,40 @@ def compile_note(quiet: bool = False) -> None:
 
 class Progress:
     """Progress lines on stderr for searches longer than ``after`` seconds: expansions
-    against the node budget, nodes, elapsed against the time budget. Only on a
-    terminal (a log or a pipe gets the summary alone), never with ``quiet``."""
+    against the node budget, nodes, elapsed against the time budget, the best plan so
+    far (its cost, or "no plan yet") and the most time left (where the node budget or
+    the time budget ends the search at the current rate). Only on a terminal (a log or
+    a pipe gets the summary alone), never with ``quiet``."""
 
-    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0, planner=None):
-        self.label, self.after, self.every = label, after, every
+    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0, planner=None,
+                 unit: str = ""):
+        self.label, self.after, self.every, self.unit = label, after, every, unit
         self.quiet = quiet or not sys.stderr.isatty()
         self.next = after
         self.budget = getattr(planner, "max_expansions", None)
         self.time_budget = getattr(planner, "time_budget_s", None)
 
-    def __call__(self, iterations, nodes, elapsed):
+    def line(self, iterations, nodes, elapsed, best=None) -> str:
+        """The progress line (without the leading indent)."""
+        part = f"{iterations:,} expansions"
+        left = [self.time_budget - elapsed] if self.time_budget else []
+        if self.budget:
+            part += f" of {self.budget:,} ({100.0 * iterations / self.budget:.0f} %)"
+            if iterations > 0:
+                left.append(elapsed * (self.budget - iterations) / iterations)
+        t = f"{elapsed:.1f} s" + (f" of {self.time_budget:g} s" if self.time_budget else "")
+        b = "no plan yet" if best is None else f"best plan so far {best:.1f}{' ' + self.unit if self.unit else ''}"
+        eta = f", at most {max(0.0, min(left)):.0f} s left" if left else ""
+        return f"{self.label}: {part}, {nodes:,} nodes, {t}, {b}{eta}"
+
+    def __call__(self, iterations, nodes, elapsed, best=None):
         if self.quiet or elapsed < self.next:
             return
         self.next = elapsed + self.every
-        part = f"{iterations:,} expansions"
-        if self.budget:
-            part += f" of {self.budget:,} ({100.0 * iterations / self.budget:.0f} %)"
-        t = f"{elapsed:.1f} s" + (f" of {self.time_budget:g} s" if self.time_budget else "")
-        print(f"  {self.label}: {part}, {nodes:,} nodes, {t}", file=sys.stderr, flush=True)
+        print("  " + self.line(iterations, nodes, elapsed, best), file=sys.stderr, flush=True)
+
+
+UNITS = {"time": "s", "energy": "J"}
 
 
 def summary(plan) -> str:
@@ -179,7 +194,8 @@ def run_plan(args) -> int:
     world = _world(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
-    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, planner=world.scenario.planner))
+    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, planner=world.scenario.planner,
+                                                         unit=UNITS.get(cost, "")))
     print(summary(plan))
     if args.json:
         write_text(args.json, json.dumps(plan.to_json(), indent=1))
@@ -214,7 +230,8 @@ def run_compare(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     compile_note(args.quiet)
     t0 = time.perf_counter()
-    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, planner=world.scenario.planner))
+    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, planner=world.scenario.planner,
+                                                           unit=UNITS.get(c, "")))
     print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
     print(compare_table(plans))
     for c, p in plans.items():

@@ -765,7 +765,9 @@ class Search:
             progress=None, batch: int = 1, threads: int | None = None) -> SearchResult:
         """Search until the goal, an empty open set, ``max_iterations`` expansions or
         ``time_budget_s`` of wall-clock time. ``progress(iterations, nodes, elapsed_s)``
-        is called after every chunk of about ``chunk`` expansions.
+        is called after every chunk of about ``chunk`` expansions; a callback that takes
+        a fourth argument also gets the best plan's cost so far (the incumbent: a goal
+        reached while refining, or a plan the search started with), or None.
 
         ``batch`` > 1: take the ``batch`` best open nodes at a time (in the serial
         search's order, up to a goal) and simulate all their edges as one batch
@@ -775,6 +777,7 @@ class Search:
         its edges run in parallel (the same nodes are expanded); a larger batch expands
         some nodes the serial search would have skipped (the children of the batch's
         first nodes could not yet be seen), in exchange for more edges at a time."""
+        progress = _with_best(progress, self.best)
         if batch > 1 or threads == "auto" or (threads or 1) > 1:
             return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
         p = self.problem
@@ -884,6 +887,27 @@ class Search:
             why += f"; {int(cnt[C_DEPTHCUT])} nodes at the depth limit {p.max_depth}"
         empty = np.zeros(0, np.int64)
         return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty, **common)
+
+
+def _with_best(progress, best):
+    """The progress callback as the search calls it, (iterations, nodes, elapsed_s): one
+    that takes a fourth argument gets the incumbent's cost (``best[0]``; None while
+    there is none) too."""
+    if progress is None:
+        return None
+    import inspect
+    try:
+        params = inspect.signature(progress).parameters.values()
+    except (TypeError, ValueError):
+        return progress
+    if sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) < 4 and not any(
+            p.kind == p.VAR_POSITIONAL for p in params):
+        return progress
+
+    def call(iterations, nodes, elapsed):
+        cost = float(best[0])
+        progress(iterations, nodes, elapsed, cost if math.isfinite(cost) else None)
+    return call
 
 
 class _Chooser:
