@@ -284,3 +284,53 @@ def test_fuzzed_run_csvs_never_crash(tmp_path, capsys, row, col, value):
     err = capsys.readouterr().err
     assert rc in (0, 2), err
     assert "Traceback" not in err and "internal error" not in err
+
+
+# ---- under an OS memory cap: the inputs that once took gigabytes -------------------------
+MEMORY_CAP = 3 << 30          # bytes of address space (a warm plan of flat.yaml peaks at ~0.7 GB)
+
+_CAPPED = r'''
+import json, resource, sys, io, contextlib
+resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[1]), int(sys.argv[1])))
+from sbmpc.commands.cli import main
+out = []
+for argv in json.loads(sys.argv[2]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        rc = main(argv)
+    out.append([rc, err.getvalue().strip()])
+print(json.dumps(out))
+'''
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork") or not Path("/proc").is_dir(),
+                    reason="RLIMIT_AS caps need Linux")
+def test_inputs_that_took_gigabytes_end_in_one_line_under_a_3_gb_cap(work):
+    """Issue 16's memory cases, in a child process whose address space is capped at
+    3 GiB: nested YAML aliases (2 GB and 30 s before), a 200-row run spanning 2e6 s
+    (24 GB), samples 1 ns apart (a hang), a 3600 s simulation at 10 us (over 5 GB), a
+    generated map of 4e8 cells. Each ends in exit 2 with one line that names the limit
+    it met (not an out-of-memory message), and no input changes."""
+    import json
+    import subprocess
+    import sys
+    (work / "laughs.yaml").write_text(BILLION_LAUGHS)
+    spread = _run_variant(work, "spread", edit_rows=lambda c, r: _set("t", lambda k: f"{k * 1e4:g}")(c, r[:200]))
+    tiny = _run_variant(work, "tiny", edit_rows=_set("t", lambda k: f"{k * 1e-9:.12g}"))
+    (work / "big.yaml").write_text(FLAT.replace("size: [20, 12], resolution: 0.25", "size: [2000, 2000], resolution: 0.1"))
+    cases = [
+        (["plan", str(work / "laughs.yaml")], "aliases are not accepted"),
+        (["diagnose", str(spread)], "median sample spacing"),
+        (["diagnose", str(tiny)], "median sample spacing"),
+        (["simulate", "--duration", "3600", "--dt", "1e-5", "--v", "0.5"], "steps"),
+        (["plan", str(work / "big.yaml")], "cells"),
+    ]
+    before = digest(work)
+    r = subprocess.run([sys.executable, "-c", _CAPPED, str(MEMORY_CAP), json.dumps([a for a, _ in cases])],
+                       capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert r.returncode == 0, r.stderr[-2000:]
+    results = json.loads(r.stdout.strip().splitlines()[-1])
+    for (argv, says), (rc, err) in zip(cases, results):
+        assert rc == 2 and "\n" not in err and says in err, (argv, rc, err)
+        assert "memory" not in err.lower(), (argv, err)
+    assert digest(work) == before
