@@ -230,12 +230,36 @@ _PATHS = st.sampled_from([("name",), ("map",), ("map", "generate"), ("map", "gen
                           ("extra_key",)])
 
 
+@pytest.fixture(scope="module")
+def memory_cap():
+    """The fuzzing runs with at most 2 GiB of address space more than the test process
+    already holds (soft RLIMIT_AS, restored afterwards; Linux only)."""
+    try:
+        import resource
+        size = next(int(line.split()[1]) * 1024 for line in Path("/proc/self/status").read_text().splitlines()
+                    if line.startswith("VmSize:"))
+    except (ImportError, OSError, StopIteration):
+        yield None
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    cap = size + (2 << 30)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+    try:
+        yield cap
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(edits=st.lists(st.tuples(_PATHS, _VALUES), min_size=1, max_size=3))
-def test_fuzzed_scenarios_never_crash(tmp_path, capsys, edits):
+def test_fuzzed_scenarios_never_crash(tmp_path, capsys, memory_cap, edits):
     """Random values at random keys of the flat scenario: exit 0 (still valid), 1 (no
     path) or 2 (one message naming the problems); never 3 or a traceback, and the file
-    is left as it was. Plans are cut to 200 expansions and 10 s."""
+    is left as it was. Plans are cut to 200 expansions and 10 s; memory is capped
+    (``memory_cap``): an input that blows up memory ends in an out-of-memory line,
+    which fails the test."""
     import copy
     import yaml
     doc = copy.deepcopy(yaml.safe_load((SCEN / "flat.yaml").read_text()))
@@ -255,7 +279,7 @@ def test_fuzzed_scenarios_never_crash(tmp_path, capsys, edits):
     rc = main(["plan", str(s), "--quiet", "--max-expansions", "200", "--time-budget", "10"])
     err = capsys.readouterr().err
     assert rc in (0, 1, 2), err
-    assert "Traceback" not in err and "internal error" not in err
+    assert "Traceback" not in err and "internal error" not in err and "out of memory" not in err
     assert s.read_bytes() == before
 
 
@@ -263,7 +287,7 @@ def test_fuzzed_scenarios_never_crash(tmp_path, capsys, edits):
 @given(row=st.integers(0, 60), col=st.sampled_from(["t", "wl_cmd", "wr_cmd", "wl", "wr", "x", "yaw"]),
        value=st.one_of(st.sampled_from(["", "nan", "inf", "-inf", "1e308", "abc", "0x10", "1,2", '"', "\x00"]),
                        st.floats(allow_nan=True, allow_infinity=True).map(repr)))
-def test_fuzzed_run_csvs_never_crash(tmp_path, capsys, row, col, value):
+def test_fuzzed_run_csvs_never_crash(tmp_path, capsys, memory_cap, row, col, value):
     """One cell of a synthetic run replaced by junk: diagnosed (0) or one message (2)."""
     src = tmp_path / "r.csv"
     if not src.exists():
@@ -283,7 +307,7 @@ def test_fuzzed_run_csvs_never_crash(tmp_path, capsys, row, col, value):
     rc = main(["diagnose", str(bad)])
     err = capsys.readouterr().err
     assert rc in (0, 2), err
-    assert "Traceback" not in err and "internal error" not in err
+    assert "Traceback" not in err and "internal error" not in err and "out of memory" not in err
 
 
 # ---- under an OS memory cap: the inputs that once took gigabytes -------------------------
