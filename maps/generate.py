@@ -37,12 +37,25 @@ class GeneratorError(ValueError):
     """A generator description is wrong; the message gives the key path."""
 
 
+def text_number_hint(value) -> str:
+    """For an error message: a note when a YAML value that should be a number is text
+    that reads as one. YAML 1.1 (PyYAML) takes 1e3 or 1.0e300, an exponent without a
+    dot and a sign, as a string."""
+    if not isinstance(value, str) or len(value) > 40 or not any(c in value for c in "eE"):
+        return ""
+    try:
+        float(value)
+    except ValueError:
+        return ""
+    return " (text: YAML reads an exponent as a number only with a dot and a sign, as in 1.0e+3)"
+
+
 def _num(d, key, path, positive=False):
     if key not in d:
         raise GeneratorError(f"{path}.{key}: expected a number, found nothing")
     v = d[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not -1e300 < v < 1e300:
-        raise GeneratorError(f"{path}.{key}: expected a number, found {v!r:.60}")
+        raise GeneratorError(f"{path}.{key}: expected a number, found {v!r:.60}{text_number_hint(v)}")
     if positive and v <= 0:
         raise GeneratorError(f"{path}.{key}: expected a positive number, found {v!r}")
     return float(v)

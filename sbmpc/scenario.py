@@ -182,9 +182,12 @@ class Verbatim(str):
 
 
 def shown(value, limit: int = 60) -> str:
-    """repr of a value for an error message, cut to ``limit`` characters."""
+    """repr of a value for an error message, cut to ``limit`` characters (a text that
+    reads as a number is said to be text: ``maps.generate.text_number_hint``)."""
+    from maps.generate import text_number_hint
     r = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 30 else f"an integer of {len(str(abs(value)))} digits"
-    return r if len(r) <= limit else r[:limit] + " ..."
+    r = r if len(r) <= limit else r[:limit] + " ..."
+    return r + text_number_hint(value)
 
 
 class _Problems:
@@ -437,8 +440,20 @@ def schema_problems(data) -> list:
     v = jsonschema.Draft202012Validator(scenario())
     out = []
     for e in sorted(v.iter_errors(_as_json(data)), key=lambda e: list(map(str, e.absolute_path))):
+        if e.context:          # none of a oneOf/anyOf's forms fits
+            sub = jsonschema.exceptions.best_match(e.context)
+            if len(sub.absolute_path) > len(e.absolute_path):
+                e = sub        # the closest form fails deeper in: name that key
+            else:
+                where = ".".join(str(k) for k in e.absolute_path) or "(the file)"
+                out.append(f"{where}: fits none of the forms the schema allows (schema)")
+                continue
         where = ".".join(str(k) for k in e.absolute_path) or "(the file)"
-        msg = e.message if len(e.message) <= 200 else e.message[:197] + "..."
+        msg = e.message
+        value = repr(e.instance)
+        if len(value) > 40 and msg.startswith(value):      # not the whole mapping again
+            msg = "the value" + msg[len(value):]
+        msg = msg if len(msg) <= 200 else msg[:197] + "..."
         out.append(f"{where}: {msg} (schema)")
     return out
 

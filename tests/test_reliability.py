@@ -109,6 +109,8 @@ FLAT = (SCEN / "flat.yaml").read_text()
     (FLAT.replace("resolution: 0.25", "resolution: " + "1" * 400), "resolution: expected a number"),
     (FLAT.replace("vehicle: p3at", "vehicle: " + "v" * 5000), "expected a shipped name"),
     (FLAT.replace("terrain: vinyl", "terrain: " + "v" * 5000), "expected a shipped name"),
+    (FLAT.replace("resolution: 0.25", "resolution: 1e300"), "found '1e300' (text: YAML reads an exponent"),
+    (FLAT.replace("x: 2.0, y: 2.0", "x: 2e0, y: 2.0"), "start.x: expected a number, found '2e0' (text:"),
 ])
 def test_hostile_scenarios_end_in_one_line(tmp_path, capsys, text, says):
     s = tmp_path / "s.yaml"
@@ -118,6 +120,18 @@ def test_hostile_scenarios_end_in_one_line(tmp_path, capsys, text, says):
     err = one_line_error(capsys, 2, rc)
     assert says in err and len(err) < 400
     assert s.read_bytes() == before
+
+
+def test_a_map_in_no_allowed_form_is_named_once_without_its_whole_value(tmp_path, capsys):
+    """origin beside generate: the schema's oneOf failure is one short line (not the
+    mapping's repr), the map check says which key is wrong."""
+    s = tmp_path / "s.yaml"
+    s.write_text(FLAT.replace("features: []}\n", "features: []}\n  origin: [.inf, 0]\n"))
+    rc = main(["plan", str(s)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "Traceback" not in err
+    assert "map: fits none of the forms the schema allows (schema)" in err
+    assert "unknown key 'origin' beside 'generate'" in err and "{'generate'" not in err
 
 
 def test_binary_and_special_files_are_named_as_such(tmp_path, capsys):
