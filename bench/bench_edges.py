@@ -144,6 +144,8 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--nodes", type=int, default=300)
     args = ap.parse_args()
+    if args.seeds < 1:
+        ap.error("--seeds: expected at least 1")
     t0 = time.perf_counter()
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
            "dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,

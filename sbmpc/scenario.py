@@ -182,12 +182,16 @@ class Verbatim(str):
 
 
 def shown(value, limit: int = 60) -> str:
-    """repr of a value for an error message, cut to ``limit`` characters (a text that
-    reads as a number is said to be text: ``maps.generate.text_number_hint``)."""
-    from maps.generate import text_number_hint
+    """repr of a value for an error message, cut to ``limit`` characters."""
     r = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 30 else f"an integer of {len(str(abs(value)))} digits"
-    r = r if len(r) <= limit else r[:limit] + " ..."
-    return r + text_number_hint(value)
+    return r if len(r) <= limit else r[:limit] + " ..."
+
+
+def shown_number(value) -> str:
+    """:func:`shown` for a value that should be a number: a text that reads as one is
+    said to be text (``maps.generate.text_number_hint``: PyYAML reads 1e3 as a string)."""
+    from maps.generate import text_number_hint
+    return Verbatim(shown(value) + text_number_hint(value))
 
 
 class _Problems:
@@ -221,7 +225,7 @@ def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math
         probs.add(f"{where}.{key}", what, v)
         return math.nan
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
-        probs.add(f"{where}.{key}", what, v)
+        probs.add(f"{where}.{key}", what, shown_number(v))
         return math.nan
     return float(v)
 

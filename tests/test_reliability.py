@@ -244,10 +244,11 @@ _PATHS = st.sampled_from([("name",), ("map",), ("map", "generate"), ("map", "gen
                           ("extra_key",)])
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture()
 def memory_cap():
-    """The fuzzing runs with at most 2 GiB of address space more than the test process
-    already holds (soft RLIMIT_AS, restored afterwards; Linux only)."""
+    """Each fuzzed case runs with at most 2 GiB of address space more than the test
+    process already holds (soft RLIMIT_AS, never raised, restored afterwards; Linux
+    only)."""
     try:
         import resource
         size = next(int(line.split()[1]) * 1024 for line in Path("/proc/self/status").read_text().splitlines()
@@ -257,8 +258,9 @@ def memory_cap():
         return
     soft, hard = resource.getrlimit(resource.RLIMIT_AS)
     cap = size + (2 << 30)
-    if hard != resource.RLIM_INFINITY:
-        cap = min(cap, hard)
+    for limit in (soft, hard):
+        if limit != resource.RLIM_INFINITY:
+            cap = min(cap, limit)
     resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
     try:
         yield cap
@@ -329,7 +331,9 @@ MEMORY_CAP = 3 << 30          # bytes of address space (a warm plan of flat.yaml
 
 _CAPPED = r'''
 import json, resource, sys, io, contextlib
-resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[1]), int(sys.argv[1])))
+soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+cap = int(sys.argv[1]) if hard == resource.RLIM_INFINITY else min(int(sys.argv[1]), hard)
+resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
 from sbmpc.commands.cli import main
 out = []
 for argv in json.loads(sys.argv[2]):

@@ -124,8 +124,8 @@ def compile_note(quiet: bool = False) -> None:
 class Progress:
     """Progress lines on stderr for searches longer than ``after`` seconds: expansions
     against the node budget, nodes, elapsed against the time budget, the best plan so
-    far (its cost, or "no plan yet") and the most time left (where the node budget or
-    the time budget ends the search at the current rate). Only on a terminal (a log or
+    far (its cost, or "no plan yet") and the most time left (where the node budget at
+    the average rate so far, or the time budget, ends the search). Only on a terminal (a log or
     a pipe gets the summary alone), never with ``quiet``."""
 
     def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0, planner=None,
@@ -146,7 +146,7 @@ class Progress:
                 left.append(elapsed * (self.budget - iterations) / iterations)
         t = f"{elapsed:.1f} s" + (f" of {self.time_budget:g} s" if self.time_budget else "")
         b = "no plan yet" if best is None else f"best plan so far {best:.1f}{' ' + self.unit if self.unit else ''}"
-        eta = f", at most {max(0.0, min(left)):.0f} s left" if left else ""
+        eta = f", at most ~{max(0.0, min(left)):.0f} s left" if left else ""
         return f"{self.label}: {part}, {nodes:,} nodes, {t}, {b}{eta}"
 
     def __call__(self, iterations, nodes, elapsed, best=None):

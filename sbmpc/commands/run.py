@@ -81,7 +81,7 @@ def run_run(args) -> int:
     def progress(label):
         p = Progress(label, args.quiet, planner=world.scenario.planner, unit=UNITS.get(cost, ""))
         if label != "first plan":           # a re-plan runs under the run's own time budget
-            p.time_budget = settings.replan_time_budget_s if settings else None
+            p.time_budget = settings.replan_time_budget_s
         return p
     res = receding.run(world, cost, truth, settings, progress=progress)
     print(summary(res))

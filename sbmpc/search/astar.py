@@ -900,9 +900,8 @@ def _with_best(progress, best):
         params = inspect.signature(progress).parameters.values()
     except (TypeError, ValueError):
         return progress
-    if sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) < 4 and not any(
-            p.kind == p.VAR_POSITIONAL for p in params):
-        return progress
+    if sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params) < 4:
+        return progress          # (print or *args callbacks keep the three arguments)
 
     def call(iterations, nodes, elapsed):
         cost = float(best[0])
