@@ -426,12 +426,13 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else _predicted(world, cost, controls, X0)
     pol = None
     if res.status == "found" and ps.polishes(cost):
-        pol = _polished(world, cost, prob, X0, controls, t0 + budget)
+        pol, drive = _polished(world, cost, prob, X0, controls, t0 + budget)
         if pol is not None:
             controls = pol.controls
             pred = _predicted(world, cost, controls, X0)
     common["polish"] = pol
-    controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps)
+    controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps,
+                                            drive if pol is not None else None)
     common["repairs"] = repairs
     if not chk.reached:
         return Plan(world.scenario.name, cost, "no_path",
@@ -449,10 +450,11 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
 
 
 def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float):
-    """The polish of searched ``controls`` (:mod:`sbmpc.polish`), or None when it gained
-    nothing, or when its controls, driven at the controller rate, do not reach the goal
-    (or only pass it where the searched ones entered it) or cost more there than the
-    searched ones: the polish is judged where every plan is. The polish aims at the goal
+    """The polish of searched ``controls`` (:mod:`sbmpc.polish`) and its drive at the
+    controller rate (:func:`_controller_rate`'s result, for :func:`_checked`); (None,
+    None) when it gained nothing, or when its controls, driven at the controller rate, do
+    not reach the goal (or only pass it where the searched ones entered it) or cost more
+    there than the searched ones: the polish is judged where every plan is. The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
     may pass just outside it at 1 kHz."""
@@ -465,20 +467,21 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
         if pol is not None:
             break
     if pol is None or pol.gain <= 0.0:
-        return None
-    new = _controller_rate(world, cost, pol.controls, X0)[0]
+        return None, None
+    drive = _controller_rate(world, cost, pol.controls, X0)
+    new = drive[0]
     if not new.reached:
-        return None
+        return None, None
     old = _controller_rate(world, cost, controls, X0)[0]
     if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
-        return None
+        return None, None
     if old.reached and _cost(old, cost) <= _cost(new, cost):
-        return None
-    return pol
+        return None, None
+    return pol, drive
 
 
 def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,
-             budget: float, ps) -> tuple:
+             budget: float, ps, drive=None) -> tuple:
     """Check searched controls at the controller rate. Where the check fails, re-plan
     from the controller-rate state and splice, up to MAX_REPAIRS times within the time
     budget: from the first control where the replay parted from the search's prediction
@@ -488,9 +491,10 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
     that only passes within the drift allowance of the goal disc gets its last approach
     planned from where it passed closest, so that the plan enters the disc (a receding-
     horizon run executes exactly that); if that fails the allowance stands. Returns
-    (controls as driven, Check, the controller-rate trajectory, re-plans made)."""
+    (controls as driven, Check, the controller-rate trajectory, re-plans made). ``drive``:
+    the controls' drive at the controller rate when it is known already (the polish's)."""
     rate = world.vehicle.controller_rate
-    chk, fine, kept = _controller_rate(world, cost, controls, X0)
+    chk, fine, kept = drive if drive is not None else _controller_rate(world, cost, controls, X0)
     repairs = 0
     dt = ps.dt
     while repairs < MAX_REPAIRS and not (chk.reached and chk.miss_m == 0.0):
