@@ -424,15 +424,14 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else _predicted(world, cost, controls, X0)
-    pol = None
+    pol, drive = None, None
     if res.status == "found" and ps.polishes(cost):
         pol, drive = _polished(world, cost, prob, X0, controls, t0 + budget)
         if pol is not None:
             controls = pol.controls
             pred = _predicted(world, cost, controls, X0)
     common["polish"] = pol
-    controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps,
-                                            drive if pol is not None else None)
+    controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps, drive)
     common["repairs"] = repairs
     if not chk.reached:
         return Plan(world.scenario.name, cost, "no_path",

@@ -444,16 +444,14 @@ def schema_problems(data) -> list:
     v = jsonschema.Draft202012Validator(scenario())
     out = []
     for e in sorted(v.iter_errors(_as_json(data)), key=lambda e: list(map(str, e.absolute_path))):
+        msg = e.message
         if e.context:          # none of a oneOf/anyOf's forms fits
             sub = jsonschema.exceptions.best_match(e.context)
             if len(sub.absolute_path) > len(e.absolute_path):
-                e = sub        # the closest form fails deeper in: name that key
+                e, msg = sub, sub.message      # the closest form fails deeper in: name that key
             else:
-                where = ".".join(str(k) for k in e.absolute_path) or "(the file)"
-                out.append(f"{where}: fits none of the forms the schema allows (schema)")
-                continue
+                msg = "fits none of the forms the schema allows"
         where = ".".join(str(k) for k in e.absolute_path) or "(the file)"
-        msg = e.message
         value = repr(e.instance)
         if len(value) > 40 and msg.startswith(value):      # not the whole mapping again
             msg = "the value" + msg[len(value):]

@@ -6,13 +6,9 @@ from sbmpc.commands.plan import Progress
 from sbmpc.search.astar import Search
 
 
-class _Planner:
-    max_expansions = 1000
-    time_budget_s = 60.0
-
-
 def test_progress_line_says_budget_share_best_plan_and_time_left():
-    p = Progress("energy search", planner=_Planner(), unit="J")
+    p = Progress("energy search", cost="energy")
+    p.budgets(1000, 60.0)
     line = p.line(250, 2400, 2.0)
     assert "250 expansions of 1,000 (25 %)" in line and "2,400 nodes" in line
     assert "2.0 s of 60 s" in line and "no plan yet" in line
@@ -45,3 +41,14 @@ def test_search_reports_the_incumbent_to_a_four_argument_callback(flat_problem):
     seen_args = []
     Search(flat_problem).run(400, chunk=16, progress=lambda *a: seen_args.append(len(a)))
     assert seen_args and set(seen_args) == {3}        # *args callbacks keep three arguments
+
+
+def test_the_search_states_its_own_budgets_to_the_progress_line(flat_problem):
+    """The line shows the budgets the search runs under (a re-plan's shorter time
+    budget, a command-line node budget), not the scenario's."""
+    p = Progress("re-plan 1", cost="time")
+    Search(flat_problem).run(400, 7.5, chunk=16, progress=p)
+    assert (p.budget, p.time_budget) == (400, 7.5)
+    assert "of 400 (" in p.line(100, 200, 1.0) and "1.0 s of 7.5 s" in p.line(100, 200, 1.0)
+    Search(flat_problem).run(300, chunk=16, progress=p)           # no time budget
+    assert (p.budget, p.time_budget) == (300, None)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import replace
@@ -123,18 +124,25 @@ def compile_note(quiet: bool = False) -> None:
 
 class Progress:
     """Progress lines on stderr for searches longer than ``after`` seconds: expansions
-    against the node budget, nodes, elapsed against the time budget, the best plan so
-    far (its cost, or "no plan yet") and the most time left (where the node budget at
-    the average rate so far, or the time budget, ends the search). Only on a terminal (a log or
-    a pipe gets the summary alone), never with ``quiet``."""
+    against the node budget, nodes, elapsed against the time budget (both as the search
+    states them, :meth:`budgets`), the best plan so far (its cost, in the unit of
+    ``cost``, or "no plan yet") and the most time left (where the node budget at the
+    average rate so far, or the time budget, ends the search). Only on a terminal (a
+    log or a pipe gets the summary alone), never with ``quiet``."""
 
-    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0, planner=None,
-                 unit: str = ""):
-        self.label, self.after, self.every, self.unit = label, after, every, unit
+    def __init__(self, label: str, quiet: bool = False, after: float = 2.0, every: float = 2.0,
+                 cost: str | None = None):
+        self.label, self.after, self.every = label, after, every
+        self.unit = {"time": "s", "energy": "J"}.get(cost, "")
         self.quiet = quiet or not sys.stderr.isatty()
         self.next = after
-        self.budget = getattr(planner, "max_expansions", None)
-        self.time_budget = getattr(planner, "time_budget_s", None)
+        self.budget = None
+        self.time_budget = None
+
+    def budgets(self, max_iterations: int, time_budget_s: float) -> None:
+        """The search's node budget and time budget [s] (inf: none)."""
+        self.budget = int(max_iterations)
+        self.time_budget = time_budget_s if math.isfinite(time_budget_s) else None
 
     def line(self, iterations, nodes, elapsed, best=None) -> str:
         """The progress line (without the leading indent)."""
@@ -154,9 +162,6 @@ class Progress:
             return
         self.next = elapsed + self.every
         print("  " + self.line(iterations, nodes, elapsed, best), file=sys.stderr, flush=True)
-
-
-UNITS = {"time": "s", "energy": "J"}
 
 
 def summary(plan) -> str:
@@ -194,8 +199,7 @@ def run_plan(args) -> int:
     world = _world(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
-    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, planner=world.scenario.planner,
-                                                         unit=UNITS.get(cost, "")))
+    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost))
     print(summary(plan))
     if args.json:
         write_text(args.json, json.dumps(plan.to_json(), indent=1))
@@ -230,8 +234,7 @@ def run_compare(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     compile_note(args.quiet)
     t0 = time.perf_counter()
-    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, planner=world.scenario.planner,
-                                                           unit=UNITS.get(c, "")))
+    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, cost=c))
     print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
     print(compare_table(plans))
     for c, p in plans.items():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, scenario_inputs, write_text
-from .plan import UNITS, Progress, _world, add_backend_flags, compile_note
+from .plan import Progress, _world, add_backend_flags, compile_note
 
 
 def add_parsers(sub):
@@ -78,12 +78,7 @@ def run_run(args) -> int:
         raise InputError(f"{args.vehicle or base}: energy cost needs a planning vehicle without regeneration "
                          "(regen: false), found regen: true")
     compile_note(args.quiet)
-    def progress(label):
-        p = Progress(label, args.quiet, planner=world.scenario.planner, unit=UNITS.get(cost, ""))
-        if label != "first plan":           # a re-plan runs under the run's own time budget
-            p.time_budget = settings.replan_time_budget_s
-        return p
-    res = receding.run(world, cost, truth, settings, progress=progress)
+    res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost))
     print(summary(res))
     if args.json:
         write_text(args.json, json.dumps(res.to_json(), indent=1))

@@ -767,7 +767,9 @@ class Search:
         ``time_budget_s`` of wall-clock time. ``progress(iterations, nodes, elapsed_s)``
         is called after every chunk of about ``chunk`` expansions; a callback that takes
         a fourth argument also gets the best plan's cost so far (the incumbent: a goal
-        reached while refining, or a plan the search started with), or None.
+        reached while refining, or a plan the search started with), or None; one with a
+        ``budgets(max_iterations, time_budget_s)`` method is told this search's budgets
+        first.
 
         ``batch`` > 1: take the ``batch`` best open nodes at a time (in the serial
         search's order, up to a goal) and simulate all their edges as one batch
@@ -777,6 +779,8 @@ class Search:
         its edges run in parallel (the same nodes are expanded); a larger batch expands
         some nodes the serial search would have skipped (the children of the batch's
         first nodes could not yet be seen), in exchange for more edges at a time."""
+        if hasattr(progress, "budgets"):
+            progress.budgets(max_iterations, time_budget_s)
         progress = _with_best(progress, self.best)
         if batch > 1 or threads == "auto" or (threads or 1) > 1:
             return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
