@@ -7,7 +7,7 @@ carries its speed and controller state: the entry speed into a hill matters.
 
 An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period,
 stepping ``dynamics.kernels.step`` every ``dt`` with the pitch under the vehicle from
-``maps.pitch_roll_at`` and the terrain under its centre from the map's terrain layer.
+``maps.pitch_cross_grade_at`` and the terrain under its centre from the map's terrain layer.
 It is invalid (codes below) when the vehicle leaves the map, pitches or rolls beyond the
 tip-over limit, or stalls (drive saturated, commanded motion not achieved for
 ``STALL_TIME``). An edge that enters the goal disc ends there, so the last control of a
@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit, prange
 
 from dynamics import kernels as K
-from maps.grid import cell_value, height_at, pitch_roll_at
+from maps.grid import cell_value, height_at, pitch_cross_grade_at, pitch_roll_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
 
@@ -84,6 +84,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     offt = int(params[Q_OFFT])
     block = int(params[Q_BLOCK])
     tip = params[Q_TIP]
+    tan_tip = math.tan(tip)         # the roll limit as a cross grade (no arctangent per step)
     margin = params[Q_MARGIN]
     x_lo = ox + margin
     y_lo = oy + margin
@@ -96,14 +97,18 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         O[d] = 0.0
     record = rec.shape[0] > 0
     end = 0
+    stepped = False
+    kp = 0                              # the terrain (index into the layer's terrains) ...
+    Pk = data[offt:offt + K.NP]         # ... its model parameters and friction table
+    Tk = data[offt + K.NP:offt + block]
     for i in range(nsteps + 1):
         x = S[K.S_X]
         y = S[K.S_Y]
         if x < x_lo or x > x_hi or y < y_lo or y > y_hi:
             end = -OFF_MAP
             break
-        pitch, roll = pitch_roll_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
-        if abs(pitch) > tip or abs(roll) > tip:
+        pitch, grade = pitch_cross_grade_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
+        if abs(pitch) > tip or abs(grade) > tan_tip:
             end = -TIP
             break
         if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:
@@ -111,18 +116,26 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             break
         if i == nsteps:
             break
-        k = 0
         if has_layer:
             k = int(cell_value(L, res, ox, oy, x, y))
-        a = offt + k * block
-        K.step(data[a:a + K.NP], data[a + K.NP:a + block], S, cmd_l, cmd_r, pitch, dt, False, O)
-        S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
+            if k != kp:                 # the terrain under the vehicle changed
+                a = offt + k * block
+                Pk = data[a:a + K.NP]
+                Tk = data[a + K.NP:a + block]
+                kp = k
+        K.step(Pk, Tk, S, cmd_l, cmd_r, pitch, dt, False, O)
+        stepped = True
         if record and rows < rec.shape[0]:
+            S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
             K.record(S, O, pitch, rec[rows])
             rows += 1
         if S[K.S_STALLED] > 0.0:
             end = -STALL
             break
+    if stepped:
+        # the height under the vehicle: the model's own z (integrated along the pitch)
+        # is replaced by the map's; nothing within the edge reads it
+        S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
     yaw = S[K.S_YAW]
     S[X_YAWW] = yaw - 2.0 * math.pi * math.floor((yaw + math.pi) / (2.0 * math.pi))
     S[X_V] = O[K.O_V] if i > 0 else S[X_V]
