@@ -37,11 +37,11 @@ def wheel_accelerations(m11, m12, tau_l, tau_r, res_l, res_r, grav):
 
 
 @jit
-def implicit_wheel_step(m11, m12, j_ll, j_lr, j_rl, j_rr, tau_l, tau_r, res_l, res_r, grav_l, grav_r, dt):
-    """Eq. 25 advanced by one linearly implicit Euler step of dt [s]: solve
-    (M + dt J) dw = dt (tau - C - G) for the wheel-speed increments (dw_l, dw_r) [rad/s],
-    with J = d(C - tau)/dw [N m s/rad] the slope of the speed-dependent torques. With J = 0
-    it is dt times :func:`wheel_accelerations`.
+def newton_step(m11, m12, j_ll, j_lr, j_rl, j_rr, res_l, res_r, dt):
+    """The Newton correction of an implicit step of eq. 25: solve (M + dt J) dw = -res
+    [rad/s] for a residual res [N m s] of M (w - w0) - dt (tau - C - G), J [N m s/rad]
+    the slope of the speed-dependent torques. With J = 0 and the residual taken at w0 it
+    is dt times :func:`wheel_accelerations` (explicit Euler).
 
     A dissipative J (positive semi-definite symmetric part) can only make M + dt J better
     conditioned than M. Near standstill the tabulated friction's cross slopes can break
@@ -58,6 +58,5 @@ def implicit_wheel_step(m11, m12, j_ll, j_lr, j_rl, j_rr, tau_l, tau_r, res_l, r
         a12 = m12
         a21 = m12
         det = a11 * a22 - a12 * a21
-    bl = dt * (tau_l - res_l - grav_l)
-    br = dt * (tau_r - res_r - grav_r)
-    return (a22 * bl - a12 * br) / det, (a11 * br - a21 * bl) / det
+    inv = 1.0 / det
+    return (a12 * res_r - a22 * res_l) * inv, (a21 * res_l - a11 * res_r) * inv

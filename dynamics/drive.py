@@ -38,8 +38,9 @@ def current_window(omega, v_max, k, r_a, i_max):
     limit |I| <= I_max intersected with the voltage limit of eq. 27, |k w + R_a I| <= V_max.
     When the back-EMF alone exceeds V_max (over-speed) the window is the single current at
     the nearest voltage bound."""
-    lo = motor_torque(-v_max, omega, k, r_a) / k     # eq. 26 at the voltage bounds
-    hi = motor_torque(v_max, omega, k, r_a) / k
+    bemf = k * omega                  # eq. 26 at the voltage bounds, over k
+    lo = (-v_max - bemf) / r_a
+    hi = (v_max - bemf) / r_a
     if lo < -i_max:
         lo = -i_max
     if hi > i_max:

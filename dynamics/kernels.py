@@ -35,11 +35,13 @@ import math
 import numpy as np
 from ._jit import jit, jit_inline
 
-from .body import gravity_torque, implicit_wheel_step, mass_matrix
+from .body import gravity_torque, mass_matrix, newton_step
 from .drive import current_window, electrical_power, pid_current
 from .kinematics import alpha_model
 from .params import G, Terrain, Vehicle
 from .resistance import OMEGA_EPS, side_force, unit_friction_fast
+
+INV_OMEGA_EPS = 1.0 / OMEGA_EPS
 
 # ---- parameter vector P ----------------------------------------------------------
 (P_M, P_I, P_R, P_B, P_ALPHA, P_MUROLL, P_MUSA, P_MUOP, P_PRESS, P_VMAX, P_K, P_RA,
@@ -118,10 +120,10 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr):
         drr *= a_shear
     press = P[P_PRESS] * cp
     roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
-    droll_l = roll / OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
-    droll_r = roll / OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
-    F_l, dF_l, dR_l = side_force(fl, roll * _clip(wl / OMEGA_EPS, -1.0, 1.0), wl, press, P[P_MUSA], P[P_MUOP])
-    F_r, dF_r, dR_r = side_force(fr, roll * _clip(wr / OMEGA_EPS, -1.0, 1.0), wr, press, P[P_MUSA], P[P_MUOP])
+    droll_l = roll * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
+    droll_r = roll * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
+    F_l, dF_l, dR_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press, P[P_MUSA], P[P_MUOP])
+    F_r, dF_r, dR_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press, P[P_MUSA], P[P_MUOP])
     visc = P[P_VISC]
     res_l = r * scl * F_l + visc * wl
     res_r = r * scr * F_r + visc * wr
@@ -235,8 +237,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr,
         pl = wl
         pr = wr
         pnorm = norm
-        stl, str_ = implicit_wheel_step(m11, m12, j_ll - k * dil, j_lr, j_rl, j_rr - k * dir_,
-                                        0.0, 0.0, rl / h, rr / h, 0.0, 0.0, h)
+        stl, str_ = newton_step(m11, m12, j_ll - k * dil, j_lr, j_rl, j_rr - k * dir_, rl, rr, h)
         lam = 1.0
         wl = pl + stl
         wr = pr + str_
@@ -326,8 +327,9 @@ def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
             dr = _clip(dr, -aref * dt, aref * dt)
         S[S_REFL] += dl
         S[S_REFR] += dr
-    rdl = dl / dt
-    rdr = dr / dt
+    inv_dt = 1.0 / dt
+    rdl = dl * inv_dt
+    rdr = dr * inv_dt
     u0 = _cached_friction(P, table, S)
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
         # 2: the digital PID samples the measured speeds; the command is held
@@ -422,9 +424,9 @@ def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
     # time below the threshold is interpolated within the step, so the verdict does not
     # depend on the step.
     if not open_loop:
-        cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r))
         stalling = False
-        if r * cn > 0.05 and (sat_l or sat_r):
+        cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r)) if (sat_l or sat_r) else 0.0
+        if r * cn > 0.05:
             q = r / (2.0 * cn)
             p1 = q * (cmd_l * wl + cmd_r * wr)
             if p1 < STALL_SPEED:

@@ -21,9 +21,16 @@ from numba import njit
 @njit(cache=True, error_model="numpy")
 def height_at(H, res, ox, oy, x, y):
     """Bilinear height [m] at world (x, y) [m]; clamped to the edge outside the grid."""
+    return _bilinear(H, 1.0 / res, ox, oy, x, y)
+
+
+@njit(cache=True, error_model="numpy")
+def _bilinear(H, inv_res, ox, oy, x, y):
+    """:func:`height_at` with the cells per metre ``inv_res`` (one division less per
+    query where several share it)."""
     ny, nx = H.shape
-    u = (x - ox) / res
-    v = (y - oy) / res
+    u = (x - ox) * inv_res
+    v = (y - oy) * inv_res
     if u < 0.0:
         u = 0.0
     elif u > nx - 1:
@@ -64,10 +71,11 @@ def pitch_cross_grade_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
     s = math.sin(yaw)
     fx, fy = half_length * c, half_length * s      # to the front axle
     lx, ly = -half_width * s, half_width * c       # to the left side
-    zfl = height_at(H, res, ox, oy, x + fx + lx, y + fy + ly)
-    zfr = height_at(H, res, ox, oy, x + fx - lx, y + fy - ly)
-    zrl = height_at(H, res, ox, oy, x - fx + lx, y - fy + ly)
-    zrr = height_at(H, res, ox, oy, x - fx - lx, y - fy - ly)
+    inv = 1.0 / res
+    zfl = _bilinear(H, inv, ox, oy, x + fx + lx, y + fy + ly)
+    zfr = _bilinear(H, inv, ox, oy, x + fx - lx, y + fy - ly)
+    zrl = _bilinear(H, inv, ox, oy, x - fx + lx, y - fy + ly)
+    zrr = _bilinear(H, inv, ox, oy, x - fx - lx, y - fy - ly)
     pitch = math.atan2(0.5 * (zfl + zfr) - 0.5 * (zrl + zrr), 2.0 * half_length)
     grade = (0.5 * (zfl + zrl) - 0.5 * (zfr + zrr)) / (2.0 * half_width)
     return pitch, grade

@@ -272,12 +272,17 @@ def test_no_nan_or_inf_over_random_commands_grades_and_terrains(wl, wr, pitch, t
 
 
 def test_implicit_step_reduces_to_eq25_and_drive_window_to_eqs26_27(p3at):
-    from dynamics.body import implicit_wheel_step, mass_matrix, wheel_accelerations
+    from dynamics.body import mass_matrix, newton_step, wheel_accelerations
     from dynamics.drive import current_window, max_motor_voltage, motor_torque
     m11, m12 = mass_matrix(p3at.mass, p3at.inertia, p3at.wheel_radius, p3at.width, 1.5)
     al, ar = wheel_accelerations(m11, m12, 3.0, -1.0, 0.5, 0.2, 0.4)
-    dl, dr = implicit_wheel_step(m11, m12, 0.0, 0.0, 0.0, 0.0, 3.0, -1.0, 0.5, 0.2, 0.4, 0.4, 0.01)
+    # the residual of M (w - w0) - dt (tau - C - G) at w0, and its correction with J = 0
+    rl, rr = -0.01 * (3.0 - 0.5 - 0.4), -0.01 * (-1.0 - 0.2 - 0.4)
+    dl, dr = newton_step(m11, m12, 0.0, 0.0, 0.0, 0.0, rl, rr, 0.01)
     assert (dl, dr) == (pytest.approx(0.01 * al), pytest.approx(0.01 * ar))
+    # a dissipative slope (each wheel's own friction) only damps the correction
+    sl, sr = newton_step(m11, m12, 5.0, 0.0, 0.0, 5.0, rl, rr, 0.01)
+    assert abs(sl) < abs(dl) and abs(sr) < abs(dr)
     k, ra, vmax = p3at.torque_constant, p3at.armature_resistance, p3at.v_max
     lo, hi = current_window(7.0, vmax, k, ra, p3at.current_limit)      # voltage-bound at 7 rad/s
     assert hi == pytest.approx(motor_torque(vmax, 7.0, k, ra) / k) and hi < p3at.current_limit
