@@ -4,7 +4,7 @@ side in one run; and how planning time grows with map size and branching factor.
 
     python bench/bench_planner.py            # writes bench/results/planner.json
 
-Numba is warmed up first (one small plan and one of each configuration). Per scenario
+Numba is warmed up first (one small plan of each cost and configuration). Per scenario
 and cost, three configurations run one after another: ``serial`` (one thread, batch 1:
 the serial A*), ``threads`` (a node's edges on every core, batch 1: the same plan) and
 ``batch4`` (every core, the 4 best nodes expanded together). The speed-up is the ratio
@@ -43,8 +43,9 @@ def main() -> int:
     import numba
     t0 = time.perf_counter()
     flat = SC.load(ROOT / "scenarios" / "flat.yaml")
-    for cfg in CONFIGS.values():                                              # compile / load the cache
-        PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), "time")
+    for cfg in CONFIGS.values():                  # compile / load the cache (energy: the polish too)
+        for cost in ("time", "energy"):
+            PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
     warm = time.perf_counter() - t0
     res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
                  "cores": numba.config.NUMBA_NUM_THREADS, "configs": CONFIGS,

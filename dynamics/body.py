@@ -23,7 +23,14 @@ def mass_matrix(mass, inertia, r, width, alpha):
 def gravity_torque(mass, g, r, pitch):
     """Eq. 24: gravity torque of each side, G = m g r sin(beta) / 2 [N m], for the pitch
     beta [rad] of the vehicle's heading (positive nose up: climbing costs torque)."""
-    return mass * g * r * math.sin(pitch) / 2.0
+    return slope_gravity_torque(mass, g, r, math.sin(pitch))
+
+
+@jit
+def slope_gravity_torque(mass, g, r, sin_pitch):
+    """Eq. 24 with the pitch given by its sine: G = m g r sin(beta) / 2 [N m] (the
+    planner's edges have the slope as a grade, not as an angle)."""
+    return mass * g * r * sin_pitch / 2.0
 
 
 @jit

@@ -35,7 +35,7 @@ import math
 import numpy as np
 from ._jit import jit, jit_inline
 
-from .body import gravity_torque, mass_matrix, newton_step
+from .body import mass_matrix, newton_step, slope_gravity_torque
 from .drive import current_window, electrical_power, pid_current
 from .kinematics import alpha_model
 from .params import G, Terrain, Vehicle
@@ -263,27 +263,35 @@ def _battery_power(il, ir, wl, wr, k, ra, regen):
 SUBSTEPS = 4   # a coarse step over which a wheel speed changes sign is redone as this many
 
 
-@jit
+@jit_inline
 def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     """Advance state S by dt [s] under commands (cmd_l, cmd_r) and pitch [rad]; outputs in
-    O (:func:`_step`). A coarse step (the continuous loop, dt above the controller
+    O (:func:`step_slope`)."""
+    step_slope(P, table, S, cmd_l, cmd_r, math.sin(pitch), math.cos(pitch), dt, open_loop, O)
+
+
+@jit
+def step_slope(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O):
+    """:func:`step` on a slope given by the sine and cosine of its pitch (sp, cp); outputs
+    in O (:func:`_step`). A coarse step (the continuous loop, dt above the controller
     period) over which a wheel speed changes sign (or leaves or reaches rest) is redone
     as SUBSTEPS shorter steps: the friction turns over there (its slope grows like
     1/|w|, its sign flips), the one place where a second-order step of 20 ms is not
     accurate (a wheel dragged through zero downhill under a saturated drive: 2-3 % off
     in energy in one step; dynamics.convergence measures it). Allocates nothing."""
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
-        _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, False)
-    elif not _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, True):
+        _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, False)
+    elif not _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, True):
         h = dt / SUBSTEPS
         for _ in range(SUBSTEPS):
-            _step(P, table, S, cmd_l, cmd_r, pitch, h, open_loop, O, False)
+            _step(P, table, S, cmd_l, cmd_r, sp, cp, h, open_loop, O, False)
 
 
 @jit
-def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
-    """One step of :func:`step`. With ``check``, a coarse step whose wheel speeds change
-    sign is not taken: S is left as it was and the result is False (else True).
+def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
+    """One step of :func:`step_slope` (the pitch by its sine sp and cosine cp). With
+    ``check``, a coarse step whose wheel speeds change sign is not taken: S is left as it
+    was and the result is False (else True).
 
     Closed loop: the commands are desired wheel speeds [rad/s]; the reference approaches
     them at the rate limit ``ref_accel``. At the controller period (dt <= 1 /
@@ -310,9 +318,9 @@ def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
     vmax = P[P_VMAX] - P[P_SAG] * S[S_E]
     if vmax < 0.0:
         vmax = 0.0
-    cp = math.cos(pitch)
-    g_l = gravity_torque(P[P_M], G, P[P_R], pitch) * P[P_SCL]
-    g_r = gravity_torque(P[P_M], G, P[P_R], pitch) * P[P_SCR]
+    g = slope_gravity_torque(P[P_M], G, P[P_R], sp)
+    g_l = g * P[P_SCL]
+    g_r = g * P[P_SCR]
     # 1: the wheel-speed reference approaches the command at the rate limit
     dl = 0.0
     dr = 0.0
@@ -411,7 +419,7 @@ def _step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O, check):
     head = S[S_YAW] + 0.5 * ym * dt
     S[S_X] += vm * cp * math.cos(head) * dt
     S[S_Y] += vm * cp * math.sin(head) * dt
-    S[S_Z] += vm * math.sin(pitch) * dt
+    S[S_Z] += vm * sp * dt
     S[S_YAW] += ym * dt
     S[S_DIST] += abs(vm) * dt
     S[S_S] += vm * dt

@@ -7,7 +7,7 @@ cell. x is east, y north, z up; yaw is counter-clockwise from +x.
 The queries are numba kernels over plain arrays so that the planner's compiled edge
 rollouts can call them: :func:`height_at` (bilinear), :func:`gradient_at`, and
 :func:`pitch_roll_at`, the pitch and roll of a vehicle from the heights under its front,
-rear, left and right wheels (:func:`pitch_cross_grade_at`: the roll as its tangent).
+rear, left and right wheels (:func:`slope_grades_at`: both as tangents).
 """
 from __future__ import annotations
 
@@ -60,13 +60,13 @@ def gradient_at(H, res, ox, oy, x, y):
 
 
 @njit(cache=True, error_model="numpy")
-def pitch_cross_grade_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
-    """Pitch [rad] and cross grade tan(roll) [m/m] of a vehicle centred at (x, y) heading
-    yaw, from the mean heights under its front and rear axles (half_length ahead and
-    behind) and under its left and right wheels (half_width aside). Pitch is positive
-    nose up; the cross grade is positive when the left side is higher. The planner's
-    edges test the roll against a limit through its tangent and so need no arctangent
-    (:func:`pitch_roll_at` gives the angle)."""
+def slope_grades_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
+    """Grades [m/m] under a vehicle centred at (x, y) heading yaw: along its heading,
+    tan(pitch), from the mean heights under its front and rear axles (half_length ahead
+    and behind), and across it, tan(roll), from those under its left and right wheels
+    (half_width aside). Positive nose up and left side up. The planner's edges need no
+    angles (limits are compared as tangents, the model takes the pitch's sine and
+    cosine); :func:`pitch_roll_at` gives the angles."""
     c = math.cos(yaw)
     s = math.sin(yaw)
     fx, fy = half_length * c, half_length * s      # to the front axle
@@ -76,18 +76,18 @@ def pitch_cross_grade_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
     zfr = _bilinear(H, inv, ox, oy, x + fx - lx, y + fy - ly)
     zrl = _bilinear(H, inv, ox, oy, x - fx + lx, y - fy + ly)
     zrr = _bilinear(H, inv, ox, oy, x - fx - lx, y - fy - ly)
-    pitch = math.atan2(0.5 * (zfl + zfr) - 0.5 * (zrl + zrr), 2.0 * half_length)
-    grade = (0.5 * (zfl + zrl) - 0.5 * (zfr + zrr)) / (2.0 * half_width)
-    return pitch, grade
+    along = (0.5 * (zfl + zfr) - 0.5 * (zrl + zrr)) / (2.0 * half_length)
+    across = (0.5 * (zfl + zrl) - 0.5 * (zfr + zrr)) / (2.0 * half_width)
+    return along, across
 
 
 @njit(cache=True, error_model="numpy")
 def pitch_roll_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
     """Pitch and roll [rad] of a vehicle centred at (x, y) heading yaw
-    (:func:`pitch_cross_grade_at`). Pitch is positive nose up, roll positive when the
-    left side is higher (right-hand rotation about the heading)."""
-    pitch, grade = pitch_cross_grade_at(H, res, ox, oy, x, y, yaw, half_length, half_width)
-    return pitch, math.atan(grade)
+    (:func:`slope_grades_at`). Pitch is positive nose up, roll positive when the left
+    side is higher (right-hand rotation about the heading)."""
+    along, across = slope_grades_at(H, res, ox, oy, x, y, yaw, half_length, half_width)
+    return math.atan(along), math.atan(across)
 
 
 @njit(cache=True, error_model="numpy")

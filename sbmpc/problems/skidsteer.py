@@ -6,8 +6,8 @@ for the grid, the wrapped heading and the speed at the end of the edge. So a chi
 carries its speed and controller state: the entry speed into a hill matters.
 
 An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period,
-stepping ``dynamics.kernels.step`` every ``dt`` with the pitch under the vehicle from
-``maps.pitch_cross_grade_at`` and the terrain under its centre from the map's terrain layer.
+stepping ``dynamics.kernels.step_slope`` every ``dt`` with the slope under the vehicle from
+``maps.slope_grades_at`` and the terrain under its centre from the map's terrain layer.
 It is invalid (codes below) when the vehicle leaves the map, pitches or rolls beyond the
 tip-over limit, or stalls (drive saturated, commanded motion not achieved for
 ``STALL_TIME``). An edge that enters the goal disc ends there, so the last control of a
@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit, prange
 
 from dynamics import kernels as K
-from maps.grid import cell_value, height_at, pitch_cross_grade_at, pitch_roll_at
+from maps.grid import cell_value, height_at, pitch_roll_at, slope_grades_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
 
@@ -84,7 +84,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     offt = int(params[Q_OFFT])
     block = int(params[Q_BLOCK])
     tip = params[Q_TIP]
-    tan_tip = math.tan(tip)         # the roll limit as a cross grade (no arctangent per step)
+    tan_tip = math.tan(tip)         # the tip-over limit as a grade (no arctangent per step)
     margin = params[Q_MARGIN]
     x_lo = ox + margin
     y_lo = oy + margin
@@ -107,8 +107,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         if x < x_lo or x > x_hi or y < y_lo or y > y_hi:
             end = -OFF_MAP
             break
-        pitch, grade = pitch_cross_grade_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
-        if abs(pitch) > tip or abs(grade) > tan_tip:
+        along, across = slope_grades_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
+        if abs(along) > tan_tip or abs(across) > tan_tip:
             end = -TIP
             break
         if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:
@@ -123,11 +123,12 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
                 Pk = data[a:a + K.NP]
                 Tk = data[a + K.NP:a + block]
                 kp = k
-        K.step(Pk, Tk, S, cmd_l, cmd_r, pitch, dt, False, O)
+        cp = 1.0 / math.sqrt(1.0 + along * along)     # the pitch's cosine and sine
+        K.step_slope(Pk, Tk, S, cmd_l, cmd_r, along * cp, cp, dt, False, O)
         stepped = True
         if record and rows < rec.shape[0]:
             S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
-            K.record(S, O, pitch, rec[rows])
+            K.record(S, O, math.atan(along), rec[rows])
             rows += 1
         if S[K.S_STALLED] > 0.0:
             end = -STALL
