@@ -355,7 +355,10 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
 def _threads(ps):
     """Threads for the search's edges: the scenario's, or with 0 "auto" (every core numba
     uses, unless measurements during the search find the serial expander faster: cores
-    busy with other work)."""
+    busy with other work). On the GPU, 1: the edges run there, and measuring the serial
+    CPU expander against it would hand it a dozen whole batches."""
+    if on_gpu(ps):
+        return 1
     if ps.threads:
         return ps.threads
     import numba

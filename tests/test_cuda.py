@@ -2,7 +2,7 @@
 numba's CUDA simulator (a subprocess with NUMBA_ENABLE_CUDASIM=1, where the same kernel
 source is run by Python threads) and must give the CPU's edges bit for bit and the CPU's
 plan; without a GPU, asking for one gives a one-line note and the CPU plan.
-``bench/cuda_compile.py`` compiles the kernel for sm_90 where a CUDA toolkit is
+``python bench/bench_gpu.py --compile-only`` compiles the kernel for sm_90 where a CUDA toolkit is
 installed."""
 import os
 import subprocess
@@ -22,7 +22,14 @@ import numpy as np
 from dataclasses import replace
 from sbmpc import plan as PL, scenario as SC, world as WO
 from sbmpc.problems import skidsteer as SS
+from sbmpc.problems import skidsteer_cuda as SCU
 from sbmpc.problems.skidsteer_cuda import CudaEdges
+made = []
+class Counted(CudaEdges):                 # every CudaEdges a plan makes, for its counters
+    def __init__(self, *a, **kw):
+        super().__init__(*a, **kw)
+        made.append(self)
+SCU.CudaEdges = Counted
 scn = SC.load("scenarios/hill_tradeoff.yaml")
 prob = PL.problem(WO.resolve(scn), "energy")
 k, nb = 3, 8
@@ -38,6 +45,10 @@ edges(prob.params, prob.data, parents, owner, controls, *gpu)
 SS.expand_batch(prob.params, prob.data, parents, owner, controls, *cpu)
 assert edges.launches == 1 and edges.edges == k * nb
 assert np.array_equal(gpu[0], cpu[0]) and np.array_equal(gpu[1], cpu[1])
+by_control = (np.zeros((k * nb, prob.start.size)), np.zeros(k * nb))
+CudaEdges(prob.params, prob.data, by_control=True, threads=8)(prob.params, prob.data, parents, owner, controls,
+                                                               *by_control)
+assert np.array_equal(by_control[0], cpu[0]) and np.array_equal(by_control[1], cpu[1])
 assert (cpu[1] > 0).sum() >= k * nb // 2, cpu[1]
 flat = SC.load("scenarios/flat.yaml")
 plans = {d: PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, device=d, batch=4))), "time")
@@ -45,6 +56,8 @@ plans = {d: PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, devic
 assert PL.device_note(replace(flat.planner, device="cuda")) is None
 assert plans["cuda"].found and plans["cuda"].controls == plans["cpu"].controls
 assert plans["cuda"].nodes_expanded == plans["cpu"].nodes_expanded
+# every edge of the cuda plan ran on the "GPU" (no CPU expander timed against it)
+assert sum(e.edges for e in made) == plans["cuda"].edges_simulated, ([e.edges for e in made], plans["cuda"].edges_simulated)
 print("OK", plans["cuda"].nodes_expanded)
 """
 

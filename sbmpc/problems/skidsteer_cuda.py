@@ -19,15 +19,20 @@ CUDA toolkit is installed (``tests/test_cuda.py``).
 from __future__ import annotations
 
 import functools
+import time
 
 import numpy as np
-from numba import cuda
+
+if not hasattr(np, "row_stack"):    # numba-cuda 0.30 registers np.row_stack, which NumPy 2.5 removed
+    np.row_stack = np.vstack
+from numba import cuda  # noqa: E402
 
 from dynamics import kernels as K
 
 from . import skidsteer as SS
 
 THREADS_PER_BLOCK = 128
+BY_CONTROL = False     # CudaEdges' default thread order (by control was slower on an H200: bench_gpu)
 
 
 def _simulated(fn):
@@ -69,9 +74,10 @@ def unavailable() -> str | None:
 def kernel():
     """The edge kernel (compiled for the GPU on its first launch)."""
     @cuda.jit
-    def edges(params, data, parents, owner, controls, children, costs):
-        e = cuda.grid(1)
-        if e < owner.shape[0]:
+    def edges(params, data, parents, owner, controls, order, children, costs):
+        t = cuda.grid(1)
+        if t < owner.shape[0]:
+            e = order[t]                       # thread t runs edge order[t]
             O = cuda.local.array(NO, np.float64)
             rec = cuda.local.array((1, NR), np.float64)
             # rows = 1 = rec's length: nothing is recorded
@@ -81,15 +87,25 @@ def kernel():
 
 class CudaEdges:
     """``Problem.expand_batch`` on the GPU for one problem's ``params`` and ``data``
-    (copied to the device once)."""
+    (copied to the device once).
 
-    def __init__(self, params: np.ndarray, data: np.ndarray):
+    ``by_control``: hand neighbouring threads the edges of one control (from different
+    nodes) rather than one node's different controls. The 32 threads of a warp run in
+    lockstep and wait for each other's branches (Newton iterations, split steps, a
+    stall), and edges under one command take more alike paths. ``threads``: threads per
+    block. The children and costs are the same either way."""
+
+    def __init__(self, params: np.ndarray, data: np.ndarray, by_control: bool | None = None,
+                 threads: int | None = None):
+        self.by_control = BY_CONTROL if by_control is None else by_control
+        self.threads = threads or THREADS_PER_BLOCK
         self.params = params
         self.data = data
         self.d_params = cuda.to_device(params)
         self.d_data = cuda.to_device(data)
         self.launches = 0
         self.edges = 0
+        self.seconds = 0.0          # wall time inside calls: copies in, kernel, copies out
 
     def __call__(self, params, data, parents, owner, controls, children, costs):
         if params is not self.params or data is not self.data:
@@ -97,14 +113,18 @@ class CudaEdges:
         n = owner.shape[0]
         if n == 0:
             return
+        t0 = time.perf_counter()
         d_par = cuda.to_device(np.ascontiguousarray(parents))
         d_own = cuda.to_device(np.ascontiguousarray(owner))
         d_ctl = cuda.to_device(np.ascontiguousarray(controls))
+        order = (np.lexsort((controls[:, 1], controls[:, 0])) if self.by_control else np.arange(n)).astype(np.int64)
+        d_ord = cuda.to_device(order)
         d_ch = cuda.device_array(children.shape, np.float64)
         d_co = cuda.device_array(n, np.float64)
-        blocks = (n + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-        kernel()[blocks, THREADS_PER_BLOCK](self.d_params, self.d_data, d_par, d_own, d_ctl, d_ch, d_co)
+        blocks = (n + self.threads - 1) // self.threads
+        kernel()[blocks, self.threads](self.d_params, self.d_data, d_par, d_own, d_ctl, d_ord, d_ch, d_co)
         children[:] = d_ch.copy_to_host()
         costs[:] = d_co.copy_to_host()
         self.launches += 1
         self.edges += n
+        self.seconds += time.perf_counter() - t0
