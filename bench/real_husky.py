@@ -11,7 +11,10 @@ current); fit mu_roll, mu_sa and mu_op of eq. 22 (:func:`dynamics.identify.fit_f
 on |tau|: the currents carry no sign) on the first 70 % of the files; score the fitted
 terrain and the nearest shipped terrain on the other 30 %. Writes bench/results/husky.json.
 
-    python bench/real_husky.py
+    python bench/real_husky.py [--data DIR]
+
+``--data``: the folder holding BorealTC's terrain folders (ASPHALT, FLOORING, ...;
+default ../shared/data/real/borealtc beside the repository).
 """
 from __future__ import annotations
 
@@ -23,8 +26,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "real" / "borealtc"
-NOMINAL = {"ASPHALT": "asphalt", "FLOORING": "vinyl", "MIXED": "packed_dirt", "SANDY_LOAM": "grass",
-           "ICE": "vinyl", "SNOW": "grass"}      # nearest shipped terrain (none is icy or snowy)
+from sbmpc.realdata import BOREALTC_TERRAINS as NOMINAL  # noqa: E402  (nearest shipped terrain)
 NO_LOAD_CURRENT = 1.35    # A, dataset code
 TRAIN_FRACTION = 0.7
 
@@ -49,16 +51,20 @@ def rmse(vehicle, terrain, s) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
 
-def main() -> int:
-    if not DATA.is_dir():
-        print(f"real_husky: expected the BorealTC folders in {DATA}, found none", file=sys.stderr)
+def main(argv=None) -> int:
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=DATA, help="folder of BorealTC's terrain folders")
+    args = ap.parse_args(argv)
+    if not args.data.is_dir():
+        print(f"real_husky: expected the BorealTC folders in {args.data}, found none", file=sys.stderr)
         return 2
     from dynamics import load_terrain, load_vehicle
     from dynamics.identify import fit_friction
     v = load_vehicle("husky")
     out = {}
     for name, nominal in NOMINAL.items():
-        folder = DATA / name
+        folder = args.data / name
         files = sorted(p.name for p in folder.glob("*.csv"))
         if len(files) < 2:
             # one long file: split it by time instead of by file

@@ -8,7 +8,10 @@ alpha (eq. 1) from the ICP pose on the same part; then diagnose on the calibrate
 vehicle and terrain: every candidate extension fitted on the same 70 % and scored on the
 held-out last 30 %. Writes bench/results/warthog.json and docs/warthog.png.
 
-    python bench/real_warthog.py [--terrains asphalt gravel sand]
+    python bench/real_warthog.py [--terrains asphalt gravel sand] [--data DIR]
+
+``--data``: the folder holding ``drive_warthog_<terrain>_windows.csv`` (default
+../shared/data/real/drive beside the repository).
 """
 from __future__ import annotations
 
@@ -29,9 +32,10 @@ FIELDS = {"torque_constant": (2.0, 8.0), "current_limit": (2.0, 80.0), "ref_acce
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--terrains", nargs="*", default=list(TERRAIN))
+    ap.add_argument("--data", type=Path, default=DATA, help="folder of the DRIVE windows CSVs")
     args = ap.parse_args(argv)
-    if not DATA.is_dir():
-        print(f"real_warthog: expected the DRIVE CSVs in {DATA}, found none", file=sys.stderr)
+    if not args.data.is_dir():
+        print(f"real_warthog: expected the DRIVE CSVs in {args.data}, found none", file=sys.stderr)
         return 2
     from dynamics import load_terrain, load_vehicle
     from dynamics.discrepancy import calibrate, channels, diagnose, noise_scale, pose_error, replay
@@ -41,7 +45,7 @@ def main(argv=None) -> int:
     figs = []
     for name in args.terrains:
         t0 = time.perf_counter()
-        run = read_drive_windows(DATA / f"drive_warthog_{name}_windows.csv", name)
+        run = read_drive_windows(args.data / f"drive_warthog_{name}_windows.csv", name)
         v0, ter = load_vehicle("warthog"), load_terrain(TERRAIN[name])
         t = run.t
         train = t < t[0] + 0.7 * (t[-1] - t[0])

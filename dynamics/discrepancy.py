@@ -136,6 +136,7 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
     out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw")}
     pose = all(c in run for c in ("x", "y", "yaw"))
     t_all = run.t
+    noise = (noise_scale(run["wl"]), noise_scale(run["wr"]))
     for a, b in run.segments():
         t = t_all[a:b]
         cl = _ffill(run["wl_cmd"][a:b])
@@ -145,6 +146,7 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
         j = np.clip(np.searchsorted(t, tk + 1e-9, side="right") - 1, 0, len(t) - 1)
         w0l = run["wl"][a] if np.isfinite(run["wl"][a]) else cl[0]
         w0r = run["wr"][a] if np.isfinite(run["wr"][a]) else cr[0]
+        w0l, w0r = start_speeds(float(w0l), float(w0r), *noise)
         p0 = [float(run[c][a]) if pose and np.isfinite(run[c][a]) else 0.0 for c in ("x", "y", "yaw")]
         S = model.state(float(w0l), float(w0r), pitch, p0[0], p0[1], p0[2])
         tr = simulate(model, cl[j], cr[j], state=S, pitch=pitch, record_dt=dt, dt=dt)
@@ -152,6 +154,21 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
         for c in out:
             out[c][a:b] = np.interp(t, ts, tr.data[c])
     return out
+
+
+def start_speeds(wl: float, wr: float, noise_l: float, noise_r: float) -> tuple:
+    """The wheel speeds [rad/s] a segment's replay starts from, in steady state (``Model.state``),
+    given the first measured ones and the sensors' noise [rad/s]. A difference between
+    the wheels within twice its noise is taken as none, and speeds within twice their
+    noise of zero as rest: a steady turn holds the full sliding turning resistance in the
+    PID integrals at any yaw rate (eq. 28's friction does not fade with the rate), so a
+    noise-sized difference would start a straight run in a turn that the PID takes
+    seconds to unwind (a clean 2 s run from rest was named turning_friction)."""
+    if abs(wl - wr) < 2.0 * math.hypot(noise_l, noise_r):
+        wl = wr = 0.5 * (wl + wr)
+    if abs(wl) < 2.0 * noise_l and abs(wr) < 2.0 * noise_r:
+        wl = wr = 0.0
+    return wl, wr
 
 
 def _ffill(x: np.ndarray) -> np.ndarray:
@@ -382,7 +399,8 @@ def _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, ba
     pose_gain = max(g_rot, g_tr) if min(g_rot, g_tr) >= -0.1 else min(g_rot, g_tr)
     err = _error(run, pred, chans, scales, held)
     params = {n: float(a) for n, a in zip(names, x)}
-    return Candidate("wheel_radius", params, {n: float(a) for n, a in zip(names, se)}, err, 1.0 - err / base_err,
+    gain = _gain(err, base_err)
+    return Candidate("wheel_radius", params, {n: float(a) for n, a in zip(names, se)}, err, gain,
                      _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
                      ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound("wheel_radius", params),
                      "pose", float(pose_gain))
@@ -554,6 +572,12 @@ def _decides(c: Candidate) -> str | None:
     return None
 
 
+def _gain(err: float, base_err: float) -> float:
+    """The fraction of the baseline's error a candidate removes (0 where the baseline's
+    error is 0: a run with nothing to explain, say every signal zero)."""
+    return 1.0 - err / base_err if base_err > 0 else 0.0
+
+
 def _pick(cands: list) -> tuple:
     """(best candidate, what it was decided on or None): the largest held-out gain among
     those decided on the held-out part, else the strongest training evidence among those
@@ -596,14 +620,14 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         err = _error(run, pred, chans, scales, held)
         r_train = _residuals(run, pred, chans, scales, train)
         params = {n: float(a) for n, a in zip(names, x)}
-        gain = 1.0 - err / base_err
+        gain = _gain(err, base_err)
         cands.append(Candidate(eff, params, {n: float(s) for n, s in zip(names, se)},
                                err, gain, _bic(r_train, len(names)) - bic0,
                                ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound(eff, params),
                                evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
                                reach=_error(base, pred, chans, scales, held),
                                train_evidence=heldout_evidence(run, pred, chans, scales, train,
-                                                               1.0 - _error(run, pred, chans, scales, train) / base_train,
+                                                               _gain(_error(run, pred, chans, scales, train), base_train),
                                                                len(names))))
     cands.sort(key=lambda c: -c.gain)
     best, decided = _pick(cands)

@@ -10,8 +10,9 @@
 * BorealTC (github.com/norlab-ulaval/BorealTC, CC0): Clearpath Husky A200 on six
   terrains, files ``pro_XX.csv`` with ``time, curL, curR, velL, velR``: motor currents
   [A, unsigned] and wheel linear speeds [m/s, quantised to 1/127 m/s] at about 6.5 Hz;
-  no commands and no pose, so no replay: :func:`read_borealtc` and
-  :func:`steady_samples` feed the eq. 28 identification of the terrain's friction.
+  no commands and no pose: :func:`read_borealtc` and :func:`steady_samples` feed the
+  eq. 28 identification of the terrain's friction; :func:`read_borealtc_run` makes a
+  run of it for ``sbmpc diagnose``, the measured speeds standing in for the commands.
 """
 from __future__ import annotations
 
@@ -94,6 +95,33 @@ def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) ->
         raise RunError(f"{path}: expected the BorealTC columns {', '.join(need)}, found no {', '.join(missing)}")
     return {"t": d["time"], "wl": d["velL"] / wheel_radius, "wr": d["velR"] / wheel_radius,
             "i_l": d["curL"], "i_r": d["curR"]}
+
+
+# BorealTC's terrain folders and the nearest shipped terrain (none is icy or snowy)
+BOREALTC_TERRAINS = {"ASPHALT": "asphalt", "FLOORING": "vinyl", "MIXED": "packed_dirt", "SANDY_LOAM": "grass",
+                     "ICE": "vinyl", "SNOW": "grass"}
+
+
+def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
+    """A BorealTC ``pro_XX.csv`` as a run for ``sbmpc diagnose``: t, wl, wr [rad/s],
+    i_l, i_r [A], and wl_cmd, wr_cmd. The dataset logs no commands: the measured wheel
+    speeds stand in for them, so what the replay tests is the current it takes to
+    follow them (the terrain's resistance, the motor), not the speed loop (a command
+    delay or lag cannot be seen). The logged currents are magnitudes: they are given
+    the sign of their wheel's direction of travel (a braking wheel's current comes out
+    with the wrong sign; the runs are on level ground)."""
+    rec = read_borealtc(path)
+    t = rec["t"]
+    if t.size < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise RunError(f"{path}, column time: expected finite, strictly increasing times, found "
+                       + ("fewer than 2 rows" if t.size < 2 else "times that do not increase"))
+    wl, wr = rec["wl"], rec["wr"]
+    cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
+            "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}
+    meta = {"vehicle": "husky", "terrain": terrain, "slope_deg": "0",
+            "note": f"BorealTC Husky {Path(path).parent.name}/{Path(path).name}: no commands logged (the measured "
+                    "wheel speeds stand in for them), currents signed by the direction of travel"}
+    return Run(cols, meta, str(path))
 
 
 def steady_samples(rec: dict, hold_s: float = 1.0, tol: float = 1.5 * BOREALTC_QUANTUM / HUSKY_WHEEL_RADIUS) -> dict:

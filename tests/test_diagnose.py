@@ -89,7 +89,9 @@ def test_the_hidden_effect_is_named_and_its_parameter_recovered(effect, seed):
         assert fitted[name] == pytest.approx(hidden[name], abs=tol), (name, fitted, hidden)
     # the extended model explains the held-out part within about the noise
     assert d.candidates[0].heldout_error < 1.3
-    assert d.candidates[0].whiteness_q < d.baseline_whiteness_q
+    # and its wheel-speed residuals are white (Ljung-Box Q of 20 lags under the chi-square
+    # 99 % point, 37.6), or whiter than the baseline's when those were not
+    assert d.candidates[0].whiteness_q < max(d.baseline_whiteness_q, 37.6)
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23])
@@ -99,6 +101,27 @@ def test_no_false_alarm_on_runs_without_an_effect(seed):
     assert d.cause == "none"
     assert d.baseline_error < 1.3
     assert max(c.gain for c in d.candidates) < 0.5 * MARGIN
+
+
+@pytest.mark.parametrize("seed, duration", [(0, 1.0), (0, 2.0), (21, 1.5)])
+def test_a_short_clean_run_from_rest_is_none(seed, duration):
+    """The replay starts from the first measured wheel speeds in steady state; from rest
+    their noise made a difference of a few hundredths of a rad/s, a steady turn whose
+    full turning resistance the PID integrals then held for seconds: clean runs of 1-2 s
+    were named turning_friction (gains 0.5-0.8)."""
+    run, _ = synth_run("none", seed, duration=duration)
+    d = diagnose(run, P3AT, VINYL)
+    assert d.cause == "none", (d.cause, max(c.gain for c in d.candidates))
+
+
+def test_start_speeds_drop_noise_sized_turns_and_keep_real_ones():
+    from dynamics.discrepancy import start_speeds
+    assert start_speeds(0.061, 0.053, 0.05, 0.05) == (0.0, 0.0)          # rest, within noise
+    assert start_speeds(2.03, 1.97, 0.05, 0.05) == (2.0, 2.0)            # straight, within noise
+    assert start_speeds(2.5, 1.5, 0.05, 0.05) == (2.5, 1.5)              # a real turn
+    assert start_speeds(-0.5, 0.5, 0.05, 0.05) == (-0.5, 0.5)            # a pivot
+    assert start_speeds(0.10, 0.16, 0.01, 0.01) == (0.10, 0.16)          # slow, a turn above the noise
+    assert start_speeds(0.12, 0.13, 0.01, 0.01) == (0.125, 0.125)        # slow, straight within the noise
 
 
 def test_effect_strengths_cover_the_vocabulary():

@@ -73,42 +73,6 @@ def test_borealtc_eq28_friction_ranks_the_terrains_and_beats_the_nominal_on_held
     assert mu["ICE"] < 0.5 * mu["FLOORING"]
 
 
-def _drive_like(path, windows=6, jump_at=3):
-    """A DRIVE-format windows CSV (20 Hz, 40 samples a window, pose relative to each
-    window's start) of a vehicle driving straight at 1 m/s, with a wheel-speed jump
-    across the boundary into window ``jump_at``."""
-    import numpy as np
-    rows = []
-    for w in range(windows):
-        for k in range(40):
-            t = 0.05 * k
-            wl = wr = 3.0 + (4.0 if w >= jump_at else 0.0)
-            rows.append([w, w // 2, 1, k, t, wl, wr, wl, wr, t * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    head = ("window,calib_step,steady,k,t,cmd_left,cmd_right,left_wheel_vel,right_wheel_vel,"
-            "icp_x,icp_y,icp_z,icp_roll,icp_pitch,icp_yaw,imu_yaw")
-    path.write_text(head + "\n" + "\n".join(",".join(f"{v:g}" for v in r) for r in rows) + "\n")
-    return path
-
-
-def test_import_drive_writes_a_run_csv_that_diagnose_reads(tmp_path, capsys):
-    from dynamics.runs import read_run
-    from sbmpc.commands.cli import main
-    src = _drive_like(tmp_path / "drive_warthog_gravel_windows.csv")
-    before = src.read_bytes()
-    assert main(["import", "drive", str(src), "--out", str(tmp_path / "run.csv")]) == 0
-    assert "terrain packed_dirt" in capsys.readouterr().out
-    run = read_run(tmp_path / "run.csv")
-    assert run.meta["vehicle"] == "warthog" and run.meta["terrain"] == "packed_dirt" and "gravel" in run.meta["note"]
-    assert len(run) == 240 and len(run.segments()) == 2            # the jump breaks the timeline once
-    assert abs(run["x"][-1] - (6 * 1.95)) < 1e-6                    # the windows' poses chained
-    assert src.read_bytes() == before
-    assert main(["import", "drive", str(src), "--out", str(src)]) == 2
-    assert "is an input" in capsys.readouterr().err
-    odd = _drive_like(tmp_path / "mystery.csv")
-    assert main(["import", "drive", str(odd), "--out", str(tmp_path / "r2.csv")]) == 2
-    assert "--terrain: expected the run's terrain" in capsys.readouterr().err
-
-
 def test_import_drive_on_the_real_asphalt_run():
     from pathlib import Path
     from dynamics.runs import read_run
@@ -122,3 +86,17 @@ def test_import_drive_on_the_real_asphalt_run():
         assert main(["import", "drive", str(src), "--out", str(out)]) == 0
         run = read_run(out)
         assert len(run) == 12000 and run.meta["terrain"] == "asphalt"
+
+
+def test_import_borealtc_on_a_real_asphalt_file(tmp_path, capsys):
+    from dynamics.runs import read_run
+    from sbmpc.commands.cli import main
+    src = DRIVE.parent / "borealtc" / "ASPHALT" / "pro_00.csv"
+    if not src.is_file():
+        pytest.skip("the BorealTC runs are not beside the repository")
+    out = tmp_path / "asphalt.csv"
+    assert main(["import", "borealtc", str(src), "--out", str(out)]) == 0
+    run = read_run(out)
+    assert len(run) == 338 and run.meta["terrain"] == "asphalt" and run.meta["vehicle"] == "husky"
+    assert main(["diagnose", str(out)]) == 0
+    assert "cause:" in capsys.readouterr().out

@@ -213,19 +213,23 @@ def test_hostile_runs_end_in_one_line_before_any_work(work, capsys, name, kw, sa
 
 
 def test_awkward_but_valid_runs_are_diagnosed(work, capsys):
-    """A byte-order mark (spreadsheets), the least run (50 rows), all-zero signals and a
-    segment column with gaps: diagnosed, exit 0, no traceback."""
+    """A byte-order mark (spreadsheets), the least run (50 rows), all-zero wheel signals,
+    every signal zero (nothing to explain: the baseline's error is 0) and a segment column
+    with gaps: diagnosed, exit 0, no traceback."""
     bom = work / "bom.csv"
     bom.write_bytes(b"\xef\xbb\xbf" + (work / "r.csv").read_bytes())
     short = _run_variant(work, "short", edit_rows=lambda c, r: r[:50])
     zeros = _run_variant(work, "zeros", edit_rows=lambda c, r: _set("wl", lambda k: "0")(c, _set("wr", lambda k: "0")(
         c, _set("wl_cmd", lambda k: "0")(c, _set("wr_cmd", lambda k: "0")(c, r)))))
+    allzero = _run_variant(work, "allzero", edit_rows=lambda c, r: [[x[0]] + ["0"] * (len(x) - 1) for x in r])
     gaps = _run_variant(work, "gaps", edit_rows=lambda c, r: [x + ["" if k % 7 else "1"] for k, x in enumerate(r)],
                         header_extra=",segment")
-    for path in (bom, short, zeros, gaps):
+    for path in (bom, short, zeros, allzero, gaps):
         rc = main(["diagnose", str(path)])
         out = capsys.readouterr()
         assert rc == 0 and "Traceback" not in out.err, (path.name, out.err)
+        if path is allzero:
+            assert "cause: none" in out.out, out.out
     from dynamics.runs import read_run
     assert len(read_run(gaps).segments()) == 1           # gaps in the column continue the segment
 

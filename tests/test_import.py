@@ -1,0 +1,94 @@
+"""`sbmpc import drive|borealtc` on small files in each dataset's format, made here (the
+real runs are never copied into the repository; tests/test_realdata.py uses them when
+they are beside it)."""
+import numpy as np
+
+from dynamics.runs import read_run
+from sbmpc.commands.cli import main
+
+
+def _drive_like(path, windows=6, jump_at=3):
+    """A DRIVE-format windows CSV (20 Hz, 40 samples a window, pose relative to each
+    window's start) of a vehicle driving straight at 1 m/s, with a wheel-speed jump
+    across the boundary into window ``jump_at``."""
+    import numpy as np
+    rows = []
+    for w in range(windows):
+        for k in range(40):
+            t = 0.05 * k
+            wl = wr = 3.0 + (4.0 if w >= jump_at else 0.0)
+            rows.append([w, w // 2, 1, k, t, wl, wr, wl, wr, t * 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    head = ("window,calib_step,steady,k,t,cmd_left,cmd_right,left_wheel_vel,right_wheel_vel,"
+            "icp_x,icp_y,icp_z,icp_roll,icp_pitch,icp_yaw,imu_yaw")
+    path.write_text(head + "\n" + "\n".join(",".join(f"{v:g}" for v in r) for r in rows) + "\n")
+    return path
+
+
+def test_import_drive_writes_a_run_csv_that_diagnose_reads(tmp_path, capsys):
+    from dynamics.runs import read_run
+    from sbmpc.commands.cli import main
+    src = _drive_like(tmp_path / "drive_warthog_gravel_windows.csv")
+    before = src.read_bytes()
+    assert main(["import", "drive", str(src), "--out", str(tmp_path / "run.csv")]) == 0
+    assert "terrain packed_dirt" in capsys.readouterr().out
+    run = read_run(tmp_path / "run.csv")
+    assert run.meta["vehicle"] == "warthog" and run.meta["terrain"] == "packed_dirt" and "gravel" in run.meta["note"]
+    assert len(run) == 240 and len(run.segments()) == 2            # the jump breaks the timeline once
+    assert abs(run["x"][-1] - (6 * 1.95)) < 1e-6                    # the windows' poses chained
+    assert src.read_bytes() == before
+    assert main(["import", "drive", str(src), "--out", str(src)]) == 2
+    assert "is an input" in capsys.readouterr().err
+    odd = _drive_like(tmp_path / "mystery.csv")
+    assert main(["import", "drive", str(odd), "--out", str(tmp_path / "r2.csv")]) == 2
+    assert "--terrain: expected the run's terrain" in capsys.readouterr().err
+
+
+def _borealtc_like(path, n=200, rate=6.5):
+    """A BorealTC-format pro_XX.csv: a Husky driving forward, then backward, then turning
+    on the spot, at the dataset's 6.5 Hz with its 1/127 m/s speed quantum and unsigned
+    currents."""
+    t = np.arange(n) / rate
+    third = n // 3
+    v_l = np.r_[np.full(third, 0.5), np.full(third, -0.4), np.full(n - 2 * third, 0.3)]
+    v_r = np.r_[np.full(third, 0.5), np.full(third, -0.4), np.full(n - 2 * third, -0.3)]
+    v_l, v_r = np.round(v_l * 127) / 127, np.round(v_r * 127) / 127
+    cur = np.r_[np.full(third, 4.0), np.full(third, 3.0), np.full(n - 2 * third, 12.0)]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rows = [f"{a:.9g},{c:g},{c:g},{l:.9g},{r:.9g}" for a, c, l, r in zip(t, cur, v_l, v_r)]
+    path.write_text("time,curL,curR,velL,velR\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_import_borealtc_writes_a_signed_run_that_diagnose_reads(tmp_path, capsys):
+    src = _borealtc_like(tmp_path / "SANDY_LOAM" / "pro_03.csv")
+    before = src.read_bytes()
+    out = tmp_path / "run.csv"
+    assert main(["import", "borealtc", str(src), "--out", str(out)]) == 0
+    assert "terrain grass" in capsys.readouterr().out                  # SANDY_LOAM's nearest shipped terrain
+    run = read_run(out)
+    assert src.read_bytes() == before
+    assert run.meta["vehicle"] == "husky" and run.meta["terrain"] == "grass" and "SANDY_LOAM" in run.meta["note"]
+    assert len(run) == 200 and len(run.segments()) == 1
+    assert np.allclose(run["wl"][:10], np.round(0.5 * 127) / 127 / 0.13, atol=1e-5)   # m/s over the 0.13 m radius
+    assert np.array_equal(run["wl_cmd"], run["wl"]) and np.array_equal(run["wr_cmd"], run["wr"])
+    # currents take the sign of their wheel's travel: forward +, backward -, the pivot's two wheels apart
+    assert np.all(run["i_l"][:66] > 0) and np.all(run["i_l"][66:132] < 0)
+    assert np.all(run["i_l"][140:] > 0) and np.all(run["i_r"][140:] < 0)
+    rc = main(["diagnose", str(out)])
+    assert rc == 0 and "cause:" in capsys.readouterr().out
+
+
+def test_import_borealtc_names_what_is_wrong(tmp_path, capsys):
+    odd = _borealtc_like(tmp_path / "somewhere" / "pro_00.csv")
+    assert main(["import", "borealtc", str(odd), "--out", str(tmp_path / "r.csv")]) == 2
+    assert "--terrain: expected the run's terrain (the folder name 'somewhere'" in capsys.readouterr().err
+    assert main(["import", "borealtc", str(odd), "--terrain", "ICE", "--out", str(tmp_path / "r.csv")]) == 0
+    assert read_run(tmp_path / "r.csv").meta["terrain"] == "vinyl"
+    capsys.readouterr()
+    bad = tmp_path / "ASPHALT" / "pro_01.csv"
+    bad.parent.mkdir()
+    bad.write_text("time,curL,velL\n0,1,0.1\n0.15,1,0.1\n")
+    assert main(["import", "borealtc", str(bad), "--out", str(tmp_path / "r2.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "expected the BorealTC columns" in err and "curR" in err and "Traceback" not in err
+    assert not (tmp_path / "r2.csv").exists()
