@@ -39,7 +39,7 @@ TIMER = r'''
 import sys, time, math
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-from sbmpc import plan as PL, scenario as SC
+from sbmpc import problem as PB, scenario as SC
 try:                                   # the layout since the search's refactor
     from sbmpc import world as WO
     from sbmpc.problems import skidsteer as SS
@@ -48,7 +48,7 @@ except ImportError:                    # a baseline from before it (world and pr
     from sbmpc import skidsteer as SS
 from dynamics import kernels as K
 world = WO.resolve(SC.load(sys.argv[2]))
-prob = PL.problem(world, "energy")
+prob = PB.problem(world, "energy")
 rng = np.random.default_rng(0)
 X0 = prob.start
 e = world.emap

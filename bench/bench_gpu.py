@@ -75,7 +75,7 @@ def _save(res: dict, out: Path) -> None:
 def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:
     import numba
     from numba import cuda
-    from sbmpc import plan as PL, scenario as SC_, world as WO
+    from sbmpc import plan as PL, problem as PB, scenario as SC_, world as WO
     from sbmpc.problems import skidsteer as SS
     from sbmpc.problems import skidsteer_cuda as SCU
     why = SCU.unavailable()
@@ -96,7 +96,7 @@ def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:
     SCU.CudaEdges = Counted
 
     world = WO.resolve(SC_.load(ROOT / "scenarios" / "hills_field.yaml"))
-    prob = PL.problem(world, "energy")
+    prob = PB.problem(world, "energy")
     rng = np.random.default_rng(0)
     variants = {"cuda": dict(by_control=False, threads=128), "cuda_by_control": dict(by_control=True, threads=128),
                 "cuda_by_control_t32": dict(by_control=True, threads=32)}

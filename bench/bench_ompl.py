@@ -45,13 +45,13 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
     from ompl import util as ou
 
     from dynamics import kernels as K
-    from sbmpc import plan as PL
+    from sbmpc import check as CK, problem as PB
     from sbmpc import world as WO
     from sbmpc.problems import skidsteer as SS
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(seed)
-    prob = PL.problem(world, cost)
+    prob = PB.problem(world, cost)
     Q, data = prob.params, prob.data
     n = SS.NX
     pose = (K.S_X, K.S_Y, SS.X_YAWW)
@@ -136,7 +136,7 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
         path = ss.getSolutionPath()
         controls = [(path.getControl(i)[0], path.getControl(i)[1], world.scenario.planner.period_s)
                     for i in range(path.getControlCount())]
-        traj, end, S, _ = PL.replay(world, cost, controls)
+        traj, end, S, _ = CK.replay(world, cost, controls)
         res.update(travel_time_s=float(traj["t"][-1]), energy_J=float(traj["energy_J"][-1]), replay_end=end)
     return res
 
@@ -155,7 +155,6 @@ def main(argv=None) -> int:
     from dataclasses import replace
 
     from sbmpc import plan as PL
-
     from sbmpc import world as WO
     from sbmpc import scenario as SC
     PL.plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba

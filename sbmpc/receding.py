@@ -41,6 +41,8 @@ from dynamics import kernels as K
 from dynamics.params import Vehicle
 
 from . import plan as PL
+from . import problem as PB
+from . import trajectory as TR
 
 from . import world as WO
 from .problems import skidsteer as SS
@@ -93,15 +95,15 @@ class RunResult:
 
     @property
     def travel_time_s(self):
-        return PL.trajectory_span(self.trajectory, "t")
+        return TR.trajectory_span(self.trajectory, "t")
 
     @property
     def energy_J(self):
-        return PL.trajectory_span(self.trajectory, "energy_J")
+        return TR.trajectory_span(self.trajectory, "energy_J")
 
     @property
     def length_m(self):
-        return PL.trajectory_length(self.trajectory)
+        return TR.trajectory_length(self.trajectory)
 
     @property
     def predicted(self) -> dict:
@@ -140,7 +142,7 @@ class RunResult:
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
                            "(branch and bound, kept if nothing cheaper is found); the cost-to-go grid is reused"),
             "plans": [r.to_json() for r in self.plans],
-            "trajectory": PL.trajectory_json(self.trajectory),
+            "trajectory": TR.trajectory_json(self.trajectory),
         }
 
 
@@ -159,7 +161,7 @@ class _Executor:
 
     def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0):
         self.dt = 1.0 / world.vehicle.controller_rate
-        self.Q, self.data = PL.pack_world(world, cost, self.dt)
+        self.Q, self.data = PB.pack_world(world, cost, self.dt)
         self.lag = int(round(delay_s / self.dt))
         self.prev = (0.0, 0.0)
 
@@ -197,7 +199,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)           # the measured state
     pieces = []
-    every = max(1, round(PL.RECORD_EVERY / real.dt))
+    every = max(1, round(TR.RECORD_EVERY / real.dt))
     tol_yaw = math.radians(rs.tol_yaw_deg)
     why = "start"
     current, k, P, since = None, 0, None, 0

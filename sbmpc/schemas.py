@@ -73,7 +73,7 @@ def scenario() -> dict:
 
 
 def _trajectory() -> dict:
-    from .plan import TRAJECTORY_KEYS
+    from .trajectory import TRAJECTORY_KEYS
     return _obj({k: {"type": "array", "items": NUM} for k in TRAJECTORY_KEYS},
                 ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"))
 

@@ -175,6 +175,7 @@ def _drawn_worlds(world, rob: dict, task_id: str):
 
 def run_task(task: dict) -> dict:
     """Plan one task (module doc); a row of COLUMNS. Never raises."""
+    from . import check as CK
     from . import plan as PL
     from . import scenario as SC
     from . import world as WO
@@ -205,7 +206,7 @@ def run_task(task: dict) -> dict:
                    reached_at_rate=bool(plan.check.reached) if plan.check is not None else None)
         rob = task["robustness"]
         if rob and plan.found:
-            checks = [PL.check(w, cost, plan.controls) for w in _drawn_worlds(world, rob, task["task_id"])]
+            checks = [CK.check(w, cost, plan.controls) for w in _drawn_worlds(world, rob, task["task_id"])]
             stall = [c.reason is not None and "stall" in c.reason for c in checks]
             miss = [not c.reached for c in checks]
             e = np.array([c.energy_J for c in checks if c.reached], float)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from sbmpc import plan as PL, scenario as SC, world as WO
+from sbmpc import plan as PL, problem as PB, scenario as SC, world as WO
 from sbmpc.commands.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SIMULATED = r"""
 import numpy as np
 from dataclasses import replace
-from sbmpc import plan as PL, scenario as SC, world as WO
+from sbmpc import plan as PL, problem as PB, scenario as SC, world as WO
 from sbmpc.problems import skidsteer as SS
 from sbmpc.problems import skidsteer_cuda as SCU
 from sbmpc.problems.skidsteer_cuda import CudaEdges
@@ -31,7 +31,7 @@ class Counted(CudaEdges):                 # every CudaEdges a plan makes, for it
         made.append(self)
 SCU.CudaEdges = Counted
 scn = SC.load("scenarios/hill_tradeoff.yaml")
-prob = PL.problem(WO.resolve(scn), "energy")
+prob = PB.problem(WO.resolve(scn), "energy")
 k, nb = 3, 8
 parents = np.repeat(prob.start[None, :], k, axis=0)
 parents[1, 0] += 4.0          # on the hill's flank
@@ -53,7 +53,7 @@ assert (cpu[1] > 0).sum() >= k * nb // 2, cpu[1]
 flat = SC.load("scenarios/flat.yaml")
 plans = {d: PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, device=d, batch=4))), "time")
          for d in ("cpu", "cuda")}
-assert PL.device_note(replace(flat.planner, device="cuda")) is None
+assert PB.device_note(replace(flat.planner, device="cuda")) is None
 assert plans["cuda"].found and plans["cuda"].controls == plans["cpu"].controls
 assert plans["cuda"].nodes_expanded == plans["cpu"].nodes_expanded
 # every edge of the cuda plan ran on the "GPU" (no CPU expander timed against it)
@@ -75,7 +75,7 @@ def test_asking_for_a_missing_gpu_gives_one_note_and_the_cpu_plan(capsys):
     if unavailable() is None:
         pytest.skip("a GPU is present")
     scn = SC.load(ROOT / "scenarios" / "flat.yaml")
-    note = PL.device_note(replace(scn.planner, device="cuda"))
+    note = PB.device_note(replace(scn.planner, device="cuda"))
     assert note.startswith("device cuda: ") and note.endswith("planning on the CPU") and "\n" not in note
     cpu = PL.plan(WO.resolve(scn), "time")
     gpu = PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, device="cuda"))), "time")

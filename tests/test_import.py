@@ -11,7 +11,6 @@ def _drive_like(path, windows=6, jump_at=3):
     """A DRIVE-format windows CSV (20 Hz, 40 samples a window, pose relative to each
     window's start) of a vehicle driving straight at 1 m/s, with a wheel-speed jump
     across the boundary into window ``jump_at``."""
-    import numpy as np
     rows = []
     for w in range(windows):
         for k in range(40):

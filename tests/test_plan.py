@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dynamics import kernels as K
-from sbmpc import plan as PL
+from sbmpc import check as CK, plan as PL, problem as PB, trajectory as TR
+from sbmpc.problems import skidsteer as SS
 from sbmpc import world as WO
 from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
@@ -38,16 +39,16 @@ def test_plans_replay_at_the_controller_rate_and_end_in_the_goal(plans, name):
     for cost, plan in ps.items():
         assert plan.found, (cost, plan.reason)
         assert plan.check.reached and plan.check.dt == pytest.approx(1.0 / rate)
-        every = round(PL.RECORD_EVERY * rate)
-        traj, end, S, _ = PL.replay(world, cost, plan.controls, every, dt=1.0 / rate)
+        every = round(TR.RECORD_EVERY * rate)
+        traj, end, S, _ = CK.replay(world, cost, plan.controls, every, dt=1.0 / rate)
         for key in ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"):
             np.testing.assert_allclose(traj[key], plan.trajectory[key], atol=1e-9, err_msg=f"{cost} {key}")
         g = world.scenario.goal
         assert math.hypot(S[K.S_X] - g["x"], S[K.S_Y] - g["y"]) <= g["radius"] + plan.check.drift_m + 1e-9
-        assert plan.check.drift_m <= 1.02 * PL.DRIFT_PER_M * plan.length_m + 1e-6   # (length of the 20 Hz samples)
+        assert plan.check.drift_m <= 1.02 * CK.DRIFT_PER_M * plan.length_m + 1e-6   # (length of the 20 Hz samples)
         # every shipped plan enters the disc itself (hills_field's time plan after its last
         # approach was re-planned: it passed 2 cm outside), the drift allowance unused
-        assert plan.check.miss_m == 0.0 and end == PL.SS.IN_GOAL
+        assert plan.check.miss_m == 0.0 and end == SS.IN_GOAL
         assert end >= 0 and S[K.S_STALLED] == 0.0
         # the plan's summary numbers are those of its trajectory and of its check
         assert plan.travel_time_s == pytest.approx(sum(c[2] for c in plan.controls), abs=1e-6)
@@ -95,7 +96,7 @@ def test_steep_hill_every_plan_goes_around(plans):
     top = world.emap.heights.max()
     for plan in ps.values():
         assert max(plan.trajectory["z"]) < 0.6 * top      # around the summit, over the lower flank at most
-    assert ps["time"].invalid_edges.get(PL.SS.CODES[PL.SS.STALL - 1], 0) > 0     # the flanks were tried
+    assert ps["time"].invalid_edges.get(SS.CODES[SS.STALL - 1], 0) > 0     # the flanks were tried
 
 
 def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
@@ -139,10 +140,10 @@ def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
     slow = WO.World(replace(world.scenario, start=dict(world.scenario.start, x=6.5, v=0.7)),
                     world.emap, world.vehicle, world.terrains)
     w_slow = 0.7 / world.vehicle.wheel_radius
-    _, end, S, _ = PL.replay(slow, "time", [(w_slow, w_slow, 20.0)])
-    assert end == -PL.SS.STALL and S[K.S_X] < 9.0
-    _, end, S, _ = PL.replay(world, "time", [(w0, w0, 12.0)])
-    assert end == PL.SS.IN_GOAL
+    _, end, S, _ = CK.replay(slow, "time", [(w_slow, w_slow, 20.0)])
+    assert end == -SS.STALL and S[K.S_X] < 9.0
+    _, end, S, _ = CK.replay(world, "time", [(w0, w0, 12.0)])
+    assert end == SS.IN_GOAL
 
 
 def test_mixed_terrain_energy_keeps_to_the_road(plans):
@@ -240,4 +241,4 @@ def test_auto_threads_give_the_serial_plan():
     scn = SC.load(SCEN / "runup_ramp.yaml")
     plans = [PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, threads=t))), "time") for t in (1, 0)]
     assert plans[0].found and plans[0].controls == plans[1].controls
-    assert PL._threads(replace(scn.planner, threads=0)) in ("auto", 1)
+    assert PB.search_threads(replace(scn.planner, threads=0)) in ("auto", 1)

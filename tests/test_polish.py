@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dynamics import kernels as K
-from sbmpc import plan as PL
+from sbmpc import check as CK, plan as PL, problem as PB
+from sbmpc.problems import skidsteer as SS
 from sbmpc import polish as PO
 from sbmpc import scenario as SC
 from sbmpc import world as WO
@@ -26,13 +27,13 @@ def _world(seed=0, **planner):
 @pytest.fixture(scope="module")
 def flat():
     w = _world()
-    return w, PL.problem(w, "energy")
+    return w, PB.problem(w, "energy")
 
 
 def _replayed_cost(world, cost, controls):
     """Cost of controls replayed by plan.replay at the planner's step (goal entry ends it)."""
-    traj, end, S, used = PL.replay(world, cost, controls)
-    assert end == PL.SS.IN_GOAL and used == len(controls)
+    traj, end, S, used = CK.replay(world, cost, controls)
+    assert end == SS.IN_GOAL and used == len(controls)
     return float(S[K.S_E] if cost == "energy" else S[K.S_T])
 
 
@@ -68,7 +69,7 @@ def test_polish_never_makes_a_plan_dearer(flat, noise, cost):
     """Random detours of the base sequence: the polish ends no dearer than it started, in
     range, and its cost is the independent replay's."""
     world, _ = flat
-    prob = PL.problem(world, cost)
+    prob = PB.problem(world, cost)
     lo, hi = WO.wheel_speed_range(world)
     ctrl = [(wl * (1 + a), wr * (1 + b), d) for (wl, wr, d), (a, b) in zip(BASE, noise + [(0, 0)] * len(BASE))]
     ctrl = [(min(max(wl, lo), hi), min(max(wr, lo), hi), d) for wl, wr, d in ctrl]

@@ -1,7 +1,7 @@
 """Progress lines of long searches: budget fractions, the best plan so far, time left."""
 import pytest
 
-from sbmpc import plan as PL, scenario as SC, world as WO
+from sbmpc import problem as PB, scenario as SC, world as WO
 from sbmpc.commands.plan import Progress
 from sbmpc.search.astar import Search
 
@@ -23,7 +23,7 @@ def test_progress_line_says_budget_share_best_plan_and_time_left():
 @pytest.fixture(scope="module")
 def flat_problem():
     world = WO.resolve(SC.load("scenarios/flat.yaml"))
-    return PL.problem(world, "time")
+    return PB.problem(world, "time")
 
 
 def test_search_reports_the_incumbent_to_a_four_argument_callback(flat_problem):

@@ -95,7 +95,7 @@ def _world(args):
         if len(v) > 2 and not 0.01 <= v[2] <= 1000:
             raise InputError(f"--goal: expected a radius in [0.01, 1000] m, found {v[2]:g}")
         scn = replace(scn, goal=dict(scn.goal, x=v[0], y=v[1], **({"radius": v[2]} if len(v) > 2 else {})))
-    from ..plan import device_note
+    from ..problem import device_note
     note = device_note(scn.planner)
     if note:
         print(f"note: {note}", file=sys.stderr)

@@ -1,0 +1,114 @@
+"""The search problem of a world: the skid-steer's packed parameters and data
+(:mod:`sbmpc.problems.skidsteer`), its control set, grid and weight, and the backend
+its edges run on (the CPU's cores or a GPU)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dynamics import kernels as K
+from dynamics.resistance import friction_table
+
+from .heuristics import _bounds, _lowest_in_disc, cost_to_go
+from .problems import skidsteer as SS
+from .search.astar import Problem
+from .world import FIXED_CONTROLS, World, _start, control_set
+
+SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
+
+
+def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
+    """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost, with
+    the edges integrated at ``dt`` [s] (default the planner's step)."""
+    scn, e, v = world.scenario, world.emap, world.vehicle
+    ps = scn.planner
+    dt = ps.dt if dt is None else dt
+    ny, nx = e.shape
+    blocks = [np.concatenate([K.pack(v, t), friction_table(v, t)]) for t in world.terrains]
+    parts = [e.heights.ravel()]
+    offl = -1
+    if e.terrain_layer is not None and len(world.terrains) > 1:
+        offl = nx * ny
+        parts.append(e.terrain_layer.astype(float).ravel())
+    offt = sum(p.size for p in parts)
+    ctg, slack = cost_to_go(world, cost)
+    offd = offt + sum(b.size for b in blocks)
+    data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
+    Q = np.zeros(SS.NQ)
+    Q[SS.Q_DT] = dt
+    Q[SS.Q_NSTEP] = max(1, round(ps.period_s / dt))
+    Q[SS.Q_GX], Q[SS.Q_GY], Q[SS.Q_GR] = scn.goal["x"], scn.goal["y"], scn.goal["radius"]
+    Q[SS.Q_HL], Q[SS.Q_HW] = world.half_length, world.half_width
+    tip = math.radians(ps.tip_over_deg)
+    Q[SS.Q_TIP] = tip
+    Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
+    Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny
+    Q[SS.Q_COST] = SS.COST_TIME if cost == "time" else SS.COST_ENERGY
+    Q[SS.Q_VBOUND], Q[SS.Q_FROLL], Q[SS.Q_MG] = _bounds(world)
+    Q[SS.Q_MKE] = max(b[K.P_M11] + abs(b[K.P_M12]) for b in blocks)
+    Q[SS.Q_ZG] = _lowest_in_disc(e, scn.goal["x"], scn.goal["y"], scn.goal["radius"])
+    Q[SS.Q_MARGIN] = world.margin
+    Q[SS.Q_OFFL] = offl
+    Q[SS.Q_OFFT] = offt
+    Q[SS.Q_BLOCK] = blocks[0].size
+    Q[SS.Q_OFFD] = offd
+    Q[SS.Q_DSLACK] = slack
+    return Q, data
+
+
+def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float | None = None) -> Problem:
+    """The search problem of a world and cost, from ``start`` (a planner state, default
+    the scenario's start state), its edges integrated at ``dt`` [s] (default the
+    planner's step)."""
+    ps = world.scenario.planner
+    Q, data = pack_world(world, cost, dt)
+    dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
+    res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
+    X0 = _start(world, start)
+    if on_gpu(ps):
+        from .problems.skidsteer_cuda import CudaEdges
+        batch = CudaEdges(Q, data)
+    else:
+        batch = SS.expand_batch
+    return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
+                   dims, res, ps.branching, rotate=ps.samples == "rotating",
+                   fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
+                   weight=ps.weight(cost), refine=ps.refine, expand_batch=batch)
+
+
+GPU_BATCH = 64     # nodes per batch on a GPU (batch 0: auto): 1024 edges at branching 16
+
+
+def device_note(ps) -> str | None:
+    """One line when the scenario asks for the GPU and it cannot be used (the CPU plans
+    instead), else None."""
+    if ps.device != "cuda":
+        return None
+    from .problems.skidsteer_cuda import unavailable
+    why = unavailable()
+    return None if why is None else f"device cuda: {why}; planning on the CPU"
+
+
+def on_gpu(ps) -> bool:
+    """Whether the edges of this planner's searches run on the GPU."""
+    return ps.device == "cuda" and device_note(ps) is None
+
+
+def batch_size(ps) -> int:
+    """Nodes expanded together: the scenario's, or with 0 (auto) 1 on the CPU and
+    GPU_BATCH on a GPU."""
+    return ps.batch or (GPU_BATCH if on_gpu(ps) else 1)
+
+
+def search_threads(ps):
+    """Threads for the search's edges: the scenario's, or with 0 "auto" (every core numba
+    uses, unless measurements during the search find the serial expander faster: cores
+    busy with other work). On the GPU, 1: the edges run there, and measuring the serial
+    CPU expander against it would hand it a dozen whole batches."""
+    if on_gpu(ps):
+        return 1
+    if ps.threads:
+        return ps.threads
+    import numba
+    return "auto" if numba.config.NUMBA_NUM_THREADS > 1 else 1
