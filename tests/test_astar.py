@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 from numba import njit
 from scipy.sparse.csgraph import shortest_path
 
-from sbmpc.search import astar
+from sbmpc.search import cells, counters, heap
 from sbmpc.search.astar import EXPAND, GOAL, HEURISTIC, Problem, search
 
 # ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
@@ -179,17 +179,17 @@ def _table_ids(keys, slots):
     """Node id of each key row through the search's cell table (new keys get the next id)."""
     table = np.empty(2 * slots, np.int64)
     table[:] = -1
-    shift = astar._shift(table)
+    shift = cells._shift(table)
     ids = np.empty(keys.shape[0], np.int64)
     stored = np.empty_like(keys)
     n = 0
     for r in range(keys.shape[0]):
-        code = astar._code(keys[r])
-        slot, j = astar._lookup(table, shift, stored, keys[r], code)
+        code = cells._code(keys[r])
+        slot, j = cells._lookup(table, shift, stored, keys[r], code)
         if j < 0:
             j = n
             stored[n] = keys[r]
-            astar._insert(table, slot, code, j)
+            cells._insert(table, slot, code, j)
             n += 1
         ids[r] = j
     return ids
@@ -209,21 +209,21 @@ def test_cell_table_finds_each_key_again_packed_or_hashed(kd, span, seed):
     np.testing.assert_array_equal(ids, want)
     for k in keys[:50]:
         packed = kd <= 3 and all(-(1 << 20) <= x < 1 << 20 for x in k)
-        assert (astar._code(k) >= 0) == packed
+        assert (cells._code(k) >= 0) == packed
 
 
 @njit(cache=True)
 def _heap_order(f, renumber_at):
     H = np.empty(4 * f.shape[0] + 4, np.int64)
-    cnt = np.zeros(astar.NC, np.int64)
+    cnt = np.zeros(counters.NC, np.int64)
     for i in range(f.shape[0]):
         if i == renumber_at:                  # as if 2^31 entries had been pushed before
-            cnt[astar.C_SEQ] = astar.SEQ_LIMIT - 1
-            astar._renumber(H, cnt)
-        astar._push(H, cnt, f[i], i)
+            cnt[counters.C_SEQ] = heap.SEQ_LIMIT - 1
+            heap._renumber(H, cnt)
+        heap._push(H, cnt, f[i], i)
     out = np.empty(f.shape[0], np.int64)
     for i in range(f.shape[0]):
-        out[i] = astar._pop(H, cnt)
+        out[i] = heap._pop(H, cnt)
     return out
 
 

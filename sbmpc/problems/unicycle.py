@@ -21,7 +21,8 @@ import numpy as np
 from numba import njit
 
 from ..search import lanes
-from ..search.astar import EXPAND, GOAL, HEURISTIC, Problem, cell_index, search
+from ..search.astar import EXPAND, GOAL, HEURISTIC, Problem, search
+from ..search.cells import cell_index
 
 # params: grid resolution (3), goal (3), goal threshold, body radius, border half-size,
 # sub-steps, sub-step dt, obstacle count, reach of an edge (its longest length, plus 10 %

@@ -59,6 +59,11 @@ from numba.core import cgutils
 from numba.core.ccallback import CFunc
 from numba.extending import intrinsic
 
+from .cells import _EMPTY, _code, _insert, _is_key, _lookup, _shift, cell_index, rehash
+from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SEQ, EXHAUSTED,
+                       FOUND, GROW, ITERATIONS, MAX_CODE, NC, RUNNING)
+from .heap import SEQ_LIMIT, _pop, _push, _renumber
+
 # ---- first-class function types of a problem -------------------------------------
 _ARR = types.float64[::1]
 _ARR2 = types.float64[:, ::1]
@@ -66,15 +71,7 @@ EXPAND = types.FunctionType(types.void(_ARR, _ARR, _ARR, _ARR, _ARR2, _ARR2, _AR
 HEURISTIC = types.FunctionType(types.float64(_ARR, _ARR, _ARR))
 GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 
-# ---- status of a chunk -----------------------------------------------------------
-RUNNING, FOUND, EXHAUSTED, ITERATIONS, GROW = 0, 1, 2, 3, 4
-# ---- counters (int64 array) ------------------------------------------------------
-C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST = range(8)
-C_INVALID = 8          # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
-MAX_CODE = 8
-NC = C_INVALID + MAX_CODE + 1
 
-_EMPTY = -1
 
 # explicit signatures: the model functions arrive as addresses (an int64 array, see
 # _addresses), so the compiled search is the same (and cached on disk) whatever the problem
@@ -106,190 +103,6 @@ def _function_value(ftype):
 _expand_fn = _function_value(EXPAND)
 _heuristic_fn = _function_value(HEURISTIC)
 _goal_fn = _function_value(GOAL)
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def cell_index(x, res):
-    """round(x / res), half away from zero (without a branch on the sign, which the
-    processor cannot predict for states around zero)."""
-    q = x / res
-    c = int(math.floor(abs(q) + 0.5))
-    return c if q >= 0.0 else -c
-
-
-# The cell table: open addressing with linear probing, a slot per pair of int64 (the
-# cell's code, its node id or -1 if empty), so that a probe reads one cache line and a
-# hit needs no look at the node's key. A key of up to 3 cells of magnitude < 2^20 packs
-# exactly into a non-negative code (21 bits each); any other key's code is its 64-bit
-# hash with the top bit set (negative), and an equal code is confirmed on the keys.
-_PACK = 1 << 20
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _code(key):
-    kd = key.shape[0]
-    if kd <= 3:
-        c = np.int64(0)
-        exact = True
-        for d in range(kd):
-            k = key[d]
-            exact &= -_PACK <= k < _PACK
-            c = (c << 21) | (k & (2 * _PACK - 1))
-        if exact:
-            return c
-    h = np.uint64(1469598103934665603)
-    for d in range(kd):
-        h = (h ^ np.uint64(key[d] & 0xFFFFFFFFFFFF)) * np.uint64(1099511628211)
-        h ^= h >> np.uint64(29)
-    return np.int64(h | np.uint64(1 << 63))
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _shift(table):
-    """64 - log2(slots of the cell table): the home slot is the top bits of the code's
-    Fibonacci hash (Knuth's multiplicative hashing; its low bits cluster the codes of
-    neighbouring cells)."""
-    n = table.shape[0] >> 1
-    s = 64
-    while n > 1:
-        n >>= 1
-        s -= 1
-    return np.uint64(s)
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _is_key(keys, n, key):
-    """Whether node n's key (row n of ``keys``) is ``key``."""
-    for d in range(key.shape[0]):
-        if keys[n, d] != key[d]:
-            return False
-    return True
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _lookup(table, shift, keys, key, code):
-    """Slot of ``key`` (with its :func:`_code`) in the cell ``table`` (``shift``:
-    :func:`_shift`): returns (slot, node id or -1)."""
-    mask = np.int64((table.shape[0] >> 1) - 1)
-    i = np.int64((np.uint64(code) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
-    while True:
-        n = table[2 * i + 1]
-        if n == _EMPTY:
-            return i, -1
-        if table[2 * i] == code and (code >= 0 or _is_key(keys, n, key)):
-            return i, n
-        i = (i + 1) & mask
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _insert(table, slot, code, node):
-    table[2 * slot] = code
-    table[2 * slot + 1] = node
-
-
-@njit(cache=True, error_model="numpy")
-def rehash(table, keys, n_nodes):
-    """Rebuild a cell table for the first n_nodes keys (after growing)."""
-    table[:] = _EMPTY
-    shift = _shift(table)
-    for n in range(n_nodes):
-        code = _code(keys[n])
-        slot, _ = _lookup(table, shift, keys, keys[n], code)
-        _insert(table, slot, code, n)
-
-
-@intrinsic
-def _bits(typingctx, x):
-    """The bits of a float64 as an int64."""
-    if x == types.float64:
-        def codegen(context, builder, sig, args):
-            return builder.bitcast(args[0], ir.IntType(64))
-        return types.int64(x), codegen
-
-
-# The open set: a binary heap of (f, push counter, node) entries, two int64 per entry in
-# one array (a level's compare reads one cache line instead of three): the bits of f made
-# monotone (a float64's bits order like its value for f >= 0; negative ones are flipped),
-# then the push counter (high 32 bits, below SEQ_LIMIT: see _renumber) and the node id
-# (low 32 bits). Ties of f go to the entry pushed first. The helpers compare and swap in
-# place, with no calls of their own, and are compiled without reference counting
-# (_nrt=False): a numba function increments and decrements the count of every array it
-# is handed, with atomic operations, and a call per heap level made that 30 % of the
-# unicycle benchmark; after that, the counts of one push and one pop per expansion were
-# still 5 %.
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _push(H, cnt, f, node):
-    i = cnt[C_HEAP]
-    b = _bits(f + 0.0)                 # (-0.0 + 0.0 is +0.0: the zeros tie)
-    k1 = b ^ ((b >> 63) & 0x7FFFFFFFFFFFFFFF)
-    k2 = (cnt[C_SEQ] << 32) | node
-    cnt[C_HEAP] += 1
-    cnt[C_SEQ] += 1
-    while i > 0:                       # sift up: move larger parents down
-        p = (i - 1) >> 1
-        p1 = H[2 * p]
-        p2 = H[2 * p + 1]
-        if k1 < p1 or (k1 == p1 and k2 < p2):
-            H[2 * i] = p1
-            H[2 * i + 1] = p2
-            i = p
-        else:
-            break
-    H[2 * i] = k1
-    H[2 * i + 1] = k2
-
-
-SEQ_LIMIT = 1 << 31      # push counters fit in 31 bits; near it the heap is renumbered
-
-
-@njit(cache=True, error_model="numpy")
-def _renumber(H, cnt):
-    """Give the heap's entries the push counters 0, 1, ... in their order (their order and
-    so the heap are unchanged) and restart the counter after them: a search may push more
-    than SEQ_LIMIT entries in all, never that many at once."""
-    h = cnt[C_HEAP]
-    seq = np.empty(h, np.int64)
-    for i in range(h):
-        seq[i] = H[2 * i + 1] >> 32
-    order = np.argsort(seq)
-    for r in range(h):
-        i = order[r]
-        H[2 * i + 1] = (r << 32) | (H[2 * i + 1] & 0xFFFFFFFF)
-    cnt[C_SEQ] = h
-
-
-@njit(cache=True, error_model="numpy", _nrt=False)
-def _pop(H, cnt):
-    """Take the entry of least f (the first pushed among equals); its node id."""
-    top = H[1] & 0xFFFFFFFF
-    last = cnt[C_HEAP] - 1
-    cnt[C_HEAP] = last
-    if last > 0:
-        k1 = H[2 * last]
-        k2 = H[2 * last + 1]
-        i = 0
-        while True:                    # sift down: move smaller children up
-            c = 2 * i + 1
-            if c >= last:
-                break
-            c1 = H[2 * c]
-            c2 = H[2 * c + 1]
-            if c + 1 < last:
-                d1 = H[2 * c + 2]
-                d2 = H[2 * c + 3]
-                if d1 < c1 or (d1 == c1 and d2 < c2):
-                    c += 1
-                    c1 = d1
-                    c2 = d2
-            if c1 < k1 or (c1 == k1 and c2 < k2):
-                H[2 * i] = c1
-                H[2 * i + 1] = c2
-                i = c
-            else:
-                break
-        H[2 * i] = k1
-        H[2 * i + 1] = k2
-    return top
 
 
 @njit(cache=True, error_model="numpy", inline="always")

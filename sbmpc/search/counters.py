@@ -1,0 +1,10 @@
+"""What the compiled search reports back: the status of a chunk of expansions and the
+counters (an int64 array) it keeps, shared by the search and its open set."""
+
+# ---- status of a chunk -----------------------------------------------------------
+RUNNING, FOUND, EXHAUSTED, ITERATIONS, GROW = 0, 1, 2, 3, 4
+# ---- counters (int64 array) ------------------------------------------------------
+C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST = range(8)
+C_INVALID = 8          # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
+MAX_CODE = 8
+NC = C_INVALID + MAX_CODE + 1
