@@ -39,13 +39,18 @@ TIMER = r'''
 import sys, time, math
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-from sbmpc import problem as PB, scenario as SC
-try:                                   # the layout since the search's refactor
-    from sbmpc import world as WO
+from sbmpc import scenario as SC
+try:                                   # the layout since plan.py's split
+    from sbmpc import problem as PB, world as WO
     from sbmpc.problems import skidsteer as SS
-except ImportError:                    # a baseline from before it (world and problem in plan.py)
-    WO = PL
-    from sbmpc import skidsteer as SS
+except ImportError:
+    try:                               # subpackages, the problem still in plan.py
+        from sbmpc import plan as PB, world as WO
+        from sbmpc.problems import skidsteer as SS
+    except ImportError:                # before the search's refactor (world and problem in plan.py)
+        from sbmpc import plan as PB
+        WO = PB
+        from sbmpc import skidsteer as SS
 from dynamics import kernels as K
 world = WO.resolve(SC.load(sys.argv[2]))
 prob = PB.problem(world, "energy")
