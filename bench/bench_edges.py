@@ -17,7 +17,10 @@ Cost: the planner's own expansion (``sbmpc.skidsteer.expand``, all edges of a no
 nodes spread over the hill_tradeoff map, timed in a child process per source tree;
 with ``--baseline REV`` that commit is checked out into a temporary git worktree and the
 two are timed alternately in one run (this machine's speed drifts), reported as the
-median ratio over rounds.
+median ratio over rounds. Twice: on random entries (a steady cruise at a random speed,
+place and heading), and on nodes of each tree's own energy search (the first
+SEARCH_EXPANSIONS expansions, ``cost_on_search_nodes``): the states a planner really
+expands, mostly mid-transient, where a scheme that saves steady steps saves less.
 """
 from __future__ import annotations
 
@@ -59,7 +62,16 @@ X0 = prob.start
 e = world.emap
 x0, x1, y0, y1 = e.extent
 states = []
-for i in range(int(sys.argv[3])):
+if len(sys.argv) > 4:                  # the search's own nodes: its first argv[4] expansions
+    try:
+        from sbmpc.search.astar import Search
+    except ImportError:
+        from sbmpc.astar import Search
+    search = Search(prob)
+    res = search.run(int(sys.argv[4]))
+    pick = np.random.default_rng(1).choice(res.nodes, min(int(sys.argv[3]), res.nodes), replace=False)
+    states = [search.X[i].copy() for i in pick]
+for i in range(0 if states else int(sys.argv[3])):
     x = rng.uniform(x0 + 2, x1 - 2); y = rng.uniform(y0 + 2, y1 - 2); yaw = rng.uniform(-math.pi, math.pi)
     v = rng.uniform(0.0, 0.8)
     p, _ = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
@@ -106,7 +118,10 @@ def convergence(per_terrain: int, dt: float, period: float, seed: int, seeds: in
     return out
 
 
-def edge_cost(baseline: str | None, rounds: int, nodes: int) -> dict:
+SEARCH_EXPANSIONS = 5000   # the search whose nodes the second timer draws from
+
+
+def edge_cost(baseline: str | None, rounds: int, nodes: int, search: bool = False) -> dict:
     scen = str(ROOT / "scenarios" / "hill_tradeoff.yaml")
     trees = {"current": str(ROOT)}
     tmp = None
@@ -117,11 +132,12 @@ def edge_cost(baseline: str | None, rounds: int, nodes: int) -> dict:
         trees["baseline"] = tmp
     try:
         times: dict = {k: [] for k in trees}
+        extra = [str(SEARCH_EXPANSIONS)] if search else []
         for name, tree in trees.items():      # warm-up: compile and cache each tree
-            subprocess.run([sys.executable, "-c", TIMER, tree, scen, "4"], check=True, capture_output=True)
+            subprocess.run([sys.executable, "-c", TIMER, tree, scen, "4"] + extra, check=True, capture_output=True)
         for _ in range(rounds):
             for name, tree in trees.items():
-                r = subprocess.run([sys.executable, "-c", TIMER, tree, scen, str(nodes)], check=True,
+                r = subprocess.run([sys.executable, "-c", TIMER, tree, scen, str(nodes)] + extra, check=True,
                                    capture_output=True, text=True)
                 times[name].append(float(r.stdout.strip().splitlines()[-1]))
         res = {k: {"us_per_edge_median": round(1e6 * float(np.median(v)), 2),
@@ -158,6 +174,8 @@ def main() -> int:
            "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed, args.seeds)}
     res["cost"] = edge_cost(args.baseline, args.rounds, args.nodes)
     print("cost", res["cost"], flush=True)
+    res["cost_on_search_nodes"] = edge_cost(args.baseline, args.rounds, args.nodes, search=True)
+    print("cost on search nodes", res["cost_on_search_nodes"], flush=True)
     res["bench_s"] = round(time.perf_counter() - t0, 1)
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps(res, indent=1))

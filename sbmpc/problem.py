@@ -19,7 +19,7 @@ SETTLE_DEPTH = 3      # edges from the start within which a child may stay in it
 
 
 def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
-    """(params, data) flat arrays of :mod:`sbmpc.skidsteer` for a world and cost, with
+    """(params, data) flat arrays of :mod:`sbmpc.problems.skidsteer` for a world and cost, with
     the edges integrated at ``dt`` [s] (default the planner's step)."""
     scn, e, v = world.scenario, world.emap, world.vehicle
     ps = scn.planner
