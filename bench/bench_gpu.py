@@ -36,6 +36,9 @@ sys.path.insert(0, str(ROOT))
 
 
 def compile_only() -> dict:
+    if _version("numba-cuda") == "not installed":
+        raise SystemExit("bench_gpu --compile-only: expected numba-cuda with a CUDA toolkit "
+                         "(pip install 'sbmpc[gpu]'), found none")
     import numba.cuda.dispatcher as dispatcher
     from numba import cuda, types
 
