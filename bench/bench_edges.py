@@ -13,7 +13,7 @@ sustainable grade + 5 deg, both ways. Each is rolled out for one planning period
 planner's step (0.02 s) and at the controller period (1 ms, the paper's 1 kHz digital
 PID) and compared: stall verdict, energy, end pose.
 
-Cost: the planner's own expansion (``sbmpc.skidsteer.expand``, all edges of a node) on
+Cost: the planner's own expansion (``sbmpc.problems.skidsteer.expand``, all edges of a node) on
 nodes spread over the hill_tradeoff map, timed in a child process per source tree;
 with ``--baseline REV`` that commit is checked out into a temporary git worktree and the
 two are timed alternately in one run (this machine's speed drifts), reported as the

@@ -9,11 +9,11 @@ time and energy of each path re-simulated through the model.
 Writes bench/results/ompl.json. How OMPL is set up:
 
 * state: a real vector of the planner's full state (pose and the drive's internal state,
-  as :mod:`sbmpc.skidsteer`); every entry but (x, y, heading) is scaled by 1e-3, so that
+  as :mod:`sbmpc.problems.skidsteer`); every entry but (x, y, heading) is scaled by 1e-3, so that
   OMPL's sampling and nearest-neighbour distance act on the pose;
 * controls: desired wheel speeds over the same range as SBMPC's samples, each held for
   one planning period (propagation step = period, min = max duration = 1 step);
-* propagator: ``sbmpc.skidsteer.propagate``, the very edge function the SBMPC search
+* propagator: ``sbmpc.problems.skidsteer.propagate``, the very edge function the SBMPC search
   calls (through a Python callback); an invalid edge (off the map, stall, tip-over) makes
   an invalid state;
 * goal: the scenario's disc (a GoalRegion with distance max(0, |xy - goal| - r)); a run

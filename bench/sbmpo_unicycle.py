@@ -1,5 +1,5 @@
 """The reference C++ SBMPO's unicycle benchmark (BENCH-SBMPO-UNICYCLE.md), run by our
-search (sbmpc.astar, the same code that plans for the skid-steer model).
+search (sbmpc.search.astar, the same code that plans for the skid-steer model).
 
     python bench/sbmpo_unicycle.py [--data DIR] [--json PATH] [--repeat N] [--passes N]
 

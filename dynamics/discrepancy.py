@@ -116,6 +116,13 @@ def channels(run: Run) -> tuple:
     return tuple(ch)
 
 
+def is_held(y: np.ndarray) -> bool:
+    """Whether a sampled signal is held or quantised: most sample-to-sample differences
+    are exactly zero (a slower sensor logged at a faster rate, or coarse steps)."""
+    d = np.diff(y[np.isfinite(y)])
+    return d.size >= 3 and np.count_nonzero(d) < 0.5 * d.size
+
+
 def noise_scale(y: np.ndarray) -> float:
     """Standard deviation of white sensor noise on a sampled signal, from the median
     absolute sample-to-sample difference (robust to the signal's own steps)."""
@@ -137,6 +144,7 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
     pose = all(c in run for c in ("x", "y", "yaw"))
     t_all = run.t
     noise = (noise_scale(run["wl"]), noise_scale(run["wr"]))
+    white = not (is_held(run["wl"]) or is_held(run["wr"]))
     for a, b in run.segments():
         t = t_all[a:b]
         cl = _ffill(run["wl_cmd"][a:b])
@@ -144,9 +152,11 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
         k = int(round((t[-1] - t[0]) / dt)) + 1
         tk = t[0] + dt * np.arange(k)
         j = np.clip(np.searchsorted(t, tk + 1e-9, side="right") - 1, 0, len(t) - 1)
+        measured = np.isfinite(run["wl"][a]) and np.isfinite(run["wr"][a])
         w0l = run["wl"][a] if np.isfinite(run["wl"][a]) else cl[0]
         w0r = run["wr"][a] if np.isfinite(run["wr"][a]) else cr[0]
-        w0l, w0r = start_speeds(float(w0l), float(w0r), *noise)
+        if measured and white:         # (a held or quantised log's noise is its own steps)
+            w0l, w0r = start_speeds(float(w0l), float(w0r), *noise)
         p0 = [float(run[c][a]) if pose and np.isfinite(run[c][a]) else 0.0 for c in ("x", "y", "yaw")]
         S = model.state(float(w0l), float(w0r), pitch, p0[0], p0[1], p0[2])
         tr = simulate(model, cl[j], cr[j], state=S, pitch=pitch, record_dt=dt, dt=dt)
@@ -156,6 +166,9 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
     return out
 
 
+START_NOISE_CAP = 0.1   # rad/s: the most start_speeds takes for noise (a few mm/s at the rim)
+
+
 def start_speeds(wl: float, wr: float, noise_l: float, noise_r: float) -> tuple:
     """The wheel speeds [rad/s] a segment's replay starts from, in steady state (``Model.state``),
     given the first measured ones and the sensors' noise [rad/s]. A difference between
@@ -163,10 +176,15 @@ def start_speeds(wl: float, wr: float, noise_l: float, noise_r: float) -> tuple:
     noise of zero as rest: a steady turn holds the full sliding turning resistance in the
     PID integrals at any yaw rate (eq. 28's friction does not fade with the rate), so a
     noise-sized difference would start a straight run in a turn that the PID takes
-    seconds to unwind (a clean 2 s run from rest was named turning_friction)."""
-    if abs(wl - wr) < 2.0 * math.hypot(noise_l, noise_r):
+    seconds to unwind (a clean 2 s run from rest was named turning_friction). Each
+    bound is at most START_NOISE_CAP, and :func:`replay` applies it only to logs with
+    white noise: on held or quantised ones (the Warthog's 4 Hz speeds, BorealTC's
+    1/127 m/s) the noise estimate is made of the signal's own steps (0.35 rad/s), a real
+    start of 12.5 and 12.9 rad/s is a turn, and straightening such starts moved the
+    Warthog's sand calibration to another optimum (47 A instead of 64 A)."""
+    if abs(wl - wr) < min(2.0 * math.hypot(noise_l, noise_r), START_NOISE_CAP):
         wl = wr = 0.5 * (wl + wr)
-    if abs(wl) < 2.0 * noise_l and abs(wr) < 2.0 * noise_r:
+    if abs(wl) < min(2.0 * noise_l, START_NOISE_CAP) and abs(wr) < min(2.0 * noise_r, START_NOISE_CAP):
         wl = wr = 0.0
     return wl, wr
 

@@ -32,9 +32,10 @@ def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     :func:`_chain_windows`), segment."""
     path = Path(path)
     try:
-        d = np.genfromtxt(path, delimiter=",", names=True)
-    except (OSError, ValueError) as exc:
-        raise RunError(f"{path}: expected a DRIVE windows CSV, found a file that cannot be read ({exc})") from None
+        d = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig")
+    except (OSError, ValueError, IndexError) as exc:
+        raise RunError(f"{path}: expected a DRIVE windows CSV, found a file that cannot be read "
+                       f"({exc or 'no rows'})") from None
     need = ("window", "t", "cmd_left", "cmd_right", "left_wheel_vel", "right_wheel_vel")
     missing = [c for c in need if c not in (d.dtype.names or ())]
     if missing:
@@ -86,9 +87,10 @@ def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) ->
     linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
     path = Path(path)
     try:
-        d = np.genfromtxt(path, delimiter=",", names=True)
-    except (OSError, ValueError) as exc:
-        raise RunError(f"{path}: expected a BorealTC CSV, found a file that cannot be read ({exc})") from None
+        d = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig")
+    except (OSError, ValueError, IndexError) as exc:
+        raise RunError(f"{path}: expected a BorealTC CSV, found a file that cannot be read "
+                       f"({exc or 'no rows'})") from None
     need = ("time", "curL", "curR", "velL", "velR")
     missing = [c for c in need if c not in (d.dtype.names or ())]
     if missing:
@@ -111,16 +113,23 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     the sign of their wheel's direction of travel (a braking wheel's current comes out
     with the wrong sign; the runs are on level ground)."""
     rec = read_borealtc(path)
-    t = rec["t"]
-    if t.size < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        raise RunError(f"{path}, column time: expected finite, strictly increasing times, found "
+    t = np.atleast_1d(rec["t"])
+    for col, key in (("time", "t"), ("velL", "wl"), ("velR", "wr"), ("curL", "i_l"), ("curR", "i_r")):
+        bad = int(np.sum(~np.isfinite(np.atleast_1d(rec[key]))))
+        if bad:
+            raise RunError(f"{path}, column {col}: expected finite numbers in every row, found {bad} "
+                           "empty, non-numeric or infinite")
+    if t.size < 2 or np.any(np.diff(t) <= 0):
+        raise RunError(f"{path}, column time: expected strictly increasing times, found "
                        + ("fewer than 2 rows" if t.size < 2 else "times that do not increase"))
+    rec = {k: np.atleast_1d(v) for k, v in rec.items()}
     wl, wr = rec["wl"], rec["wr"]
     cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
             "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}
     meta = {"vehicle": "husky", "terrain": terrain, "slope_deg": "0",
-            "note": f"BorealTC Husky {Path(path).parent.name}/{Path(path).name}: no commands logged (the measured "
-                    "wheel speeds stand in for them), currents signed by the direction of travel"}
+            "note": f"BorealTC Husky {Path(path).resolve().parent.name}/{Path(path).name}: no commands logged "
+                    "(the measured wheel speeds stand in for them: a command delay or lag cannot be seen), "
+                    "currents signed by the direction of travel"}
     return Run(cols, meta, str(path))
 
 

@@ -148,7 +148,7 @@ class RunResult:
 
 def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
     """(position [m], heading [rad], speed [m/s]) differences of a measured state X from
-    a predicted state P (planner states, :mod:`sbmpc.skidsteer`)."""
+    a predicted state P (planner states, :mod:`sbmpc.problems.skidsteer`)."""
     dxy = math.hypot(X[K.S_X] - P[K.S_X], X[K.S_Y] - P[K.S_Y])
     dyaw = abs(math.remainder(X[K.S_YAW] - P[K.S_YAW], 2.0 * math.pi))
     dv = abs(X[SS.X_V] - P[SS.X_V])

@@ -40,13 +40,17 @@ def sbmpc_imports(path):
     return found
 
 
-# LAYOUT: commands -> plan/receding -> world/heuristics -> problems -> search; the search
+# LAYOUT: commands -> plan/receding -> check -> problem -> world/heuristics -> problems -> search; the search
 # knows no robot, no map and no model; nothing below the commands imports them
 RULES = [
-    ("search", {"problems", "commands", "plan", "world", "heuristics", "receding"}, {"dynamics", "maps"}),
-    ("problems", {"commands", "plan", "world", "heuristics", "receding"}, set()),
-    ("world.py", {"commands", "plan", "heuristics", "receding"}, set()),
-    ("heuristics.py", {"commands", "plan", "receding"}, set()),
+    ("search", {"problems", "commands", "plan", "world", "heuristics", "receding", "problem", "check",
+                "trajectory"}, {"dynamics", "maps"}),
+    ("problems", {"commands", "plan", "world", "heuristics", "receding", "problem", "check"}, set()),
+    ("world.py", {"commands", "plan", "heuristics", "receding", "problem", "check"}, set()),
+    ("heuristics.py", {"commands", "plan", "receding", "problem", "check"}, set()),
+    ("problem.py", {"commands", "plan", "receding", "check"}, set()),
+    ("check.py", {"commands", "plan", "receding"}, set()),
+    ("trajectory.py", {"commands", "plan", "receding", "problem", "check", "search", "problems"}, set()),
     ("plan.py", {"commands", "receding"}, set()),
 ]
 

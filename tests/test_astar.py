@@ -1,4 +1,4 @@
-"""The generic search (sbmpc.astar) on problems with known answers, and its parts (cell
+"""The generic search (sbmpc.search.astar) on problems with known answers, and its parts (cell
 table, open set) against plain Python."""
 import math
 

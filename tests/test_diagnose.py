@@ -122,6 +122,20 @@ def test_start_speeds_drop_noise_sized_turns_and_keep_real_ones():
     assert start_speeds(-0.5, 0.5, 0.05, 0.05) == (-0.5, 0.5)            # a pivot
     assert start_speeds(0.10, 0.16, 0.01, 0.01) == (0.10, 0.16)          # slow, a turn above the noise
     assert start_speeds(0.12, 0.13, 0.01, 0.01) == (0.125, 0.125)        # slow, straight within the noise
+    assert start_speeds(-12.50, -12.89, 0.35, 0.36) == (-12.50, -12.89)   # held 4 Hz log: the cap, a real turn
+    assert start_speeds(0.18, 0.18, 0.38, 0.38) == (0.18, 0.18)          # moving, above the cap
+
+
+def test_a_held_log_is_told_from_a_white_one():
+    """replay straightens noise-sized starts only on logs with white noise: a held (slower
+    sensor) or quantised log's noise estimate is made of its own steps."""
+    from dynamics.discrepancy import is_held
+    rng = np.random.default_rng(0)
+    white = 3.0 + rng.normal(0.0, 0.05, 500)
+    assert not is_held(white)
+    assert is_held(np.repeat(white[::5], 5))                          # a 4 Hz sensor logged at 20 Hz
+    smooth = 3.0 + 0.5 * np.sin(np.arange(500) / 65.0) + rng.normal(0.0, 0.005, 500)
+    assert is_held(np.round(smooth * 0.13 * 127) / 127 / 0.13)       # BorealTC's 1/127 m/s quantum
 
 
 def test_effect_strengths_cover_the_vocabulary():

@@ -91,3 +91,14 @@ def test_import_borealtc_names_what_is_wrong(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "expected the BorealTC columns" in err and "curR" in err and "Traceback" not in err
     assert not (tmp_path / "r2.csv").exists()
+    for name, text, says in [("empty", "", "cannot be read"),
+                             ("header_only", "time,curL,curR,velL,velR\n", "fewer than 2 rows"),
+                             ("inf", "time,curL,curR,velL,velR\n0,1,1,0.1,0.1\n0.15,1,1,inf,0.1\n", "column velL"),
+                             ("text", "time,curL,curR,velL,velR\n0,1,1,0.1,0.1\n0.15,x,1,0.1,0.1\n", "column curL"),
+                             ("backwards", "time,curL,curR,velL,velR\n0.3,1,1,0.1,0.1\n0.15,1,1,0.1,0.1\n",
+                              "times that do not increase")]:
+        f = tmp_path / "ASPHALT" / f"{name}.csv"
+        f.write_text(text)
+        assert main(["import", "borealtc", str(f), "--out", str(tmp_path / f"{name}_run.csv")]) == 2, name
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, (name, err)

@@ -1,4 +1,4 @@
-"""sbmpc.lanes: 16 float32 lanes equal 16 scalar float32 computations, bit for bit."""
+"""sbmpc.search.lanes: 16 float32 lanes equal 16 scalar float32 computations, bit for bit."""
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st

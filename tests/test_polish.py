@@ -31,7 +31,7 @@ def flat():
 
 
 def _replayed_cost(world, cost, controls):
-    """Cost of controls replayed by plan.replay at the planner's step (goal entry ends it)."""
+    """Cost of controls replayed by check.replay at the planner's step (goal entry ends it)."""
     traj, end, S, used = CK.replay(world, cost, controls)
     assert end == SS.IN_GOAL and used == len(controls)
     return float(S[K.S_E] if cost == "energy" else S[K.S_T])

@@ -1,4 +1,4 @@
-"""The reference C++ SBMPO's unicycle benchmark (sbmpc.unicycle) on the generic search."""
+"""The reference C++ SBMPO's unicycle benchmark (sbmpc.problems.unicycle) on the generic search."""
 import math
 from pathlib import Path
 

@@ -1,4 +1,4 @@
-"""The skid-steered vehicle on an elevation map, as a search problem for :mod:`sbmpc.astar`.
+"""The skid-steered vehicle on an elevation map, as a search problem for :mod:`sbmpc.search.astar`.
 
 State: the closed-loop model's state vector (``dynamics.kernels``: wheel speeds, PID
 references and integrals, currents, pose, time, energy, stall timer) plus two entries
@@ -24,7 +24,7 @@ distance d to the goal disc:
   energy the vehicle carries (eq. 5's mass matrix) and z_goal the lowest height of the
   goal disc; electrical energy is at least the mechanical work of the motors.
 
-Both are raised by a cost-to-go grid over the map (``sbmpc.plan.cost_to_go``): Dijkstra
+Both are raised by a cost-to-go grid over the map (``sbmpc.heuristics.cost_to_go``): Dijkstra
 from the goal over the map's cells, with 8-neighbour steps that cost d / v_bound (time)
 or max(0, F_roll d + m g dz) (energy: a climb costs its potential energy, a descent at
 most pays for its own rolling, none is banked), scaled down by the octile-to-Euclidean
@@ -165,7 +165,7 @@ def propagate(params, data, state, control, out):
 
 @njit(EXPAND.signature, cache=True, error_model="numpy")
 def expand(params, data, work, state, controls, children, costs):
-    """The edges of one expansion (:mod:`sbmpc.astar`), one :func:`propagate` per control."""
+    """The edges of one expansion (:mod:`sbmpc.search.astar`), one :func:`propagate` per control."""
     for b in range(controls.shape[0]):
         costs[b] = propagate(params, data, state, controls[b], children[b])
 

@@ -8,7 +8,7 @@ nodes and costs as ten float32 sincos calls on all 101 benchmark maps); grid (0.
 pi/36) with snapping; validity of the raw end state against the map border and the
 obstacles (body radius 0.125 m); edge cost the xy distance between snapped states;
 heuristic distance plus wrapped bearing error; goal when the heuristic is <= 0.5 or the
-node is in the goal's cell. It shares :mod:`sbmpc.astar` with the skid-steer planner.
+node is in the goal's cell. It shares :mod:`sbmpc.search.astar` with the skid-steer planner.
 """
 from __future__ import annotations
 
@@ -71,7 +71,7 @@ def expand(params, data, work, state, controls, children, costs):
     """The edges of one expansion, in float32 as the C++ does; cost = xy distance
     between the snapped states.
 
-    All edges at once, edge b in lane b of 16 float32 lanes (:mod:`sbmpc.lanes`; each
+    All edges at once, edge b in lane b of 16 float32 lanes (:mod:`sbmpc.search.lanes`; each
     operation rounded to float32 as the scalar code rounds it). The heading of sub-step
     k, th + k omega dt, has its cosine and sine by one rotation of the node heading's by
     the control's k omega dt (:func:`_turned`; no trig in the edges). A node's heading
@@ -308,5 +308,5 @@ def problem(bench: Benchmark, obstacles: np.ndarray) -> Problem:
 
 
 def solve(bench: Benchmark, obstacles: np.ndarray):
-    """One benchmark solve; a :class:`sbmpc.astar.SearchResult`."""
+    """One benchmark solve; a :class:`sbmpc.search.astar.SearchResult`."""
     return search(problem(bench, obstacles), bench.max_iterations, chunk=1 << 30)
