@@ -104,10 +104,11 @@ def batch_size(ps) -> int:
 def search_threads(ps):
     """Threads for the search's edges: the scenario's, or with 0 "auto" (every core numba
     uses, unless measurements during the search find the serial expander faster: cores
-    busy with other work). On the GPU, 1: the edges run there, and measuring the serial
-    CPU expander against it would hand it a dozen whole batches."""
+    busy with other work). On the GPU, None: the edges run there (measuring the serial
+    CPU expander against it would hand it a dozen whole batches), and numba's thread
+    count is left alone for the CPU work around the search (the polish, the checks)."""
     if on_gpu(ps):
-        return 1
+        return None
     if ps.threads:
         return ps.threads
     import numba
