@@ -26,20 +26,27 @@ DRIVE_WINDOW_S = 2.0
 JUMP = 2.0     # rad/s: a wheel-speed jump across a window boundary that breaks the timeline
 
 
+def _columns(path: Path, dataset: str, kind: str, need: tuple) -> np.ndarray:
+    """The named columns of a CSV file with a header row (a byte-order mark allowed), as
+    a one-dimensional structured array (one row included), or a RunError naming the
+    file, what it should be (``kind``, from ``dataset``) and what is missing."""
+    try:
+        d = np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig"))
+    except (OSError, ValueError, IndexError) as exc:
+        raise RunError(f"{path}: expected {kind}, found a file that cannot be read ({exc or 'no rows'})") from None
+    missing = [c for c in need if c not in (d.dtype.names or ())]
+    if missing:
+        raise RunError(f"{path}: expected the {dataset} columns {', '.join(need)}, found no {', '.join(missing)}")
+    return d
+
+
 def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     """A DRIVE windows CSV as a run: t, wl_cmd, wr_cmd, wl, wr, x/y/yaw (the ICP pose,
     given relative to each window's start, chained into one pose: see
     :func:`_chain_windows`), segment."""
     path = Path(path)
-    try:
-        d = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig")
-    except (OSError, ValueError, IndexError) as exc:
-        raise RunError(f"{path}: expected a DRIVE windows CSV, found a file that cannot be read "
-                       f"({exc or 'no rows'})") from None
-    need = ("window", "t", "cmd_left", "cmd_right", "left_wheel_vel", "right_wheel_vel")
-    missing = [c for c in need if c not in (d.dtype.names or ())]
-    if missing:
-        raise RunError(f"{path}: expected the DRIVE columns {', '.join(need)}, found no {', '.join(missing)}")
+    d = _columns(path, "DRIVE", "a DRIVE windows CSV",
+                 ("window", "t", "cmd_left", "cmd_right", "left_wheel_vel", "right_wheel_vel"))
     win = d["window"].astype(int)
     t = win * DRIVE_WINDOW_S + d["t"]
     order = np.argsort(t, kind="stable")
@@ -86,15 +93,7 @@ def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) ->
     """One BorealTC ``pro_XX.csv`` as arrays: t [s], wl, wr [rad/s] (the logged wheel
     linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
     path = Path(path)
-    try:
-        d = np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig")
-    except (OSError, ValueError, IndexError) as exc:
-        raise RunError(f"{path}: expected a BorealTC CSV, found a file that cannot be read "
-                       f"({exc or 'no rows'})") from None
-    need = ("time", "curL", "curR", "velL", "velR")
-    missing = [c for c in need if c not in (d.dtype.names or ())]
-    if missing:
-        raise RunError(f"{path}: expected the BorealTC columns {', '.join(need)}, found no {', '.join(missing)}")
+    d = _columns(path, "BorealTC", "a BorealTC CSV", ("time", "curL", "curR", "velL", "velR"))
     return {"t": d["time"], "wl": d["velL"] / wheel_radius, "wr": d["velR"] / wheel_radius,
             "i_l": d["curL"], "i_r": d["curR"]}
 
@@ -113,16 +112,15 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     the sign of their wheel's direction of travel (a braking wheel's current comes out
     with the wrong sign; the runs are on level ground)."""
     rec = read_borealtc(path)
-    t = np.atleast_1d(rec["t"])
+    t = rec["t"]
     for col, key in (("time", "t"), ("velL", "wl"), ("velR", "wr"), ("curL", "i_l"), ("curR", "i_r")):
-        bad = int(np.sum(~np.isfinite(np.atleast_1d(rec[key]))))
+        bad = int(np.sum(~np.isfinite(rec[key])))
         if bad:
             raise RunError(f"{path}, column {col}: expected finite numbers in every row, found {bad} "
                            "empty, non-numeric or infinite")
     if t.size < 2 or np.any(np.diff(t) <= 0):
         raise RunError(f"{path}, column time: expected strictly increasing times, found "
                        + ("fewer than 2 rows" if t.size < 2 else "times that do not increase"))
-    rec = {k: np.atleast_1d(v) for k, v in rec.items()}
     wl, wr = rec["wl"], rec["wr"]
     cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
             "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}

@@ -29,32 +29,44 @@ def add_parsers(sub):
     p.set_defaults(func=run_import)
 
 
+def _datasets() -> dict:
+    """Per dataset: (its name, what a source file is, its terrains -> the nearest shipped
+    ones, the terrain a source names by default and what names it, the reader)."""
+    from ..realdata import BOREALTC_TERRAINS, read_borealtc_run, read_drive_windows
+
+    def drive_terrain(source: Path) -> tuple:
+        stem = source.stem.lower()
+        return next((k for k in DRIVE_TERRAINS if k in stem), None), f"the file name '{source.name}'"
+
+    def borealtc_terrain(source: Path) -> tuple:
+        folder = source.resolve().parent.name
+        return (folder.upper() if folder.upper() in BOREALTC_TERRAINS else None), f"the folder name '{folder}'"
+
+    return {"drive": ("DRIVE", "a DRIVE windows CSV", DRIVE_TERRAINS, drive_terrain, str, read_drive_windows),
+            "borealtc": ("BorealTC", "a BorealTC pro_XX.csv", BOREALTC_TERRAINS, borealtc_terrain, str.upper,
+                         read_borealtc_run)}
+
+
 def run_import(args) -> int:
     from dynamics.runs import RunError, write_run
-    from ..realdata import BOREALTC_TERRAINS, read_borealtc_run, read_drive_windows
+    label, kind, known, named, key_of, read = _datasets()[args.dataset]
     Outputs([args.source]).file(args.out, "--out")
-    drive = args.dataset == "drive"
-    kind = "a DRIVE windows CSV" if drive else "a BorealTC pro_XX.csv"
     if not args.source.is_file():
         raise InputError(f"{args.source}: expected {kind} file, found no such file")
-    known = DRIVE_TERRAINS if drive else BOREALTC_TERRAINS
     name = args.terrain
     if name is None:
-        where = args.source.stem.lower() if drive else args.source.resolve().parent.name
-        name = next((k for k in known if (k in where if drive else k == where.upper())), None)
+        name, namer = named(args.source)
         if name is None:
-            raise InputError(f"--terrain: expected the run's terrain (the {'file' if drive else 'folder'} name "
-                             f"'{args.source.name if drive else where}' names none of {', '.join(known)}), "
+            raise InputError(f"--terrain: expected the run's terrain ({namer} names none of {', '.join(known)}), "
                              "found nothing")
-    key = name if drive else name.upper()
+    key = key_of(name)
     shipped = known.get(key, name)
     try:
-        run = read_drive_windows(args.source, shipped) if drive else read_borealtc_run(args.source, shipped)
+        run = read(args.source, shipped)
     except RunError as exc:
         raise InputError(str(exc)) from None
     if key in known:
-        run.meta["note"] = (f"{run.meta.get('note', '')}; {'DRIVE' if drive else 'BorealTC'} terrain {key}, "
-                            f"nearest shipped terrain {shipped}")
+        run.meta["note"] = f"{run.meta.get('note', '')}; {label} terrain {key}, nearest shipped terrain {shipped}"
     with atomic(args.out) as tmp:
         write_run(tmp, run)
     segs = run.segments()
