@@ -70,9 +70,10 @@ CANDIDATES = {
 }
 
 
-def _least_squares(fun, x0, lo, hi, diff_step: float, max_nfev: int) -> tuple:
+def _least_squares(fun, x0, lo, hi, diff_step: float, max_nfev: int, with_cost: bool = False) -> tuple:
     """Bounded least squares of the residual vector ``fun(x)``: (x, standard errors from
-    the Jacobian at the optimum, NaN where it is singular)."""
+    the Jacobian at the optimum, NaN where it is singular), and half the residual sum of
+    squares at x when ``with_cost``."""
     res = least_squares(fun, np.clip(np.asarray(x0, float), lo, hi), bounds=(np.asarray(lo, float), np.asarray(hi, float)),
                         diff_step=diff_step, x_scale="jac", max_nfev=max_nfev)
     J = res.jac
@@ -82,13 +83,35 @@ def _least_squares(fun, x0, lo, hi, diff_step: float, max_nfev: int) -> tuple:
         se = np.sqrt(np.maximum(np.diag(np.linalg.inv(J.T @ J) * s2), 0.0))
     except np.linalg.LinAlgError:
         se = np.full(k, math.nan)
-    return res.x, se
+    return (res.x, se, float(res.cost)) if with_cost else (res.x, se)
 
 
-def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=None, max_nfev: int = 30):
+def start_points(x0, lo, hi, n: int) -> np.ndarray:
+    """``n`` starting points for a bounded fit, shape (n, k): ``x0`` first, then the
+    points of an unscrambled Halton sequence spread over the box [lo, hi] (deterministic:
+    the same fit gives the same answer)."""
+    x0, lo, hi = (np.asarray(a, float) for a in (x0, lo, hi))
+    pts = [np.clip(x0, lo, hi)]
+    if n > 1:
+        from scipy.stats import qmc
+        u = qmc.Halton(d=x0.size, scramble=False).random(2 * n)[1:]   # its first point is the origin
+        far = [p for p in lo + u * (hi - lo) if np.any(np.abs(p - pts[0]) > 1e-6 * (hi - lo))]
+        pts.extend(far[:n - 1])
+    return np.array(pts)
+
+
+def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=None, max_nfev: int = 30,
+              starts: int = 1) -> tuple:
     """Least-squares calibration of vehicle fields ({name: (low, high)}) on the wheel-speed
-    (and torque or current) replay of ``run`` (restricted to ``mask``). Returns the
-    calibrated vehicle and {name: (value, standard error)}."""
+    (and torque or current) replay of ``run`` (restricted to ``mask``).
+
+    ``starts``: the fit is run from the vehicle's own values and from ``starts - 1``
+    further points spread over the bounds (``start_points``), each for at most
+    ``max_nfev`` replays, and the lowest residual kept: a replay's residual has several
+    local minima over saturation limits, and one start may settle in another. Returns
+    the calibrated vehicle, {name: (value, standard error)} and the optima reached,
+    best first: [{"cost": half the residual sum of squares (noise units), name: value,
+    ...}, ...]."""
     chans = channels(run)
     scales = {c: noise_scale(run[c]) for c in chans}
     mask = np.ones(len(run), bool) if mask is None else mask
@@ -101,9 +124,12 @@ def calibrate(run: Run, vehicle: Vehicle, terrain: Terrain, fields: dict, mask=N
         v = vehicle.replace(**dict(zip(names, map(float, x))))
         return _residuals(run, replay(run, v, terrain), chans, scales, mask)
 
-    x, se = _least_squares(fun, x0, lo, hi, 1e-2, max_nfev)
+    fits = sorted((_least_squares(fun, p, lo, hi, 1e-2, max_nfev, with_cost=True)
+                   for p in start_points(x0, lo, hi, max(int(starts), 1))), key=lambda f: f[2])
+    x, se, _ = fits[0]
     v = vehicle.replace(**dict(zip(names, map(float, x))))
-    return v, {n: (float(a), float(e)) for n, a, e in zip(names, x, se)}
+    optima = [{"cost": c, **{n: float(a) for n, a in zip(names, xs)}} for xs, _, c in fits]
+    return v, {n: (float(a), float(e)) for n, a, e in zip(names, x, se)}, optima
 
 
 def channels(run: Run) -> tuple:

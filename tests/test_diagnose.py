@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dynamics import load_terrain, load_vehicle
-from dynamics.discrepancy import CANDIDATES, MARGIN, diagnose, noise_scale, replay
+from dynamics.discrepancy import CANDIDATES, MARGIN, calibrate, diagnose, noise_scale, replay, start_points
 from dynamics.runs import Run, RunError, read_run, write_run
 from dynamics.synth import STRENGTHS, synth_run
 from sbmpc.commands.cli import main
@@ -112,6 +112,32 @@ def test_a_short_clean_run_from_rest_is_none(seed, duration):
     run, _ = synth_run("none", seed, duration=duration)
     d = diagnose(run, P3AT, VINYL)
     assert d.cause == "none", (d.cause, max(c.gain for c in d.candidates))
+
+
+def test_start_points_begin_at_the_guess_and_spread_over_the_bounds():
+    pts = start_points([2.0, 50.0], [1.0, 10.0], [3.0, 90.0], 6)
+    assert pts.shape == (6, 2)
+    assert np.array_equal(pts[0], [2.0, 50.0])
+    assert np.all(pts >= [1.0, 10.0]) and np.all(pts <= [3.0, 90.0])
+    assert len({tuple(p) for p in pts}) == 6                 # no start twice
+    assert np.array_equal(pts, start_points([2.0, 50.0], [1.0, 10.0], [3.0, 90.0], 6))
+
+
+def test_calibration_from_several_starts_escapes_a_flat_start():
+    """A P3-AT whose reference rate limit is 0.6 m/s^2 (1.0 assumed). Started at 2.55 the
+    residual is flat (the current limit binds, not the rate limit) and the fit stays
+    there; a second start over the bounds finds 0.6."""
+    v, ter = load_vehicle("p3at"), load_terrain("vinyl")
+    run, _ = synth_run("none", 3, vehicle=v.replace(ref_accel=0.6), duration=20.0)
+    guess = v.replace(ref_accel=2.55)
+    _, one, opt1 = calibrate(run, guess, ter, {"ref_accel": (0.1, 5.0)}, starts=1)
+    assert len(opt1) == 1 and abs(one["ref_accel"][0] - 0.6) > 1.0
+    fitted, cal, opt = calibrate(run, guess, ter, {"ref_accel": (0.1, 5.0)}, starts=3)
+    value, se = cal["ref_accel"]
+    assert abs(value - 0.6) < max(3 * se, 0.003)
+    assert fitted.ref_accel == value
+    assert len(opt) == 3 and [o["cost"] for o in opt] == sorted(o["cost"] for o in opt)
+    assert opt[0]["ref_accel"] == value and opt[-1]["cost"] > 10 * opt[0]["cost"]
 
 
 def test_start_speeds_drop_noise_sized_turns_and_keep_real_ones():
