@@ -16,10 +16,12 @@ One step of length dt (Fig. 3 closed loop, Fig. 6 kinematics):
    the drive (continuous limit and the voltage limit of eq. 27); the integral does not
    wind up while the output is saturated (conditional integration);
 3. the resistance C (eqs. 17-22, fast form), gravity G (eq. 24), mass matrix M (eq. 5)
-   give the wheel accelerations of eq. 25, integrated *linearly implicitly*:
-   (M + dt dC/dw) dw = dt (tau - C - G). The friction is stiff near straight motion at
-   low speed (its slope grows like 1 / |w|); the implicit treatment keeps the step
-   stable at the planner's coarse steps and exact in the limit dt -> 0;
+   give the wheel accelerations of eq. 25, integrated *implicitly*: backward Euler at
+   the controller period, an L-stable two-stage SDIRK at coarser steps, each stage a
+   Newton solve of M (w - w0) = dt (tau - C - G) started from the speeds that the last
+   step's end acceleration predicts (kept in the state). The friction is stiff near
+   straight motion at low speed (its slope grows like 1 / |w|); the implicit treatment
+   keeps the step stable at the planner's coarse steps and exact in the limit dt -> 0;
 4. the kinematic model (eq. 1) advances the pose: the speed v is along the slope, the
    map position advances by v cos(pitch) along the heading (midpoint heading).
 
@@ -52,10 +54,12 @@ NP = 27
 # ---- state vector S --------------------------------------------------------------
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
  S_YAW, S_T, S_E, S_DIST, S_S, S_STALLT, S_STALLED,
- S_CWL, S_CWR, S_CFL, S_CFR, S_CLL, S_CLR, S_CRL, S_CRR) = range(28)
-NS = 28
+ S_CWL, S_CWR, S_CFL, S_CFR, S_CLL, S_CLR, S_CRL, S_CRR, S_DWL, S_DWR) = range(30)
+NS = 30
 # S_C*: the unit friction and its slopes (fast form) at the speeds (S_CWL, S_CWR), kept
-# from the last step: the next step starts its solve there and need not look them up
+# from the last step: the next step starts its solve there and need not look them up.
+# S_DW*: the wheel accelerations [rad/s^2] at the end of the last step (from its stages):
+# the next step's solves start from the speeds they predict (0: from the speeds themselves)
 
 # ---- step outputs O --------------------------------------------------------------
 (O_TAUL, O_TAUR, O_IL, O_IR, O_PL, O_PR, O_PB, O_V, O_YAWRATE, O_SAT) = range(10)
@@ -169,24 +173,37 @@ def _held_current(icmd, w, vmax, k, ra, imax):
 NEWTON_ITERATIONS = 6    # most one implicit solve takes (typically 1-2; where it cycles between
                          # kinks of the friction or the current limit, the last iterate stands)
 NEWTON_TOL = 1e-4        # rad/s: a solve has converged when its next correction is below
+STEP_RATE = 0.5          # rad/s^2: ... or when a full Newton correction is below this times the
+                         # step (0.01 rad/s at the planner's 20 ms; its error is of the order
+                         # of its square: the speeds it reaches are taken, the currents
+                         # evaluated there, the friction extrapolated)
+REST_BAND = OMEGA_EPS    # rad/s: ... and neither wheel within this of rest, where the friction
+                         # turns over (there the residual decides: a stop held by friction
+                         # otherwise drifts from the controller-rate solution)
 SDIRK_GAMMA = 1.0 - math.sqrt(0.5)   # Alexander's L-stable two-stage SDIRK, order 2
 
 
 @jit_inline
-def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr, refl, refr,
+def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, icl, icr, refl, refr,
            zl_b, zr_b, rdl, rdr, vmax, cp, g_l, g_r):
     """One implicit solve for the wheel speeds w [rad/s] (Newton on two unknowns):
 
         M (w - w0) = off + h (k I(w) - C(w) - G)
 
     with resistance C (eqs. 17-22), gravity G (eq. 24), M of eq. 5 (eq. 25) and ``off``
-    [N m s] what earlier stages contributed; starting from the guess (wl, wr), where the
-    unit frictions and their slopes ``u`` (6-tuple of :func:`unit_friction_fast`) are
-    known. The delivered current I: ``digital``, the held commands (icl, icr) clipped to
+    [N m s] what earlier stages contributed; starting from the guess (wl, wr). ``u``: the
+    unit frictions and their slopes (6-tuple of :func:`unit_friction_fast`) at the guess
+    when ``known``, else they are looked up first. The delivered current I: ``digital``,
+    the held commands (icl, icr) clipped to
     the drive's window at w (its voltage bound falls with speed, eq. 27); otherwise the
     PID current (Fig. 4) at w with the integral advanced from (zl_b, zr_b) by h e(w),
     clipped, not winding up while saturated. The friction is stiff near straight motion
     and at rest (its slope grows like 1/|w|); a step that overshoots a kink is halved.
+    The solve ends when the residual is within NEWTON_TOL, or (the continuous loop only)
+    when a full Newton correction is below STEP_RATE times the step, leaves both
+    currents on the same side of their limits and both wheels outside REST_BAND: from a
+    good guess that is the first correction, and the friction at the speeds it reaches
+    is extrapolated along its slopes (no lookup).
     Returns (wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u): speeds, currents [A],
     integrals [rad], saturation, unit frictions (lagged) and ``u`` at the solution."""
     k = P[P_K]
@@ -198,6 +215,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr,
     a_lag = 1.0 - math.exp(-h / lag) if lag > 0.0 else 1.0
     a_shear = 1.0 - math.exp(-h / P[P_SHEARLAG]) if P[P_SHEARLAG] > 0.0 else 1.0
     tol = NEWTON_TOL * (m11 - abs(m12))     # on the residual [N m s]
+    step_tol = h * (STEP_RATE / SDIRK_GAMMA)   # on a correction [rad/s] (h is a stage of the step)
     pl = wl
     pr = wr
     pnorm = 1e300
@@ -207,7 +225,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr,
     zl = zl_b
     zr = zr_b
     for it in range(NEWTON_ITERATIONS):
-        if it > 0:
+        if it > 0 or not known:
             u = unit_friction_fast(table, P[P_SCL] * wl, P[P_SCR] * wr)
         if digital:
             il, dil, sat_l = _held_current(icl, wl, vmax, k, ra, imax)
@@ -226,7 +244,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr,
         rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (k * il - res_l - g_l)
         rr = m12 * (wl - wl0) + m11 * (wr - wr0) - off_r - h * (k * ir - res_r - g_r)
         norm = abs(rl) + abs(rr)
-        if it > 0 and norm < tol:
+        if (it > 0 or not known) and norm < tol:
             break
         if norm > pnorm and lam > 0.01:
             # the Newton step overshot a kink of the friction: step back halfway
@@ -241,6 +259,27 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, off_l, off_r, h, digital, icl, icr,
         lam = 1.0
         wl = pl + stl
         wr = pr + str_
+        if (not digital and abs(stl) + abs(str_) < step_tol
+                and min(abs(wl), abs(wr)) > REST_BAND):
+            # converged unless a current crossed its limit: the currents at the new
+            # speeds, the friction extrapolated there
+            il2, dil, sat_l2, zl2 = _loop_current(P, refl, zl_b, rdl, wl, vmax, h)
+            ir2, dir_, sat_r2, zr2 = _loop_current(P, refr, zr_b, rdr, wr, vmax, h)
+            if sat_l2 != sat_l or sat_r2 != sat_r:
+                continue
+            il = il2
+            ir = ir2
+            zl = zl2
+            zr = zr2
+            scl = P[P_SCL]
+            scr = P[P_SCR]
+            u = (u[0] + u[2] * scl * stl + u[3] * scr * str_, u[1] + u[4] * scl * stl + u[5] * scr * str_,
+                 u[2], u[3], u[4], u[5])
+            if lag > 0.0:
+                il = S[S_IL] + a_lag * (il - S[S_IL])
+                ir = S[S_IR] + a_lag * (ir - S[S_IR])
+            res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
+            break
     return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u
 
 
@@ -338,8 +377,8 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     inv_dt = 1.0 / dt
     rdl = dl * inv_dt
     rdr = dr * inv_dt
-    u0 = _cached_friction(P, table, S)
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
+        u0 = _cached_friction(P, table, S)
         # 2: the digital PID samples the measured speeds; the command is held
         if open_loop:
             icl = cmd_l
@@ -359,7 +398,7 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
                 S[S_INTR] += er * dt
         # 3: backward Euler on eq. 25
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
-            P, table, S, wl0, wr0, wl0, wr0, u0, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0,
+            P, table, S, wl0, wr0, wl0, wr0, u0, True, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, vmax, cp, g_l, g_r)
         # the held current against the wheel speed, linear over the step
         pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
@@ -367,13 +406,26 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
         v, yaw_rate = alpha_model(P[P_SCL] * wl, P[P_SCR] * wr, P[P_R], P[P_B], P[P_ALPHA])
         vm = 0.5 * (v0 + v)
         ym = 0.5 * (yr0 + yaw_rate)
+        S[S_DWL] = (wl - wl0) * inv_dt
+        S[S_DWR] = (wr - wr0) * inv_dt
     else:
         # 2-3: the continuous loop, two-stage SDIRK: stage 1 ends at gamma dt, stage 2
         # at dt, each solved implicitly for the speeds with the PID current at them
         gam = SDIRK_GAMMA
         h = gam * dt
+        # stage 1 starts from the speeds the last step's end acceleration predicts
+        gl = wl0 + h * S[S_DWL]
+        gr = wr0 + h * S[S_DWR]
+        if gl * wl0 <= 0.0 or gr * wr0 <= 0.0:
+            gl = wl0                     # not through (or to) rest: the friction turns over there
+            gr = wr0
+        # the friction there extrapolated from the step's start (its slopes)
+        u0 = _cached_friction(P, table, S)
+        dgl = P[P_SCL] * (gl - wl0)
+        dgr = P[P_SCR] * (gr - wr0)
+        u0 = (u0[0] + u0[2] * dgl + u0[3] * dgr, u0[1] + u0[4] * dgl + u0[5] * dgr, u0[2], u0[3], u0[4], u0[5])
         w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr, u = _solve(
-            P, table, S, wl0, wr0, wl0, wr0, u0, 0.0, 0.0, h, False, 0.0, 0.0,
+            P, table, S, wl0, wr0, gl, gr, u0, True, 0.0, 0.0, h, False, 0.0, 0.0,
             ref_l0 + gam * dl, ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp,
             g_l, g_r)
         # stage 1's slopes, from its own equation: M (w1 - w0) = h F1
@@ -382,8 +434,17 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
         off_r = sl * (m12 * (w1l - wl0) + m11 * (w1r - wr0))
         zbl = S[S_INTL] + sl * (z1l - S[S_INTL])
         zbr = S[S_INTR] + sl * (z1r - S[S_INTR])
+        # stage 2 starts from stage 1's slope carried over the whole step
+        gl = wl0 + (w1l - wl0) * (1.0 / SDIRK_GAMMA)
+        gr = wr0 + (w1r - wr0) * (1.0 / SDIRK_GAMMA)
+        known = gl * wl0 <= 0.0 or gr * wr0 <= 0.0
+        if known:
+            gl = w1l                     # not through (or to) rest: from stage 1's speeds
+            gr = w1r
+        f1l = (w1l - wl0) * inv_dt * (1.0 / SDIRK_GAMMA)     # stage 1's slopes [rad/s^2]
+        f1r = (w1r - wr0) * inv_dt * (1.0 / SDIRK_GAMMA)
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
-            P, table, S, wl0, wr0, w1l, w1r, u, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL],
+            P, table, S, wl0, wr0, gl, gr, u, known, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL],
             S[S_REFR], zbl, zbr, rdl, rdr, vmax, cp, g_l, g_r)
         if check and ((wl0 * wl <= 0.0 and wl != wl0) or (wr0 * wr <= 0.0 and wr != wr0)):
             S[S_REFL] = ref_l0          # nothing else was written: the caller splits the step
@@ -400,6 +461,9 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
         ym = (1.0 - gam) * yr1 + gam * yaw_rate
         sat_l = sat_l or s1l
         sat_r = sat_r or s1r
+        # the slopes at the step's end, from stage 2's equation w = w0 + dt ((1 - gamma) f1 + gamma f2)
+        S[S_DWL] = ((wl - wl0) * inv_dt - (1.0 - gam) * f1l) * (1.0 / SDIRK_GAMMA)
+        S[S_DWR] = ((wr - wr0) * inv_dt - (1.0 - gam) * f1r) * (1.0 / SDIRK_GAMMA)
     S[S_E] += pb * dt
     S[S_IL] = il
     S[S_IR] = ir
