@@ -139,6 +139,20 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr):
 
 
 @jit_inline
+def _extrapolated_friction(u, dl, dr):
+    """The unit frictions ``u`` (6-tuple of :func:`unit_friction_fast`) carried along
+    their slopes to wheel speeds changed by (dl, dr) [rad/s, radius-scaled]; slopes kept."""
+    return (u[0] + u[2] * dl + u[3] * dr, u[1] + u[4] * dl + u[5] * dr, u[2], u[3], u[4], u[5])
+
+
+@jit_inline
+def _lagged(S, il, ir, a_lag):
+    """The delivered currents [A] of the actuator-lag extension: the state's currents
+    moved by the fraction a_lag towards the commanded (il, ir)."""
+    return S[S_IL] + a_lag * (il - S[S_IL]), S[S_IR] + a_lag * (ir - S[S_IR])
+
+
+@jit_inline
 def _loop_current(P, ref, integral, ref_rate, w, vmax, dt):
     """The PID current (Fig. 4) of one side with its integral advanced implicitly to the
     end of a step of dt [s] at wheel speed w, clipped to the drive's window (eq. 27).
@@ -234,8 +248,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
             il, dil, sat_l, zl = _loop_current(P, refl, zl_b, rdl, wl, vmax, h)
             ir, dir_, sat_r, zr = _loop_current(P, refr, zr_b, rdr, wr, vmax, h)
         if lag > 0.0:
-            il = S[S_IL] + a_lag * (il - S[S_IL])
-            ir = S[S_IR] + a_lag * (ir - S[S_IR])
+            il, ir = _lagged(S, il, ir, a_lag)
             dil *= a_lag
             dir_ *= a_lag
         res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
@@ -271,13 +284,9 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
             ir = ir2
             zl = zl2
             zr = zr2
-            scl = P[P_SCL]
-            scr = P[P_SCR]
-            u = (u[0] + u[2] * scl * stl + u[3] * scr * str_, u[1] + u[4] * scl * stl + u[5] * scr * str_,
-                 u[2], u[3], u[4], u[5])
+            u = _extrapolated_friction(u, P[P_SCL] * stl, P[P_SCR] * str_)
             if lag > 0.0:
-                il = S[S_IL] + a_lag * (il - S[S_IL])
-                ir = S[S_IR] + a_lag * (ir - S[S_IR])
+                il, ir = _lagged(S, il, ir, a_lag)
             res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
             break
     return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u
@@ -420,10 +429,7 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
             gl = wl0                     # not through (or to) rest: the friction turns over there
             gr = wr0
         # the friction there extrapolated from the step's start (its slopes)
-        u0 = _cached_friction(P, table, S)
-        dgl = P[P_SCL] * (gl - wl0)
-        dgr = P[P_SCR] * (gr - wr0)
-        u0 = (u0[0] + u0[2] * dgl + u0[3] * dgr, u0[1] + u0[4] * dgl + u0[5] * dgr, u0[2], u0[3], u0[4], u0[5])
+        u0 = _extrapolated_friction(_cached_friction(P, table, S), P[P_SCL] * (gl - wl0), P[P_SCR] * (gr - wr0))
         w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr, u = _solve(
             P, table, S, wl0, wr0, gl, gr, u0, True, 0.0, 0.0, h, False, 0.0, 0.0,
             ref_l0 + gam * dl, ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp,
