@@ -96,3 +96,29 @@ def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
         on.append(p.energy_J)
         off.append(q.energy_J)
     assert np.median(on) < 0.98 * np.median(off)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(-4.0, 8.7), st.floats(-4.0, 8.7)), min_size=3, max_size=6),
+       st.integers(0, 5), st.sampled_from(PO.STEPS))
+def test_moves_stay_in_range_and_a_moved_turn_keeps_the_heading(ws, i, s):
+    """Every trial keeps both controls' wheel speeds within [lo, hi]; the moves that shift
+    a turn between controls i and i + 1 keep their summed wheel-speed difference (the
+    heading change after both, on level ground) where no clipping intervened."""
+    lo, hi = -4.0, 8.7
+    ctrl = np.array([(a, b, 1.0) for a, b in ws])
+    i = min(i, len(ctrl) - 1)
+    moves = PO._moves(ctrl, i, s, hi, lo, hi)
+    assert np.all((moves >= lo) & (moves <= hi))
+    if i + 2 >= len(ctrl):
+        return
+    d = s * hi
+    turn = (ctrl[i, 1] - ctrl[i, 0]) + (ctrl[i + 1, 1] - ctrl[i + 1, 0])
+    wl, wr, nl, nr = ctrl[i, 0], ctrl[i, 1], ctrl[i + 1, 0], ctrl[i + 1, 1]
+    shifted = [m for m in moves if np.allclose(m, (wl + d, wr - d, nl - d, nr + d))
+               or np.allclose(m, (wl - d, wr + d, nl + d, nr - d))]
+    unclipped = all(lo <= x <= hi for x in (wl + d, wr - d, nl - d, nr + d, wl - d, wr + d, nl + d, nr - d))
+    if unclipped:
+        assert len(shifted) == 2
+    for m in shifted:
+        assert (m[1] - m[0]) + (m[3] - m[2]) == pytest.approx(turn, abs=1e-9)
