@@ -182,6 +182,15 @@ class _Executor:
         return rec[:rows], int(end), S
 
 
+def _weaker(stalls: list, name: str) -> str:
+    """The failure of a run whose vehicle stalled at ``stalls`` [(x, y)] where every plan
+    of the planning model ``name`` predicted it would get through."""
+    where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
+    return (f"the vehicle stalled {len(stalls)} time{'s' if len(stalls) > 1 else ''}, at {where}, where every "
+            f"plan predicted it would get through: it is weaker there than the planning model ({name}); plan "
+            f"with a model of this vehicle (sbmpc diagnose on a run of it writes one)")
+
+
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
     """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
@@ -233,8 +242,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 # again after the next period
                 why = None
             else:
+                # after stalls where the plans drove it, and from where none is seen now
+                weaker = f"; {_weaker(stalls, world.vehicle.name)}" if stalls else ""
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
-                                        f"({why}): {p.reason}")
+                                        f"({why}): {p.reason}{weaker}")
         control = current.controls[k]
         if k == len(current.controls) - 1:
             # the last control was cut where the prediction entered the goal: hold it
@@ -252,11 +263,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             out.stalls += 1
             stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
             if out.stalls > rs.max_stalls:
-                where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
-                return finish("failed", f"the vehicle stalled {out.stalls} times, at {where}, where every plan "
-                                        f"predicted it would get through: it is weaker there than the planning "
-                                        f"model ({world.vehicle.name}); plan with a model of this vehicle "
-                                        f"(sbmpc diagnose on a run of it writes one)")
+                return finish("failed", _weaker(stalls, world.vehicle.name))
             X[K.S_STALLT] = 0.0
             X[K.S_STALLED] = 0.0
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"

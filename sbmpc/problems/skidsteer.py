@@ -26,12 +26,16 @@ distance d to the goal disc:
 
 Both are raised by a cost-to-go grid over the map (``sbmpc.heuristics.cost_to_go``): Dijkstra
 from the goal over the map's cells, with 8-neighbour steps that cost d / v_bound (time)
-or max(0, F_roll d + m g dz) (energy: a climb costs its potential energy, a descent at
-most pays for its own rolling, none is banked), scaled down by the octile-to-Euclidean
-ratio, and avoiding cells where the vehicle tips over at every heading. It knows the
-shape of the ground that the straight-line bounds cannot see: the hill to be climbed or
-gone around. Its one approximation: kinetic energy gained in a dip and spent on the next
-rise is not credited beyond the KE the node carries now.
+or the least battery energy of the step (energy, ``sbmpc.heuristics.least_step_energy``:
+rolling resistance and the climb's potential energy plus the least copper loss the
+motors' currents must dissipate for them; a descent at most pays for its own rolling,
+none is banked), scaled down by the octile-to-Euclidean ratio, and avoiding cells where
+the vehicle tips over at every heading. It knows the shape of the ground that the
+straight-line bounds cannot see: the hill to be climbed or gone around. The KE a node
+carries is credited there times KEGRID = 1 + 2 R_a I_max / (k w_top), the copper
+bound's largest slope (KE spent on a climb saves at most that much of its bound). Its
+one approximation: kinetic energy gained in a dip and spent on the next rise is not
+credited beyond the KE the node carries now.
 """
 from __future__ import annotations
 
@@ -59,8 +63,8 @@ IN_GOAL = 1
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_DSLACK) = range(25)
-NQ = 25
+ Q_DSLACK, Q_KEGRID) = range(26)
+NQ = 26
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
 
@@ -210,7 +214,7 @@ def heuristic(params, data, state):
         j = min(max(int(math.floor(v)), 0), ny - 2)
         a = offd + j * nx + i
         c = min(min(data[a], data[a + 1]), min(data[a + nx], data[a + nx + 1]))
-        hd = c - params[Q_DSLACK] - ke
+        hd = c - params[Q_DSLACK] - params[Q_KEGRID] * ke
         if hd > h:
             h = hd
     return h if h > 0.0 else 0.0
