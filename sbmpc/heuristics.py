@@ -48,39 +48,63 @@ def _bounds(world: World):
 
 
 def copper_coefficient(world: World) -> float:
-    """c [1/N] of :func:`least_step_energy`: R_a r / (k^2 w_top), w_top 1.05 times the
-    largest sampled wheel speed (as the time bound's speed)."""
+    """c [1/N] of :func:`least_step_energy`: R_a r s / (k^2 w_top), s the smaller of the
+    wheels' radius scales (a side's rolled distance is r s int w dt) and w_top = V_max / k
+    the no-load speed: while a motor drives (I w > 0) the voltage limit (eq. 27) keeps
+    |w| below it, and only those intervals need to deliver the work."""
     v = world.vehicle
-    lo, hi = wheel_speed_range(world)
-    w_top = 1.05 * max(abs(lo), abs(hi)) * max(v.radius_scale_left, v.radius_scale_right)
-    return v.armature_resistance * v.wheel_radius / (v.torque_constant ** 2 * w_top)
+    w_top = v.v_max / v.torque_constant
+    s = min(v.radius_scale_left, v.radius_scale_right)
+    return v.armature_resistance * v.wheel_radius * s / (v.torque_constant ** 2 * w_top)
+
+
+def _step_work(f_roll, rise, d, c):
+    """Per side (W, L) of :func:`least_step_energy`'s minimum: the work [J] and the rolled
+    distance [m] (L >= d) at which W + c W^2 / L is least."""
+    f_roll, rise, d = np.broadcast_arrays(np.asarray(f_roll, float), np.asarray(rise, float), np.asarray(d, float))
+    a = np.maximum(0.5 * f_roll, 1e-12)
+    b = 0.5 * rise
+    L = np.maximum(d, np.maximum(b, 0.0) * np.sqrt(c / (a * (1.0 + c * a))))
+    return a * L + b, L
 
 
 def least_step_energy(f_roll, rise, d, c):
     """Least battery energy [J] of a step over the ground of length d [m] that rises by
     ``rise`` = m g dz [J], against a rolling force f_roll [N] (arrays broadcast).
 
-    Per side (each carries half of both), the motor's electrical energy is its mechanical
-    work W plus the copper loss R_a int I^2 dt (P = R_a I^2 + k w I, docs/model.md), and
-    by Cauchy-Schwarz int I^2 dt >= (int I w dt)^2 / int w^2 dt >= (W / k)^2 / (w_top L / r),
-    L the wheel's rolled distance, W >= f_roll L / 2 + rise / 2 (rolling resistance over
-    what the wheel rolls, its share of the climb). So a side spends at least
-    W + c W^2 / L, c = R_a r / (k^2 w_top) (:func:`copper_coefficient`), minimised over
-    L >= d (a wheel that rolls farther for the same climb draws less current: the
-    minimum is at L* = rise sqrt(c / (f_roll (2 + c f_roll))) when that exceeds d). With
-    nothing to climb against (f_roll d + rise <= 0) the bound is 0 (no regeneration).
-    On a steady climb at the top command it is 0.5-5 % below the model's draw (the
+    Per side, the motor's electrical energy is its mechanical work W plus the copper loss
+    R_a int I^2 dt (P = R_a I^2 + k w I, docs/model.md), and by Cauchy-Schwarz over the
+    intervals where it drives (I w > 0, |w| <= w_top there) int I^2 dt >= (W / k)^2 /
+    (w_top L / r), L the wheel's rolled distance, W >= f_roll L / 2 + its share of the
+    climb (each side's rolling resistance is mu m g cos / 2 over what it rolls). So a
+    side spends at least W + c W^2 / L, c = R_a r / (k^2 w_top) (:func:`copper_coefficient`).
+    W^2 / L is jointly convex, so the two sides together spend at least twice the value
+    at their mean W and mean L (the kinematics have no longitudinal slip: the mean rolled
+    distance is at least the distance d travelled, though the inner wheel of a turn
+    rolls less). Minimised over L >= d (a wheel that rolls farther for the same climb
+    draws less current: the minimum is at L* = rise sqrt(c / (f_roll (2 + c f_roll)))
+    when that exceeds d). With nothing to climb against (f_roll d + rise <= 0) the bound
+    is 0 (no regeneration). The bound is convex and grows linearly with (rise, d)
+    together, so splitting a step never lowers it: the grid's detour scaling and the
+    slack stay valid.
+    On a steady climb at the top command it is 0.3-5 % below the model's draw (the
     wheels slow on a grade, so the real copper loss per metre is larger); the copper
     term adds 4 % to rolling plus climb on the level and 20 % near the steepest grade
     the drive holds (packed dirt, tests/test_heuristics.py)."""
-    f_roll, rise, d = np.broadcast_arrays(np.asarray(f_roll, float), np.asarray(rise, float), np.asarray(d, float))
-    a = np.maximum(0.5 * f_roll, 1e-12)
-    b = 0.5 * rise
-    lstar = np.maximum(b, 0.0) * np.sqrt(c / (a * (1.0 + c * a)))
-    L = np.maximum(d, lstar)
-    W = a * L + b
+    W, L = _step_work(f_roll, rise, d, c)
     e = 2.0 * (W + c * W * W / np.maximum(L, 1e-12))
-    return np.where(f_roll * d + rise > 0.0, e, 0.0)
+    return np.where(np.asarray(f_roll) * np.asarray(d) + np.asarray(rise) > 0.0, e, 0.0)
+
+
+def ke_factor(f_roll, rise, d, c) -> float:
+    """The largest slope dE/dW = 1 + 2 c W / L of :func:`least_step_energy` over the given
+    steps (at least 1): kinetic energy the vehicle carries and spends on a step saves at
+    most this much of the step's bound (the bound is convex in W), so the heuristic
+    credits a node's KE this many times."""
+    W, L = _step_work(f_roll, rise, d, c)
+    live = np.asarray(f_roll) * np.asarray(d) + np.asarray(rise) > 0.0
+    s = 1.0 + 2.0 * c * W / np.maximum(L, 1e-12)
+    return float(max(1.0, s[live].max())) if np.any(live) else 1.0
 
 
 RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle
@@ -134,8 +158,10 @@ def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
 @functools.lru_cache(maxsize=8)
 def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
-    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), and the slack [s or J]
-    the heuristic subtracts for the way from a pose to its nearest node. Unreachable
+    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), the slack [s or J]
+    the heuristic subtracts for the way from a pose to its nearest node, and the factor
+    its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
+    time). Unreachable
     nodes get a large finite cost. Cached per (world, cost): planning and replaying
     share it.
 
@@ -167,6 +193,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     climb = math.tan(climb_limit(world))
     copper = copper_coefficient(world)
     src, dst, w = [], [], []
+    kegrid = 1.0
     for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
         a = idx[:ny - dj, max(0, -di):nx - max(0, di)].ravel()
         b = idx[dj:, max(0, di):nx - max(0, -di)].ravel()      # the cell (j + dj, i + di)
@@ -181,6 +208,8 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
             else:
                 f = np.minimum(froll_cell[p], froll_cell[q])
                 wt = least_step_energy(f, mg * (H.ravel()[q] - H.ravel()[p]), d, copper)
+                if p.size:
+                    kegrid = max(kegrid, ke_factor(f, mg * (H.ravel()[q] - H.ravel()[p]), d, copper))
             # reversed edges: Dijkstra runs from the goal
             src.append(q)
             dst.append(p)
@@ -189,7 +218,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     g = scn.goal
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
     if goal_nodes.size == 0:
-        return np.zeros(e.shape), 0.0
+        return np.zeros(e.shape), 0.0, 1.0
     # on a window, a source node (index nx * ny) joined to the goal at 0 and to every
     # cell of the window's inner edges at the straight-line bound from there
     S = nx * ny
@@ -231,7 +260,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         out = np.zeros(e.shape)
         out[j0:j1, i0:i1] = D.reshape(ny, nx)
     out.setflags(write=False)        # cached and shared
-    return out, float(slack)
+    return out, float(slack), kegrid
 
 
 def _max_rise(H, res, dist):

@@ -17,8 +17,10 @@ parallel over numba's threads):
   mean (a turn spread over two periods);
 * s x the top speed of turn moved from control i + 1 to control i or back (the heading
   after both kept: a turn that migrates a little earlier or later, where a swap would
-  move the path's end out of the goal), and both wheels of control i made 1 + s times
-  as fast with control i + 1's 1 - s times (or the reverse: speed moved between them);
+  move the path's end out of the goal), and s x the top speed added to both wheels of
+  control i and taken from both of control i + 1, or back (speed moved between them,
+  the distance kept); none of these keeps heading and distance where a wheel speed is
+  clipped to the range;
 
 and keeps the best trial when it reaches the goal disc for less than the plan's cost
 (time or energy); the last control is held longer or cut where the vehicle enters the
@@ -80,15 +82,15 @@ def _moves(ctrl: np.ndarray, i: int, s: float, top: float, lo: float, hi: float)
         if (a, b) != (wl, wr):
             out.append((a, b, nl, nr))
     if i + 2 < n:                                    # two full periods (not the cut last one)
-        # a turn moved between the two (the heading after both kept), a speed moved
+        # a turn or a speed moved between the two (heading and distance after both kept
+        # but where a wheel speed is clipped to the range)
         for a, b, c, e in ((wl + d, wr - d, nl - d, nr + d), (wl - d, wr + d, nl + d, nr - d),
-                           (wl * (1 + s), wr * (1 + s), nl * (1 - s), nr * (1 - s)),
-                           (wl * (1 - s), wr * (1 - s), nl * (1 + s), nr * (1 + s))):
+                           (wl + d, wr + d, nl - d, nr - d), (wl - d, wr - d, nl + d, nr + d)):
             a, b = min(max(a, lo), hi), min(max(b, lo), hi)
             c, e = min(max(c, lo), hi), min(max(e, lo), hi)
             if (a, b, c, e) != (wl, wr, nl, nr):
                 out.append((a, b, c, e))
-    if i + 2 < n and (wl, wr) != (nl, nr):          # two full periods (not the cut last one)
+    if i + 2 < n and (wl, wr) != (nl, nr):
         out.append((nl, nr, wl, wr))
         ml, mr = 0.5 * (wl + nl), 0.5 * (wr + nr)
         out.append((ml, mr, ml, mr))

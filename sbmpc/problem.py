@@ -10,7 +10,7 @@ import numpy as np
 from dynamics import kernels as K
 from dynamics.resistance import friction_table
 
-from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
+from .heuristics import _bounds, _lowest_in_disc, cost_to_go
 from .problems import skidsteer as SS
 from .search.astar import Problem
 from .world import FIXED_CONTROLS, World, _start, control_set
@@ -32,7 +32,7 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
-    ctg, slack = cost_to_go(world, cost)
+    ctg, slack, kegrid = cost_to_go(world, cost)
     offd = offt + sum(b.size for b in blocks)
     data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
@@ -54,8 +54,7 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
     Q[SS.Q_BLOCK] = blocks[0].size
     Q[SS.Q_OFFD] = offd
     Q[SS.Q_DSLACK] = slack
-    # the copper bound's largest slope dE/dW = 1 + 2 c F_max, F_max = k I_max / r a side's force
-    Q[SS.Q_KEGRID] = 1.0 + 2.0 * copper_coefficient(world) * v.torque_constant * v.current_limit / v.wheel_radius
+    Q[SS.Q_KEGRID] = kegrid        # the step bounds' largest slope dE/dW (heuristics.ke_factor)
     return Q, data
 
 

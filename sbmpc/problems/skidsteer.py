@@ -32,8 +32,9 @@ motors' currents must dissipate for them; a descent at most pays for its own rol
 none is banked), scaled down by the octile-to-Euclidean ratio, and avoiding cells where
 the vehicle tips over at every heading. It knows the shape of the ground that the
 straight-line bounds cannot see: the hill to be climbed or gone around. The KE a node
-carries is credited there times KEGRID = 1 + 2 R_a I_max / (k w_top), the copper
-bound's largest slope (KE spent on a climb saves at most that much of its bound). Its
+carries is credited there times KEGRID, the largest slope dE/dW of the grid's step
+bounds (``sbmpc.heuristics.ke_factor``: KE spent on a step saves at most that much of
+its bound). Its
 one approximation: kinetic energy gained in a dip and spent on the next rise is not
 credited beyond the KE the node carries now.
 """
