@@ -40,7 +40,9 @@ OUT = ROOT / "bench" / "results" / "edges.json"
 
 TIMER = r'''
 import sys, time, math
+import numba
 import numpy as np
+numba.set_num_threads(1)               # one core (an expander may loop in parallel)
 sys.path.insert(0, sys.argv[1])
 from sbmpc import scenario as SC
 try:                                   # the layout since plan.py's split

@@ -168,10 +168,14 @@ def propagate(params, data, state, control, out):
     return edge_cost(params, data, state, control, out, np.empty((0, K.NR)), 0, np.empty(K.NO))
 
 
-@njit(EXPAND.signature, cache=True, error_model="numpy")
+@njit(EXPAND.signature, cache=True, error_model="numpy", parallel=True)
 def expand(params, data, work, state, controls, children, costs):
-    """The edges of one expansion (:mod:`sbmpc.search.astar`), one :func:`propagate` per control."""
-    for b in range(controls.shape[0]):
+    """The edges of one expansion (:mod:`sbmpc.search.astar`), one :func:`propagate` per
+    control, over numba's current threads (the serial search sets them to 1). A prange
+    loop even on one thread: numba compiles a parallel loop's body into code about a
+    third faster per edge than the same loop without it (on hill_tradeoff's search
+    nodes 11.3 against 17.1 us per edge, the same results to the bit; 2026-11-30)."""
+    for b in prange(controls.shape[0]):
         costs[b] = propagate(params, data, state, controls[b], children[b])
 
 

@@ -597,6 +597,17 @@ class Search:
         progress = _with_best(progress, self.best)
         if batch > 1 or threads == "auto" or (threads or 1) > 1:
             return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
+        if threads == 1:                # a problem's expander may loop in parallel: one thread
+            import numba
+            before = numba.get_num_threads()
+            numba.set_num_threads(1)
+            try:
+                return self._run_serial(max_iterations, time_budget_s, chunk, progress)
+            finally:
+                numba.set_num_threads(before)
+        return self._run_serial(max_iterations, time_budget_s, chunk, progress)
+
+    def _run_serial(self, max_iterations, time_budget_s, chunk, progress) -> SearchResult:
         p = self.problem
         t0 = time.perf_counter()
         while True:
