@@ -207,9 +207,10 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
                 wt = np.full(p.size, d / vb)
             else:
                 f = np.minimum(froll_cell[p], froll_cell[q])
-                wt = least_step_energy(f, mg * (H.ravel()[q] - H.ravel()[p]), d, copper)
+                rise = mg * (H.ravel()[q] - H.ravel()[p])
+                wt = least_step_energy(f, rise, d, copper)
                 if p.size:
-                    kegrid = max(kegrid, ke_factor(f, mg * (H.ravel()[q] - H.ravel()[p]), d, copper))
+                    kegrid = max(kegrid, ke_factor(f, rise, d, copper))
             # reversed edges: Dijkstra runs from the goal
             src.append(q)
             dst.append(p)

@@ -104,7 +104,8 @@ def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
 def test_moves_stay_in_range_and_a_moved_turn_keeps_the_heading(ws, i, s):
     """Every trial keeps both controls' wheel speeds within [lo, hi]; the moves that shift
     a turn between controls i and i + 1 keep their summed wheel-speed difference (the
-    heading change after both, on level ground) where no clipping intervened."""
+    heading change after both, on level ground), and those that shift speed their summed
+    wheel speeds (the distance), where no clipping intervened."""
     lo, hi = -4.0, 8.7
     ctrl = np.array([(a, b, 1.0) for a, b in ws])
     i = min(i, len(ctrl) - 1)
@@ -122,3 +123,10 @@ def test_moves_stay_in_range_and_a_moved_turn_keeps_the_heading(ws, i, s):
         assert len(shifted) == 2
     for m in shifted:
         assert (m[1] - m[0]) + (m[3] - m[2]) == pytest.approx(turn, abs=1e-9)
+    # the moves that shift speed between the two keep their summed wheel speeds (distance)
+    speed = [m for m in moves if np.allclose(m, (wl + d, wr + d, nl - d, nr - d))
+             or np.allclose(m, (wl - d, wr - d, nl + d, nr + d))]
+    if unclipped:
+        assert len(speed) == 2
+    for m in speed:
+        assert m.sum() == pytest.approx(wl + wr + nl + nr, abs=1e-9)
