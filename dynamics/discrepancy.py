@@ -45,8 +45,8 @@ from .synth import apply
 MARGIN = 0.05          # least held-out gain that names a cause (with the evidence below)
 EVIDENCE = 10.0        # held-out BIC change (heldout_evidence) below -EVIDENCE: very strong evidence
 REACH_MIN = 0.05       # noise units: a candidate that moves the held-out prediction less is untested there
-TRAINING_EVIDENCE = 200.0   # training evidence (as heldout_evidence, on the training part) that names
-                            # an effect the held-out part cannot test
+TRAINING_EVIDENCE = 200.0   # evidence (heldout_evidence) on the one part that names an effect the
+                            # other part cannot test
 TIE = 0.02             # gains closer than this to the named cause's: a rival within noise
 AT_BOUND = 0.01        # a fit within this fraction of its range from a bound "ends at the bound"
 TRAIN_FRACTION = 0.7
@@ -237,11 +237,13 @@ class Candidate:
     bic_delta: float
     whiteness_q: float
     at_bound: tuple = ()      # parameters whose fit ended at a bound of the candidate's range
-    fitted_on: str = "channels"   # or "pose": fitted to the relative pose errors
+    fitted_on: str = "channels"   # "pose": fitted to the relative pose errors; "heldout": to the
+                                  # channels of the held-out part (the training part cannot see it)
     pose_gain: float | None = None   # 1 - held-out RPE extended / baseline (the better of heading, translation)
     evidence: float = math.nan   # held-out BIC change (heldout_evidence): below -EVIDENCE names the cause
     reach: float = math.nan      # held-out RMS change of the prediction from the baseline's, noise units
     train_evidence: float = math.nan   # as ``evidence``, on the training part
+    train_reach: float = math.nan      # as ``reach``, on the training part
 
 
 def at_bound(effect: str, params: dict) -> tuple:
@@ -277,7 +279,8 @@ class Diagnosis:
     extended_terrain: Terrain | None = None
     pose: dict = field(default_factory=dict)     # {"baseline": RPE, "extended": RPE} on the held-out part
     rivals: tuple = ()     # other candidates within TIE of the named cause's gain (also above MARGIN)
-    decided_on: str | None = None   # "heldout", "training" (the held-out part cannot test it) or "pose"
+    decided_on: str | None = None   # "heldout", "training" (the held-out part cannot test it),
+                                    # "heldout_only" (the training part cannot) or "pose"
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -290,7 +293,8 @@ class Diagnosis:
                             "pose_gain": c.pose_gain,
                             "evidence": None if math.isnan(c.evidence) else c.evidence,
                             "reach": None if math.isnan(c.reach) else c.reach,
-                            "train_evidence": None if math.isnan(c.train_evidence) else c.train_evidence}
+                            "train_evidence": None if math.isnan(c.train_evidence) else c.train_evidence,
+                            "train_reach": None if math.isnan(c.train_reach) else c.train_reach}
                            for c in self.candidates],
             "cause": self.cause,
             "rivals": list(self.rivals),
@@ -496,8 +500,11 @@ def _model_for(effect, x, vehicle, terrain, names):
     return apply(vehicle, effect, dict(zip(names, x)), terrain)
 
 
-def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
-    """Fit one candidate on the training mask: (x, standard errors).
+def fit_candidate(effect, run, vehicle, terrain, chans, scales, train, window_s: float = FIT_WINDOW_S):
+    """Fit one candidate on the samples of the mask ``train`` (the training part, or the
+    held-out part of a candidate the training part cannot test), replaying the run from
+    its start to the mask's last sample but at most ``window_s`` [s]: (x, standard
+    errors).
 
     One parameter: a bounded Brent search of the residual sum of squares, after a coarse
     grid where the objective is flat between steps (the delay, down to one replay step:
@@ -508,7 +515,7 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train):
     standard errors from its Jacobian."""
     names, lo, hi, x0, step = CANDIDATES[effect]
     last = int(np.flatnonzero(train)[-1]) + 1
-    last = min(last, int(np.searchsorted(run.t, run.t[0] + FIT_WINDOW_S)) + 1)
+    last = min(last, int(np.searchsorted(run.t, run.t[0] + window_s)) + 1)
     part = run.slice(0, last)
     tmask = train[:last]
 
@@ -603,15 +610,22 @@ def _decides(c: Candidate) -> str | None:
     integration step, parameters a few per cent off, gains up to about 0.04 on
     generated runs) and the evidence for it is very strong on both parts of the run:
     the training BIC and the held-out BIC (:func:`heldout_evidence`, samples counted by
-    their autocorrelation) each fall by more than EVIDENCE. "training" when the held-out
-    part cannot test it (its prediction there moves by less than REACH_MIN noise units
-    from the baseline's: say a turning effect and a held-out part that drives straight)
-    and the training part's evidence, its samples counted by their autocorrelation as
-    on the held-out part, falls by more than TRAINING_EVIDENCE (a much higher bar: the
-    fit has seen these data). Else None."""
+    their autocorrelation) each fall by more than EVIDENCE. When one part cannot test
+    it (its prediction there moves by less than REACH_MIN noise units from the
+    baseline's), the other decides alone, with a much higher bar (its evidence, samples
+    counted by their autocorrelation, falls by more than TRAINING_EVIDENCE): "training"
+    when the held-out part cannot (say a turning effect and a held-out part that drives
+    straight; the fit has seen these data), "heldout_only" when the training part
+    cannot (say a voltage sag that grows with the energy drawn and limits the drive only
+    late in the run: :func:`diagnose` then fits it on the held-out part,
+    ``fitted_on="heldout"``), there also with a gain of at least MARGIN. Else None."""
     if c.reach < REACH_MIN:
         return "training" if c.train_evidence < -TRAINING_EVIDENCE else None
-    if c.gain >= MARGIN and c.bic_delta < -EVIDENCE and not c.evidence >= -EVIDENCE:
+    if c.gain < MARGIN:
+        return None
+    if c.fitted_on == "heldout":
+        return "heldout_only" if c.evidence < -TRAINING_EVIDENCE else None
+    if c.bic_delta < -EVIDENCE and not c.evidence >= -EVIDENCE:
         return "heldout"
     return None
 
@@ -624,11 +638,13 @@ def _gain(err: float, base_err: float) -> float:
 
 def _pick(cands: list) -> tuple:
     """(best candidate, what it was decided on or None): the largest held-out gain among
-    those decided on the held-out part, else the strongest training evidence among those
-    decided on the training part alone, else the largest gain (not named)."""
-    held = [c for c in cands if _decides(c) == "heldout"]
+    decided on the held-out part (with the training part's evidence or alone), else the
+    strongest training evidence among those decided on the training part alone, else
+    the largest gain (not named)."""
+    held = [c for c in cands if _decides(c) in ("heldout", "heldout_only")]
     if held:
-        return max(held, key=lambda c: c.gain), "heldout"
+        best = max(held, key=lambda c: c.gain)
+        return best, _decides(best)
     train = [c for c in cands if _decides(c) == "training"]
     if train:
         return min(train, key=lambda c: c.train_evidence), "training"
@@ -653,26 +669,36 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     rmse = {c: float(np.sqrt(np.nanmean(((run[c] - base[c]))[held] ** 2))) for c in chans}
     cands = []
     todo = effects or tuple(CANDIDATES)
+
+    def candidate(eff, x, se, fitted_on="channels"):
+        names = CANDIDATES[eff][0]
+        v, ter, p = _model_for(eff, x, vehicle, terrain, names)
+        pred = replay(run, v, ter, p + pitch)
+        err = _error(run, pred, chans, scales, held)
+        params = {n: float(a) for n, a in zip(names, x)}
+        gain = _gain(err, base_err)
+        return Candidate(eff, params, {n: float(a) for n, a in zip(names, se)}, err, gain,
+                         _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
+                         ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound(eff, params),
+                         fitted_on=fitted_on,
+                         evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
+                         reach=_error(base, pred, chans, scales, held),
+                         train_evidence=heldout_evidence(run, pred, chans, scales, train,
+                                                         _gain(_error(run, pred, chans, scales, train), base_train),
+                                                         len(names)),
+                         train_reach=_error(base, pred, chans, scales, train))
+
     for i, eff in enumerate(todo):
         if progress is not None:
             progress(i, len(todo), eff)
-        names = CANDIDATES[eff][0]
-        x, se = fit_candidate(eff, run, vehicle, terrain, chans, scales, train)
-        v, ter, p = _model_for(eff, x, vehicle, terrain, names)
-        p = p + pitch
-        pred = replay(run, v, ter, p)
-        err = _error(run, pred, chans, scales, held)
-        r_train = _residuals(run, pred, chans, scales, train)
-        params = {n: float(a) for n, a in zip(names, x)}
-        gain = _gain(err, base_err)
-        cands.append(Candidate(eff, params, {n: float(s) for n, s in zip(names, se)},
-                               err, gain, _bic(r_train, len(names)) - bic0,
-                               ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound(eff, params),
-                               evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
-                               reach=_error(base, pred, chans, scales, held),
-                               train_evidence=heldout_evidence(run, pred, chans, scales, train,
-                                                               _gain(_error(run, pred, chans, scales, train), base_train),
-                                                               len(names))))
+        c = candidate(eff, *fit_candidate(eff, run, vehicle, terrain, chans, scales, train))
+        if c.train_reach < REACH_MIN <= c.reach:
+            # the training part cannot see it (a voltage sag that limits the drive only
+            # late in the run): its fit there is uninformed; fit it on the held-out part,
+            # replaying the whole run (_decides judges it as data the fit has seen)
+            c = candidate(eff, *fit_candidate(eff, run, vehicle, terrain, chans, scales, held, math.inf),
+                          fitted_on="heldout")
+        cands.append(c)
     cands.sort(key=lambda c: -c.gain)
     best, decided = _pick(cands)
     pe_base = pose_error(run, base, held)

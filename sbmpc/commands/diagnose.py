@@ -64,7 +64,7 @@ def run_synth(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    from dynamics.discrepancy import EVIDENCE, MARGIN, diagnose, replay
+    from dynamics.discrepancy import EVIDENCE, MARGIN, TRAINING_EVIDENCE, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
     outs = Outputs([args.run, args.vehicle, args.terrain])
@@ -125,10 +125,14 @@ def run_diagnose(args) -> int:
     in_pose = named is not None and named.fitted_on == "pose"
     if d.cause == "none":
         why = (f" (no candidate gains {100 * MARGIN:.0f} % on held-out data with very strong evidence (BIC "
-               f"falls by more than {EVIDENCE:g} on both parts), nor halves the pose error)")
+               f"falls by more than {EVIDENCE:g} on both parts, or by more than {TRAINING_EVIDENCE:g} on the one "
+               "part that sees it), nor halves the pose error)")
     elif d.decided_on == "training":
         why = (f" (the held-out part cannot test it: its prediction there moves by {named.reach:.3f} noise units; "
                f"training evidence {named.train_evidence:.0f})")
+    elif d.decided_on == "heldout_only":
+        why = (f" (the training part cannot test it: its prediction there moves by {named.train_reach:.3f} noise "
+               f"units; held-out gain {d.gain:.2f}, held-out BIC change {named.evidence:.0f})")
     else:
         why = (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
                + (": seen only in the pose" if in_pose else f", held-out BIC change {named.evidence:.0f}") + ")")
