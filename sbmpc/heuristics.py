@@ -86,7 +86,7 @@ def least_step_energy(f_roll, rise, d, c):
     when that exceeds d). With nothing to climb against (f_roll d + rise <= 0) the bound
     is 0 (no regeneration). The bound is convex and grows linearly with (rise, d)
     together, so splitting a step never lowers it: the grid's detour scaling and the
-    slack stay valid.
+    way from a node to a pose stay valid.
     On a steady climb at the top command it is 0.3-5 % below the model's draw (the
     wheels slow on a grade, so the real copper loss per metre is larger); the copper
     term adds 4 % to rolling plus climb on the level and 20 % near the steepest grade
@@ -158,8 +158,9 @@ def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
 @functools.lru_cache(maxsize=8)
 def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
-    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), the slack [s or J]
-    the heuristic subtracts for the way from a pose to its nearest node, and the factor
+    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), the largest rolling
+    force [N] of the map's cells (for the heuristic's bound of the way from a node to a
+    pose between the nodes, ``skidsteer._node_to_pose``), and the factor
     its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
     time). Unreachable
     nodes get a large finite cost. Cached per (world, cost): planning and replaying
@@ -253,15 +254,13 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     else:
         D = dijkstra(G_, indices=goal_nodes, min_only=True)[:S]
     D[~np.isfinite(D)] = 1e12
-    diag = res * math.sqrt(2.0)
-    slack = diag / vb if cost == "time" else float(least_step_energy(froll_cell.max(), mg * _max_rise(H, res, diag), diag, copper))
     if (j0, j1, i0, i1) == (0, full_ny, 0, full_nx):
         out = D.reshape(ny, nx)
     else:
         out = np.zeros(e.shape)
         out[j0:j1, i0:i1] = D.reshape(ny, nx)
     out.setflags(write=False)        # cached and shared
-    return out, float(slack), kegrid
+    return out, float(froll_cell.max()), kegrid
 
 
 def _max_rise(H, res, dist):

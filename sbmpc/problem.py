@@ -10,7 +10,7 @@ import numpy as np
 from dynamics import kernels as K
 from dynamics.resistance import friction_table
 
-from .heuristics import _bounds, _lowest_in_disc, cost_to_go
+from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
 from .problems import skidsteer as SS
 from .search.astar import Problem
 from .world import FIXED_CONTROLS, World, _start, control_set
@@ -32,7 +32,7 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
-    ctg, slack, kegrid = cost_to_go(world, cost)
+    ctg, frmax, kegrid = cost_to_go(world, cost)
     offd = offt + sum(b.size for b in blocks)
     data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
@@ -53,8 +53,9 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
     Q[SS.Q_OFFT] = offt
     Q[SS.Q_BLOCK] = blocks[0].size
     Q[SS.Q_OFFD] = offd
-    Q[SS.Q_DSLACK] = slack
+    Q[SS.Q_FRMAX] = frmax       # the largest rolling force of the map's cells (the way from a node to a pose)
     Q[SS.Q_KEGRID] = kegrid        # the step bounds' largest slope dE/dW (heuristics.ke_factor)
+    Q[SS.Q_COPPER] = copper_coefficient(world)
     return Q, data
 
 

@@ -1,5 +1,7 @@
 """The cost-to-go grid: a lower bound of the cost to the goal, also when a large map
 gets only a window of it."""
+import functools
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -144,3 +146,47 @@ def test_the_energy_heuristic_never_exceeds_what_the_found_path_still_costs(name
     h = np.array([SS.heuristic(prob.params, prob.data, X) for X in res.states])
     assert np.all(h <= E[-1] - E + 1e-9)
     assert h[0] > 0.7 * (E[-1] - E[0])         # and it is informative: most of the cost
+
+
+@functools.lru_cache(maxsize=2)
+def _hill_problem(cost):
+    from sbmpc import problem as PB
+    world = WO.resolve(SC.load(SCEN / "hill_tradeoff.yaml"))
+    return world, PB.problem(world, cost)
+
+
+@settings(max_examples=60, deadline=None)
+@given(u=st.floats(0.0, 0.999), v=st.floats(0.0, 0.999), dz=st.floats(-0.2, 0.2), cost=st.sampled_from(["time", "energy"]))
+def test_the_grid_read_is_the_least_corner_less_its_way_to_the_pose(u, v, dz, cost):
+    """The heuristic reads the cost-to-go grid at the four corners of the pose's cell,
+    each less the most the way from that corner to the pose may cost (what the grid's
+    value there may exceed the pose's own by): dist / v_bound for time, the energy step
+    bound (least_step_energy at the map's largest rolling force, for the pose's height
+    above the corner) for energy. A grid low at one node only tells whether the read
+    takes the right corners and ways."""
+    from sbmpc.problems import skidsteer as SS
+    from dynamics import kernels as K
+    world, prob = _hill_problem(cost)
+    Q, data = prob.params.copy(), prob.data.copy()
+    nx, ny, res = int(Q[SS.Q_NX]), int(Q[SS.Q_NY]), Q[SS.Q_RES]
+    off = int(Q[SS.Q_OFFD])
+    i0, j0 = nx // 3, ny // 2                      # the pose's cell: nodes (i0, j0) .. (i0 + 1, j0 + 1)
+    H = world.emap.heights
+    for ci, cj in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        data[off:off + nx * ny] = 1e7
+        data[off + (j0 + cj) * nx + i0 + ci] = 5e4       # far above the straight-line bound
+        x = Q[SS.Q_OX] + (i0 + u) * res
+        y = Q[SS.Q_OY] + (j0 + v) * res
+        X = np.zeros(SS.NX)
+        X[K.S_X], X[K.S_Y] = x, y
+        X[K.S_Z] = H[j0 + cj, i0 + ci] + dz
+        d = math.hypot(u - ci, v - cj) * res
+        if cost == "time":
+            way = d / Q[SS.Q_VBOUND]
+        else:
+            way = float(HE.least_step_energy(Q[SS.Q_FRMAX], Q[SS.Q_MG] * dz, d, HE.copper_coefficient(world)))
+        h = SS.heuristic(Q, data, X)
+        assert h == pytest.approx(5e4 - way, rel=1e-12)
+    data[off:off + nx * ny] = 1e7                  # a low node outside the cell is not read
+    data[off + (j0 + 2) * nx + i0] = 5e4
+    assert SS.heuristic(Q, data, X) > 1e6

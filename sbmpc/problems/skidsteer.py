@@ -31,7 +31,12 @@ rolling resistance and the climb's potential energy plus the least copper loss t
 motors' currents must dissipate for them; a descent at most pays for its own rolling,
 none is banked), scaled down by the octile-to-Euclidean ratio, and avoiding cells where
 the vehicle tips over at every heading. It knows the shape of the ground that the
-straight-line bounds cannot see: the hill to be climbed or gone around. The KE a node
+straight-line bounds cannot see: the hill to be climbed or gone around. A pose between
+the grid's nodes reads the least over its cell's four corners of the corner's value less
+the most the way from that corner to the pose may cost (``_node_to_pose``: its distance
+over v_bound, or the energy step bound for its climb from the corner's height to the
+pose's; the map is bilinear, so the cell's highest corner is never below the pose and
+its way costs no climb). The KE a node
 carries is credited there times KEGRID, the largest slope dE/dW of the grid's step
 bounds (``sbmpc.heuristics.ke_factor``: KE spent on a step saves at most that much of
 its bound). Its
@@ -64,8 +69,8 @@ IN_GOAL = 1
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_DSLACK, Q_KEGRID) = range(26)
-NQ = 26
+ Q_FRMAX, Q_KEGRID, Q_COPPER) = range(27)
+NQ = 27
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
 
@@ -187,6 +192,31 @@ def expand_batch(params, data, parents, owner, controls, children, costs):
         costs[e] = propagate(params, data, parents[owner[e]], controls[e], children[e])
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _node_to_pose(params, dx, dy, dz):
+    """The most the way from a cost-to-go node to a pose (dx, dy, dz) [m] away may
+    cost [s or J], which the grid's value at the node may exceed the pose's cost to go
+    by: dist / v_bound for time; for energy the step bound of
+    ``sbmpc.heuristics.least_step_energy`` at the map's largest rolling force, for the
+    pose's height above the node (the map is bilinear: the highest corner of a cell is
+    never below the pose)."""
+    d = math.sqrt(dx * dx + dy * dy)
+    if params[Q_COST] == COST_TIME:
+        return d / params[Q_VBOUND]
+    f = params[Q_FRMAX]
+    rise = params[Q_MG] * dz
+    if f * d + rise <= 0.0:
+        return 0.0
+    cu = params[Q_COPPER]
+    a = 0.5 * f
+    b = 0.5 * rise
+    L = d
+    if b > 0.0:
+        L = max(d, b * math.sqrt(cu / (a * (1.0 + cu * a))))
+    W = a * L + b
+    return 2.0 * (W + cu * W * W / max(L, 1e-12))
+
+
 @njit(HEURISTIC.signature, cache=True, error_model="numpy")
 def heuristic(params, data, state):
     """Lower bound of the time [s] or energy [J] to the goal disc (module doc): the larger
@@ -208,8 +238,8 @@ def heuristic(params, data, state):
         h = params[Q_FROLL] * d + params[Q_MG] * (params[Q_ZG] - state[K.S_Z]) - ke
     offd = int(params[Q_OFFD])
     if offd >= 0:
-        # cost-to-go grid: the least of the four surrounding nodes, less what reaching
-        # that node from (x, y) could at most save
+        # cost-to-go grid: the least over the four surrounding nodes of the node's cost
+        # less the most the way from that node to (x, y) can cost (_node_to_pose)
         nx = int(params[Q_NX])
         ny = int(params[Q_NY])
         res = params[Q_RES]
@@ -217,9 +247,13 @@ def heuristic(params, data, state):
         v = (y - params[Q_OY]) / res
         i = min(max(int(math.floor(u)), 0), nx - 2)
         j = min(max(int(math.floor(v)), 0), ny - 2)
-        a = offd + j * nx + i
-        c = min(min(data[a], data[a + 1]), min(data[a + nx], data[a + nx + 1]))
-        hd = c - params[Q_DSLACK] - params[Q_KEGRID] * ke
+        c = math.inf
+        for dj in range(2):
+            for di in range(2):
+                a = (j + dj) * nx + i + di
+                way = _node_to_pose(params, (u - i - di) * res, (v - j - dj) * res, state[K.S_Z] - data[a])
+                c = min(c, data[offd + a] - way)
+        hd = c - params[Q_KEGRID] * ke
         if hd > h:
             h = hd
     return h if h > 0.0 else 0.0
