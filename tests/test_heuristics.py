@@ -160,9 +160,9 @@ def _hill_problem(cost):
 def test_the_grid_read_is_the_least_corner_less_its_way_to_the_pose(u, v, dz, cost):
     """The heuristic reads the cost-to-go grid at the four corners of the pose's cell,
     each less the most the way from that corner to the pose may cost (what the grid's
-    value there may exceed the pose's own by): dist / v_bound for time, the energy step
-    bound (least_step_energy at the map's largest rolling force, for the pose's height
-    above the corner) for energy. A grid low at one node only tells whether the read
+    value there may exceed the pose's own by): the cell's diagonal / v_bound for time,
+    the energy step bound (least_step_energy at the map's largest rolling force, for
+    the distance and the pose's height above the corner) for energy. A grid low at one node only tells whether the read
     takes the right corners and ways."""
     from sbmpc.problems import skidsteer as SS
     from dynamics import kernels as K
@@ -182,7 +182,7 @@ def test_the_grid_read_is_the_least_corner_less_its_way_to_the_pose(u, v, dz, co
         X[K.S_Z] = H[j0 + cj, i0 + ci] + dz
         d = math.hypot(u - ci, v - cj) * res
         if cost == "time":
-            way = d / Q[SS.Q_VBOUND]
+            way = math.sqrt(2.0) * res / Q[SS.Q_VBOUND]      # the cell's diagonal (see _node_to_pose)
         else:
             way = float(HE.least_step_energy(Q[SS.Q_FRMAX], Q[SS.Q_MG] * dz, d, HE.copper_coefficient(world)))
         h = SS.heuristic(Q, data, X)
