@@ -11,9 +11,10 @@ a viscous drag of 0.3 N m s/rad, a turning friction x 0.75, a 4 deg grade). Each
 diagnosed as ``sbmpc diagnose`` does; the named cause and its fitted parameter are set
 against the hidden truth.
 
-    python bench/bench_independent.py
+    python bench/bench_independent.py [--base-seeds 20240 31000]
 
-writes ``bench/results/independent.json`` (the runs themselves go to a temporary
+Each base seed is one batch of the eleven runs with its own command sequences and
+noise. Writes ``bench/results/independent.json`` (the runs themselves go to a temporary
 folder; ``python bench/independent/sim.py --out DIR`` writes them where you like).
 """
 from __future__ import annotations
@@ -29,7 +30,11 @@ ROOT = Path(__file__).resolve().parent
 OUT = ROOT / "results" / "independent.json"
 
 
-def main() -> int:
+def main(argv=None) -> int:
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base-seeds", type=int, nargs="+", default=[20240, 31000])
+    args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT / "independent"))
     import sim
     from dynamics.discrepancy import diagnose
@@ -37,30 +42,31 @@ def main() -> int:
     from dynamics.runs import read_run
 
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        sim.generate(tmp)
-        manifest = json.loads((Path(tmp) / "manifest.json").read_text())
-        for entry in manifest["runs"]:
-            run = read_run(Path(tmp) / entry["file"])
-            t0 = time.perf_counter()
-            d = diagnose(run, load_vehicle("p3at"), load_terrain("vinyl"))
-            named = next((c for c in d.candidates if c.effect == d.cause), None)
-            row = {"run": entry["file"], "hidden": entry["effect"], "truth": entry["params"],
-                   "cause": d.cause, "right": d.cause == entry["effect"], "decided_on": d.decided_on,
-                   "gain": d.gain, "fitted": named.params if named else None,
-                   "stderr": named.stderr if named else None,
-                   "evidence": None if named is None or named.evidence != named.evidence else named.evidence,
-                   "rivals": list(d.rivals), "baseline_heldout_error": d.baseline_error,
-                   "best_other_gain": max((c.gain for c in d.candidates if c.effect != d.cause), default=None),
-                   "seconds": round(time.perf_counter() - t0, 2)}
-            rows.append(row)
-            print(f"{entry['file']:28s} hidden {entry['effect']:17s} -> {d.cause:17s} "
-                  f"{'right' if row['right'] else 'WRONG'}  gain {d.gain:.2f}  "
-                  f"fitted {json.dumps({k: round(v, 4) for k, v in (row['fitted'] or {}).items()})}", flush=True)
+    for base in args.base_seeds:
+        with tempfile.TemporaryDirectory() as tmp:
+            sim.generate(tmp, base_seed=base)
+            manifest = json.loads((Path(tmp) / "manifest.json").read_text())
+            for entry in manifest["runs"]:
+                run = read_run(Path(tmp) / entry["file"])
+                t0 = time.perf_counter()
+                d = diagnose(run, load_vehicle("p3at"), load_terrain("vinyl"))
+                named = next((c for c in d.candidates if c.effect == d.cause), None)
+                row = {"base_seed": base, "run": entry["file"], "hidden": entry["effect"], "truth": entry["params"],
+                       "cause": d.cause, "right": d.cause == entry["effect"], "decided_on": d.decided_on,
+                       "gain": d.gain, "fitted": named.params if named else None,
+                       "stderr": named.stderr if named else None,
+                       "evidence": None if named is None or named.evidence != named.evidence else named.evidence,
+                       "rivals": list(d.rivals), "baseline_heldout_error": d.baseline_error,
+                       "best_other_gain": max((c.gain for c in d.candidates if c.effect != d.cause), default=None),
+                       "seconds": round(time.perf_counter() - t0, 2)}
+                rows.append(row)
+                print(f"{base} {entry['file']:28s} hidden {entry['effect']:17s} -> {d.cause:17s} "
+                      f"{'right' if row['right'] else 'WRONG'}  gain {d.gain:.2f}  "
+                      f"fitted {json.dumps({k: round(v, 4) for k, v in (row['fitted'] or {}).items()})}", flush=True)
     right = sum(r["right"] for r in rows)
     with_effect = [r for r in rows if r["hidden"] != "none"]
     out = {"machine": platform.processor() or platform.machine(), "python": platform.python_version(),
-           "measured_at": time.strftime("%Y-%m-%d"), "generator": "bench/independent/sim.py",
+           "measured_at": time.strftime("%Y-%m-%d"), "generator": "bench/independent/sim.py", "base_seeds": args.base_seeds,
            "runs": rows, "right": right, "total": len(rows),
            "least_gain_with_effect": min(r["gain"] for r in with_effect) if with_effect else None}
     OUT.write_text(json.dumps(out, indent=1) + "\n")
