@@ -1,6 +1,7 @@
 """The generic search (sbmpc.search.astar) on problems with known answers, and its parts (cell
 table, open set) against plain Python."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -265,3 +266,25 @@ def test_auto_threads_keep_the_faster_expander_and_measure_again():
     for _ in range(c.RECHECK - (2 * c.TRIES + 10) + 2 * c.TRIES + 5):
         c(16)
     assert c.choices == ["serial", "parallel"] and calls[-5:] == ["p"] * 5
+
+
+@pytest.mark.parametrize("kw", [dict(threads=1), dict(threads=2), dict(batch=4, threads=2), dict(threads="auto")])
+def test_a_search_leaves_numbas_thread_count_as_it_found_it(kw):
+    """Each mode sets numba's threads for its expander (one thread for the serial search,
+    the asked count for the batched one); afterwards the caller's count is back (the
+    polish after a search runs its trials on numba's threads)."""
+    import numba
+    from sbmpc import problem as PB, scenario as SC, world as WO
+    from sbmpc.search.astar import Search
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one numba thread: nothing to change")
+    world = WO.resolve(SC.load(Path(__file__).resolve().parents[1] / "scenarios" / "flat.yaml"))
+    prob = PB.problem(world, "time")
+    before = numba.get_num_threads()
+    numba.set_num_threads(1 if kw.get("threads") != 1 else 2)
+    try:
+        mine = numba.get_num_threads()
+        Search(prob).run(30, **kw)
+        assert numba.get_num_threads() == mine
+    finally:
+        numba.set_num_threads(before)

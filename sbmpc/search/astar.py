@@ -595,17 +595,16 @@ class Search:
         if hasattr(progress, "budgets"):
             progress.budgets(max_iterations, time_budget_s)
         progress = _with_best(progress, self.best)
-        if batch > 1 or threads == "auto" or (threads or 1) > 1:
-            return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
-        if threads == 1:                # a problem's expander may loop in parallel: one thread
-            import numba
-            before = numba.get_num_threads()
-            numba.set_num_threads(1)
-            try:
-                return self._run_serial(max_iterations, time_budget_s, chunk, progress)
-            finally:
-                numba.set_num_threads(before)
-        return self._run_serial(max_iterations, time_budget_s, chunk, progress)
+        import numba
+        before = numba.get_num_threads()      # each mode sets numba's threads: restored after
+        try:
+            if batch > 1 or threads == "auto" or (threads or 1) > 1:
+                return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
+            if threads == 1:                # a problem's expander may loop in parallel: one thread
+                numba.set_num_threads(1)
+            return self._run_serial(max_iterations, time_budget_s, chunk, progress)
+        finally:
+            numba.set_num_threads(before)
 
     def _run_serial(self, max_iterations, time_budget_s, chunk, progress) -> SearchResult:
         p = self.problem
@@ -646,7 +645,7 @@ class Search:
                          CO[:k * nb])
         if p.expand_batch is not None:
             import numba
-            if threads is not None:
+            if threads is not None:             # (Search.run restores the count after)
                 n = numba.config.NUMBA_NUM_THREADS if threads == "auto" else int(threads)
                 numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
 
