@@ -641,10 +641,12 @@ def _pick(cands: list) -> tuple:
     decided on the held-out part (with the training part's evidence or alone), else the
     strongest training evidence among those decided on the training part alone, else
     the largest gain (not named)."""
-    held = [c for c in cands if _decides(c) in ("heldout", "heldout_only")]
+    held = [c for c in cands if _decides(c) == "heldout"]
     if held:
-        best = max(held, key=lambda c: c.gain)
-        return best, _decides(best)
+        return max(held, key=lambda c: c.gain), "heldout"
+    only = [c for c in cands if _decides(c) == "heldout_only"]    # gains on data their fit saw:
+    if only:                                                     # after the out-of-sample ones
+        return max(only, key=lambda c: c.gain), "heldout_only"
     train = [c for c in cands if _decides(c) == "training"]
     if train:
         return min(train, key=lambda c: c.train_evidence), "training"
@@ -692,7 +694,7 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         if progress is not None:
             progress(i, len(todo), eff)
         c = candidate(eff, *fit_candidate(eff, run, vehicle, terrain, chans, scales, train))
-        if c.train_reach < REACH_MIN <= c.reach:
+        if c.train_reach < REACH_MIN <= c.reach and _decides(c) is None:
             # the training part cannot see it (a voltage sag that limits the drive only
             # late in the run): its fit there is uninformed; fit it on the held-out part,
             # replaying the whole run (_decides judges it as data the fit has seen)
@@ -731,7 +733,8 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
         pose["baseline"] = pe
         ext = replay(run, ext_v, ext_t, math.radians(ext_p) + pitch) if named else base
         pose["extended"] = pose_error(run, ext, held)
-    rivals = tuple(c.effect for c in cands[1:] if named and _decides(c) and best.gain - c.gain < TIE)
+    rivals = tuple(c.effect for c in cands[1:] if named and _decides(c) and best.gain - c.gain < TIE
+                   and (c.fitted_on == "heldout") == (best.fitted_on == "heldout"))   # like with like
     gain = (best.pose_gain if best.fitted_on == "pose" else best.gain) if named else 0.0
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, best.effect if named else "none",
                      gain, _where(run, base, chans, scales), _xcorr(run, base, scales),

@@ -160,9 +160,9 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
     over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), the largest rolling
     force [N] of the map's cells (for the heuristic's bound of the way from a node to a
-    pose between the nodes, ``skidsteer._node_to_pose``), and the factor
+    pose between the nodes, ``skidsteer._node_to_pose``), the factor
     its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
-    time). Unreachable
+    time) and the goal's gap [s or J] the heuristic subtracts (:func:`_goal_gap`). Unreachable
     nodes get a large finite cost. Cached per (world, cost): planning and replaying
     share it.
 
@@ -220,7 +220,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     g = scn.goal
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
     if goal_nodes.size == 0:
-        return np.zeros(e.shape), 0.0, 1.0
+        return np.zeros(e.shape), 0.0, 1.0, 0.0
     # on a window, a source node (index nx * ny) joined to the goal at 0 and to every
     # cell of the window's inner edges at the straight-line bound from there
     S = nx * ny
@@ -260,7 +260,33 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         out = np.zeros(e.shape)
         out[j0:j1, i0:i1] = D.reshape(ny, nx)
     out.setflags(write=False)        # cached and shared
-    return out, float(froll_cell.max()), kegrid
+    frmax = float(froll_cell.max())
+    gap = _goal_gap(e, g, X.ravel()[goal_nodes], Y.ravel()[goal_nodes], H.ravel()[goal_nodes],
+                    cost, vb, frmax, mg, copper)
+    return out, frmax, kegrid, gap
+
+
+def _goal_gap(e: ElevationMap, goal: dict, qx, qy, qz, cost, vb, frmax, mg, copper, n: int = 720) -> float:
+    """The most the grid may charge beyond where a path ends [s or J]: a path ends where
+    it first touches the goal disc, the grid where it reaches a node inside the disc
+    (value 0), up to about a cell further. The largest, over points b of the disc's
+    edge (``n`` samples, their spacing added to the distances), of the least bound of
+    the way from b to one of the goal's nodes q (``qx, qy, qz``): distance / v_bound for
+    time, the energy step bound at the map's largest rolling force for the climb from b
+    to q. The heuristic subtracts it: its constant shift of every value leaves the
+    weighted search's order as it is."""
+    if len(qx) == 0:
+        return 0.0
+    r = goal["radius"]
+    a = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    bx, by = goal["x"] + r * np.cos(a), goal["y"] + r * np.sin(a)
+    bz = np.array([e.height(x, y) for x, y in zip(bx, by)])
+    d = np.hypot(bx[:, None] - qx[None, :], by[:, None] - qy[None, :]) + np.pi * r / n
+    if cost == "time":
+        way = d / vb
+    else:
+        way = least_step_energy(frmax, mg * (qz[None, :] - bz[:, None]), d, copper)
+    return float(way.min(axis=1).max())
 
 
 def _max_rise(H, res, dist):

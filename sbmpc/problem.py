@@ -32,7 +32,7 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
-    ctg, frmax, kegrid = cost_to_go(world, cost)
+    ctg, frmax, kegrid, gap = cost_to_go(world, cost)
     offd = offt + sum(b.size for b in blocks)
     data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
@@ -56,6 +56,7 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
     Q[SS.Q_FRMAX] = frmax       # the largest rolling force of the map's cells (the way from a node to a pose)
     Q[SS.Q_KEGRID] = kegrid        # the step bounds' largest slope dE/dW (heuristics.ke_factor)
     Q[SS.Q_COPPER] = copper_coefficient(world)
+    Q[SS.Q_GOALGAP] = gap          # the grid's reach past a path's end in the disc (heuristics._goal_gap)
     return Q, data
 
 

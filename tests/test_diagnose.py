@@ -290,6 +290,10 @@ def test_an_effect_the_training_part_cannot_test_is_fitted_and_named_on_the_held
     assert c.fitted_on == "heldout" and c.train_reach < 0.05 and c.bic_delta > -10
     assert c.gain > 0.2 and c.evidence < -1000
     assert c.params["sag_V_per_kJ"] == pytest.approx(1.0, abs=0.05)
+    # the same commands without the sag: the held-out fit finds nothing to name
+    clean, _ = synth_run("none", 19, duration=DURATION)
+    d = diagnose(clean, P3AT, VINYL)
+    assert d.cause == "none" and d.decided_on is None
 
 
 @pytest.mark.parametrize("seed, kw", [

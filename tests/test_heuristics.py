@@ -123,7 +123,7 @@ def test_the_ke_credit_covers_the_steepest_grid_step():
     factor is the slope there (above the 1.41 that the current limit alone gives), so
     the credit never exceeds what KE can save of a step's bound."""
     world = WO.resolve(SC.load(SCEN / "steep_hill.yaml"))
-    _, _, q = HE.cost_to_go.__wrapped__(world, "energy")
+    _, _, q, _ = HE.cost_to_go.__wrapped__(world, "energy")
     v = world.vehicle
     at_limit = 1.0 + 2.0 * HE.copper_coefficient(world) * v.torque_constant * v.current_limit / v.wheel_radius
     assert q > at_limit > 1.3
@@ -162,8 +162,9 @@ def test_the_grid_read_is_the_least_corner_less_its_way_to_the_pose(u, v, dz, co
     each less the most the way from that corner to the pose may cost (what the grid's
     value there may exceed the pose's own by): the cell's diagonal / v_bound for time,
     the energy step bound (least_step_energy at the map's largest rolling force, for
-    the distance and the pose's height above the corner) for energy. A grid low at one node only tells whether the read
-    takes the right corners and ways."""
+    the distance and the pose's height above the corner) for energy; all less the
+    goal's gap (heuristics._goal_gap). A grid low at one node only tells whether the
+    read takes the right corners and ways."""
     from sbmpc.problems import skidsteer as SS
     from dynamics import kernels as K
     world, prob = _hill_problem(cost)
@@ -186,7 +187,44 @@ def test_the_grid_read_is_the_least_corner_less_its_way_to_the_pose(u, v, dz, co
         else:
             way = float(HE.least_step_energy(Q[SS.Q_FRMAX], Q[SS.Q_MG] * dz, d, HE.copper_coefficient(world)))
         h = SS.heuristic(Q, data, X)
-        assert h == pytest.approx(5e4 - way, rel=1e-12)
+        assert h == pytest.approx(5e4 - way - Q[SS.Q_GOALGAP], rel=1e-12)
     data[off:off + nx * ny] = 1e7                  # a low node outside the cell is not read
     data[off + (j0 + 2) * nx + i0] = 5e4
     assert SS.heuristic(Q, data, X) > 1e6
+
+
+@pytest.mark.parametrize("cost", ["time", "energy"])
+@pytest.mark.parametrize("gap, bearing", [(0.001, 90.0), (0.001, 200.0), (0.05, 30.0), (0.3, 135.0), (1.0, 200.0)])
+def test_the_heuristic_stays_below_a_real_drive_into_a_disc_off_the_grids_nodes(cost, gap, bearing):
+    """A path ends where it first touches the goal disc, which can lie up to a cell from
+    the nearest grid node inside it (here the disc's centre is half a cell off the
+    nodes). From rest, ``gap`` metres outside the disc at ``bearing`` from its centre
+    and facing it, the
+    heuristic must stay below what driving at the top speed costs to enter it (the
+    closed-loop model's own time or battery energy over its 1 s edges). (With the grid
+    reaching the disc only through its nodes inside, 1 mm north of this disc read
+    1.22 J where entering it costs 0.24 J.)"""
+    from sbmpc import problem as PB
+    from sbmpc.problems import skidsteer as SS
+    from dynamics import kernels as K
+    scn = SC.load(SCEN / "flat.yaml")
+    goal = dict(scn.goal, x=16.125, y=8.51, radius=0.5)
+    scn = replace(scn, goal=goal)
+    ang = math.radians(bearing)
+    x = goal["x"] + (goal["radius"] + gap) * math.cos(ang)
+    y = goal["y"] + (goal["radius"] + gap) * math.sin(ang)
+    scn = replace(scn, start=dict(scn.start, x=x, y=y, yaw_deg=math.degrees(ang) - 180.0, v=0.0))
+    world = WO.resolve(scn)
+    prob = PB.problem(world, cost)
+    X = prob.start.copy()
+    top = WO.wheel_speed_range(world)[1]
+    c, S = 0.0, X.copy()
+    for _ in range(6):                            # 1 s edges until the disc is entered
+        out = np.zeros_like(S)
+        step = SS.propagate(prob.params, prob.data, S, np.array([top, top]), out)
+        assert step > 0
+        c, S = c + step, out
+        if SS.is_goal(prob.params, prob.data, S):
+            break
+    assert SS.is_goal(prob.params, prob.data, S)
+    assert SS.heuristic(prob.params, prob.data, X) <= c

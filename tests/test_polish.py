@@ -83,7 +83,9 @@ def test_polish_never_makes_a_plan_dearer(flat, noise, cost):
 
 def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
     """flat.yaml's energy plans for Halton seeds 0-3, driven at 1 kHz: the polish makes
-    each cheaper than the search's own plan, the median by at least 2 %. (It does not
+    each cheaper than the search's own plan, the median by at least 1 % (1.8 % measured
+    since the grid read at each pose's own cell corners made the searched plans
+    cheaper; 2-3 % before). (It does not
     bring every seed to one optimum: a local search ends in the basin it starts in, so
     the spread over seeds stays a few per cent: docs/planner.md.)"""
     on, off = [], []
@@ -95,7 +97,7 @@ def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
         assert p.energy_J < q.energy_J
         on.append(p.energy_J)
         off.append(q.energy_J)
-    assert np.median(on) < 0.98 * np.median(off)
+    assert np.median(on) < 0.99 * np.median(off)
 
 
 @settings(max_examples=60, deadline=None)

@@ -118,7 +118,8 @@ def run_diagnose(args) -> int:
     for c in d.candidates:
         ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" + (" (at its bound)" if k in c.at_bound else "")
                        for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
-        pose = f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else ""
+        pose = (f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else
+                "  [fitted on the held-out part: the training part cannot test it]" if c.fitted_on == "heldout" else "")
         ev = "" if math.isnan(c.evidence) else f"{c.evidence:.0f}"
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f} {ev:>12s}  {ps}{pose}")
     named = next((c for c in d.candidates if c.effect == d.cause), None)
@@ -132,7 +133,8 @@ def run_diagnose(args) -> int:
                f"training evidence {named.train_evidence:.0f})")
     elif d.decided_on == "heldout_only":
         why = (f" (the training part cannot test it: its prediction there moves by {named.train_reach:.3f} noise "
-               f"units; held-out gain {d.gain:.2f}, held-out BIC change {named.evidence:.0f})")
+               f"units; fitted on the held-out part: gain there {d.gain:.2f}, BIC change there "
+               f"{named.evidence:.0f})")
     else:
         why = (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
                + (": seen only in the pose" if in_pose else f", held-out BIC change {named.evidence:.0f}") + ")")

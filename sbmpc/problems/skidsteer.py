@@ -33,10 +33,11 @@ none is banked), scaled down by the octile-to-Euclidean ratio, and avoiding cell
 the vehicle tips over at every heading. It knows the shape of the ground that the
 straight-line bounds cannot see: the hill to be climbed or gone around. A pose between
 the grid's nodes reads the least over its cell's four corners of the corner's value less
-the most the way from that corner to the pose may cost (``_node_to_pose``: its distance
-over v_bound, or the energy step bound for its climb from the corner's height to the
-pose's; the map is bilinear, so the cell's highest corner is never below the pose and
-its way costs no climb). The KE a node
+the most the way from that corner to the pose may cost (``_node_to_pose``: the cell's
+diagonal over v_bound, or the energy step bound for the distance and the climb from the
+corner's height to the pose's; the map is bilinear, so the cell's highest corner is never below the pose and
+its way costs no climb), less the goal's gap (``sbmpc.heuristics._goal_gap``: the grid
+reaches the disc at its nodes inside, a path at its edge). The KE a node
 carries is credited there times KEGRID, the largest slope dE/dW of the grid's step
 bounds (``sbmpc.heuristics.ke_factor``: KE spent on a step saves at most that much of
 its bound). Its
@@ -69,8 +70,8 @@ IN_GOAL = 1
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_FRMAX, Q_KEGRID, Q_COPPER) = range(27)
-NQ = 27
+ Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP) = range(28)
+NQ = 28
 SQRT2 = math.sqrt(2.0)
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
@@ -212,7 +213,7 @@ def _node_to_pose(params, dx, dy, dz):
     if f * d + rise <= 0.0:
         return 0.0
     cu = params[Q_COPPER]
-    a = 0.5 * f
+    a = max(0.5 * f, 1e-12)
     b = 0.5 * rise
     L = d
     if b > 0.0:
@@ -257,7 +258,7 @@ def heuristic(params, data, state):
                 a = (j + dj) * nx + i + di
                 way = _node_to_pose(params, (u - i - di) * res, (v - j - dj) * res, state[K.S_Z] - data[a])
                 c = min(c, data[offd + a] - way)
-        hd = c - params[Q_KEGRID] * ke
+        hd = c - params[Q_KEGRID] * ke - params[Q_GOALGAP]
         if hd > h:
             h = hd
     return h if h > 0.0 else 0.0
