@@ -36,13 +36,19 @@ the grid's nodes reads the least over its cell's four corners of the corner's va
 the most the way from that corner to the pose may cost (``_node_to_pose``: the cell's
 diagonal over v_bound, or the energy step bound for the distance and the climb from the
 corner's height to the pose's; the map is bilinear, so the cell's highest corner is never below the pose and
-its way costs no climb), less the goal's gap (``sbmpc.heuristics._goal_gap``: the grid
-reaches the disc at its nodes inside, a path at its edge). The KE a node
+its way costs no climb). The KE a node
 carries is credited there times KEGRID, the largest slope dE/dW of the grid's step
 bounds (``sbmpc.heuristics.ke_factor``: KE spent on a step saves at most that much of
 its bound). Its
 one approximation: kinetic energy gained in a dip and spent on the next rise is not
 credited beyond the KE the node carries now.
+
+The heuristic is the larger of the two less the goal's gap
+(``sbmpc.heuristics._goal_gap``): the grid reaches the disc at its nodes inside, a path
+ends at its edge, up to a cell before. Subtracted from every value alike, also near
+the goal where that makes it negative, it leaves the weighted search's order as it
+was; subtracted from the grid's read alone, or clamped at 0, it moved the energy plans
+over seeds by +-3 % (ties are fragile, docs/performance.md).
 """
 from __future__ import annotations
 
@@ -258,10 +264,12 @@ def heuristic(params, data, state):
                 a = (j + dj) * nx + i + di
                 way = _node_to_pose(params, (u - i - di) * res, (v - j - dj) * res, state[K.S_Z] - data[a])
                 c = min(c, data[offd + a] - way)
-        hd = c - params[Q_KEGRID] * ke - params[Q_GOALGAP]
+        hd = c - params[Q_KEGRID] * ke
         if hd > h:
             h = hd
-    return h if h > 0.0 else 0.0
+    # less the goal's gap, after the clamp: every value moves by the same constant (may
+    # go below 0 near the goal), so the weighted search's order stays as without it
+    return (h if h > 0.0 else 0.0) - params[Q_GOALGAP]
 
 
 @njit(GOAL.signature, cache=True, error_model="numpy")
