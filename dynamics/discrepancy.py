@@ -638,9 +638,10 @@ def _gain(err: float, base_err: float) -> float:
 
 def _pick(cands: list) -> tuple:
     """(best candidate, what it was decided on or None): the largest held-out gain among
-    decided on the held-out part (with the training part's evidence or alone), else the
-    strongest training evidence among those decided on the training part alone, else
-    the largest gain (not named)."""
+    those decided on the held-out part with the training part's support, else among
+    those the held-out part decided alone (their gains are on data their fit saw), else
+    the strongest training evidence among those decided on the training part alone,
+    else the largest gain (not named)."""
     held = [c for c in cands if _decides(c) == "heldout"]
     if held:
         return max(held, key=lambda c: c.gain), "heldout"
