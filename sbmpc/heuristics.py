@@ -15,6 +15,7 @@ from dynamics.params import G
 from maps import ElevationMap
 from maps.grid import pitch_roll_at
 
+from .problems import skidsteer as SS
 from .world import World, wheel_speed_range
 
 
@@ -58,14 +59,27 @@ def copper_coefficient(world: World) -> float:
     return v.armature_resistance * v.wheel_radius * s / (v.torque_constant ** 2 * w_top)
 
 
-def _step_work(f_roll, rise, d, c):
-    """Per side (W, L) of :func:`least_step_energy`'s minimum: the work [J] and the rolled
-    distance [m] (L >= d) at which W + c W^2 / L is least."""
+@njit(cache=True, error_model="numpy")
+def _steps(f_roll, rise, d, c, energy, slope):
+    """Over flat arrays: each step's bound (skidsteer.step_energy) into ``energy`` and
+    its slope dE/dW = 1 + 2 c W / L at the minimum into ``slope`` (0 where the bound is
+    0: nothing to climb against)."""
+    for k in range(f_roll.shape[0]):
+        energy[k] = SS.step_energy(f_roll[k], rise[k], d[k], c)
+        if f_roll[k] * d[k] + rise[k] > 0.0:
+            W, L = SS.step_work(f_roll[k], rise[k], d[k], c)
+            slope[k] = 1.0 + 2.0 * c * W / max(L, 1e-12)
+        else:
+            slope[k] = 0.0
+
+
+def _step_bounds(f_roll, rise, d, c) -> tuple:
+    """(bounds, slopes) of :func:`_steps` over arrays that broadcast, in their shape."""
     f_roll, rise, d = np.broadcast_arrays(np.asarray(f_roll, float), np.asarray(rise, float), np.asarray(d, float))
-    a = np.maximum(0.5 * f_roll, 1e-12)
-    b = 0.5 * rise
-    L = np.maximum(d, np.maximum(b, 0.0) * np.sqrt(c / (a * (1.0 + c * a))))
-    return a * L + b, L
+    flat = [np.ascontiguousarray(x).ravel() for x in (f_roll, rise, d)]
+    energy, slope = np.empty(flat[0].size), np.empty(flat[0].size)
+    _steps(*flat, float(c), energy, slope)
+    return energy.reshape(f_roll.shape), slope.reshape(f_roll.shape)
 
 
 def least_step_energy(f_roll, rise, d, c):
@@ -90,10 +104,9 @@ def least_step_energy(f_roll, rise, d, c):
     On a steady climb at the top command it is 0.3-5 % below the model's draw (the
     wheels slow on a grade, so the real copper loss per metre is larger); the copper
     term adds 4 % to rolling plus climb on the level and 20 % near the steepest grade
-    the drive holds (packed dirt, tests/test_heuristics.py)."""
-    W, L = _step_work(f_roll, rise, d, c)
-    e = 2.0 * (W + c * W * W / np.maximum(L, 1e-12))
-    return np.where(np.asarray(f_roll) * np.asarray(d) + np.asarray(rise) > 0.0, e, 0.0)
+    the drive holds (packed dirt, tests/test_heuristics.py). One formula, compiled
+    (``skidsteer.step_energy``), serves this grid and the heuristic's way to a pose."""
+    return _step_bounds(f_roll, rise, d, c)[0]
 
 
 def ke_factor(f_roll, rise, d, c) -> float:
@@ -101,10 +114,8 @@ def ke_factor(f_roll, rise, d, c) -> float:
     steps (at least 1): kinetic energy the vehicle carries and spends on a step saves at
     most this much of the step's bound (the bound is convex in W), so the heuristic
     credits a node's KE this many times."""
-    W, L = _step_work(f_roll, rise, d, c)
-    live = np.asarray(f_roll) * np.asarray(d) + np.asarray(rise) > 0.0
-    s = 1.0 + 2.0 * c * W / np.maximum(L, 1e-12)
-    return float(max(1.0, s[live].max())) if np.any(live) else 1.0
+    slope = _step_bounds(f_roll, rise, d, c)[1]
+    return float(max(1.0, slope.max())) if slope.size else 1.0
 
 
 RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle

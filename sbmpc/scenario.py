@@ -44,9 +44,9 @@ class PlannerSettings:
     w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
     suffices; for energy 1.1 too, since its heuristic counts the copper loss: over
-    Halton seeds the energy plans of hill_tradeoff, mixed_terrain and steep_hill spread
-    by 2.0-4.3 % at 1.1 (3.1-7.0 % at 1.2 with the older heuristic), for 30-70 % more
-    expansions; 2.0 lost up to 24 %, bench/bench_energy_plans.py); refine:
+    Halton seeds the energy plans of hill_tradeoff, steep_hill and mixed_terrain spread
+    by 2.0-4.0 % at 1.1 (3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
+    24 %, bench/bench_energy_plans.py); refine:
     after the first solution, go on (anytime weighted A*, pruning with the unweighted
     bound) for refine times the expansions it took, keeping the best plan (0: stop at
     the first; on the shipped scenarios refinement changed no time plan by more than

@@ -200,32 +200,44 @@ def expand_batch(params, data, parents, owner, controls, children, costs):
         costs[e] = propagate(params, data, parents[owner[e]], controls[e], children[e])
 
 
+@njit(cache=True, error_model="numpy")
+def step_work(f_roll, rise, d, c):
+    """Per side (W [J], L [m]) of :func:`step_energy`'s minimum: the work and the rolled
+    distance L >= d at which W + c W^2 / L is least (L* = rise sqrt(c / (f_roll (2 + c
+    f_roll))) when that exceeds d)."""
+    a = max(0.5 * f_roll, 1e-12)
+    b = 0.5 * rise
+    L = d
+    if b > 0.0:
+        L = max(d, b * math.sqrt(c / (a * (1.0 + c * a))))
+    return a * L + b, L
+
+
+@njit(cache=True, error_model="numpy")
+def step_energy(f_roll, rise, d, c):
+    """Least battery energy [J] of a step of length d [m] rising by ``rise`` = m g dz [J]
+    against a rolling force f_roll [N], c [1/N] the copper coefficient: 2 (W + c W^2 / L)
+    at :func:`step_work`'s minimum, 0 with nothing to climb against (the derivation:
+    ``sbmpc.heuristics.least_step_energy``, its array form for the cost-to-go grid)."""
+    if f_roll * d + rise <= 0.0:
+        return 0.0
+    W, L = step_work(f_roll, rise, d, c)
+    return 2.0 * (W + c * W * W / max(L, 1e-12))
+
+
 @njit(cache=True, error_model="numpy", inline="always")
 def _node_to_pose(params, dx, dy, dz):
     """The most the way from a cost-to-go node to a pose (dx, dy, dz) [m] away may
     cost [s or J], which the grid's value at the node may exceed the pose's cost to go
-    by: for energy the step bound of ``sbmpc.heuristics.least_step_energy`` at the map's
-    largest rolling force, for the distance and the pose's height above the node (the
-    map is bilinear: the highest corner of a cell is never below the pose). For time
-    the cell's diagonal over v_bound, not the distance: the tighter read made the
-    weighted time search greedier (steep_hill's time plan 36.3 -> 37.5 s, narrow_pass's
-    49.1 -> 52.1 s), and the energy read's gain is the blocked flanks' climbs, which
-    time never had."""
+    by: for energy the step bound (:func:`step_energy`) at the map's largest rolling
+    force, for the distance and the pose's height above the node (the map is bilinear:
+    the highest corner of a cell is never below the pose). For time the cell's diagonal
+    over v_bound, not the distance: the tighter read made the weighted time search
+    greedier (steep_hill's time plan 36.3 -> 37.5 s, narrow_pass's 49.1 -> 52.1 s), and
+    the energy read's gain is the blocked flanks' climbs, which time never had."""
     if params[Q_COST] == COST_TIME:
         return SQRT2 * params[Q_RES] / params[Q_VBOUND]
-    d = math.sqrt(dx * dx + dy * dy)
-    f = params[Q_FRMAX]
-    rise = params[Q_MG] * dz
-    if f * d + rise <= 0.0:
-        return 0.0
-    cu = params[Q_COPPER]
-    a = max(0.5 * f, 1e-12)
-    b = 0.5 * rise
-    L = d
-    if b > 0.0:
-        L = max(d, b * math.sqrt(cu / (a * (1.0 + cu * a))))
-    W = a * L + b
-    return 2.0 * (W + cu * W * W / max(L, 1e-12))
+    return step_energy(params[Q_FRMAX], params[Q_MG] * dz, math.sqrt(dx * dx + dy * dy), params[Q_COPPER])
 
 
 @njit(HEURISTIC.signature, cache=True, error_model="numpy")
