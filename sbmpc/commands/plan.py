@@ -114,7 +114,7 @@ def compile_note(quiet: bool = False) -> None:
     try:
         import os
         from ..problems.skidsteer import expand_batch
-        from ..search.astar import run_search
+        from ..search.loop import run_search
         cold = any(not os.path.exists(f._cache._cache_file._index_path) for f in (run_search, expand_batch))
     except Exception:          # numba's cache internals moved: say nothing
         return
