@@ -254,7 +254,9 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
     budget: from the first control where the replay parted from the search's prediction
     ``pred`` (poses at the control boundaries: the search's model drifted from the vehicle's there), or, where it never
     parted but an edge failed at 1 kHz that passed at the search's step, from that
-    edge's start with the search's step halved (that edge was not converged). A replay
+    edge's start with the search's step halved (that edge was not converged). Where the
+    re-plan finds no way on from there (a dead end: every edge tips or stalls), the next
+    one starts 2, 4, 8 ... controls further back. A replay
     that only passes within the drift allowance of the goal disc gets its last approach
     planned from where it passed closest, so that the plan enters the disc (a receding-
     horizon run executes exactly that); if that fails the allowance stands. Returns
@@ -264,6 +266,7 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
     chk, fine, kept = drive if drive is not None else controller_rate(world, cost, controls, X0)
     repairs = 0
     dt = ps.dt
+    back = 0          # controls to step back from where the check failed (a dead end there)
     while repairs < MAX_REPAIRS and not (chk.reached and chk.miss_m == 0.0):
         left = budget - (time.perf_counter() - t0)
         if left <= 0:
@@ -273,16 +276,23 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
             # the last approach: from where the replay parted, else a few controls back
             if not parted:
                 j = max(0, len(kept) - APPROACH_CONTROLS)
-        elif not parted:
+        elif not parted and back == 0:
             dt = max(dt / 2.0, 1.0 / rate)
+        j = max(0, j - back)
         Sj = fine_state(world, cost, controls[:j], X0)
-        if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
-            break
-        prob = problem(world, cost, Sj, dt)
-        res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
+        dead = Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None
+        if not dead:
+            prob = problem(world, cost, Sj, dt)
+            res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
         repairs += 1
-        if res.status != "found":
-            break
+        if dead or res.status != "found":
+            if chk.reached or j == 0:
+                break
+            # no way on from there (the vehicle already on a flank it tips over from at
+            # every control): re-plan from further back, 2, 4, 8 ... controls
+            back = max(2, 2 * back)
+            continue
+        back = 0
         T = res.states[:, K.S_T]
         tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
                 for i, c in enumerate(res.control_rows)]

@@ -92,6 +92,38 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     assert any(w in q.reason for w in ("stalled", "tipped over", "outside the goal disc"))
 
 
+
+def test_a_repair_from_a_dead_end_steps_back():
+    """narrow_pass's time search with Halton seed 2 finds a path that, driven at 1 kHz,
+    tips over just after the pass (x = 16.9 m, control 34 of 47). The re-plan from that
+    edge's start finds every edge tipping (the vehicle is already on the flank): a dead
+    end. The next re-plan starts 2 controls back, in the pass, and the plan holds at
+    1 kHz (checked by an independent replay). Before, the repair gave up after the dead
+    end and the plan was refused."""
+    from dataclasses import replace
+    from sbmpc.search.astar import Search
+    scn = SC.load(SCEN / "narrow_pass.yaml")
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=2)))
+    starts, run = [], Search.run
+
+    def spy(self, *a, **k):
+        res = run(self, *a, **k)
+        starts.append((float(self.problem.start[K.S_X]), res.status))
+        return res
+    Search.run = spy
+    try:
+        p = PL.plan(world, "time")
+    finally:
+        Search.run = run
+    assert p.found and p.check.reached and p.check.miss_m == 0.0
+    chk = CK.controller_rate(world, "time", p.controls, PL._start(world, None))[0]
+    assert chk.reached and chk.miss_m == 0.0
+    assert CK.check_cost(chk, "time") == pytest.approx(p.travel_time_s, rel=1e-9)
+    # the search, a dead end past the pass, then a re-plan from further back that succeeds
+    assert [st for _, st in starts] == ["found", "no_path", "found"], starts
+    assert starts[1][0] > 16.5 and 13.5 < starts[2][0] < starts[1][0]
+    assert p.repairs == 2
+
 def test_steep_hill_every_plan_goes_around(plans):
     world, ps = plans["steep_hill"]
     top = world.emap.heights.max()
