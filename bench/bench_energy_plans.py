@@ -6,7 +6,9 @@ For each scenario:
 * the time and the energy plan as ``sbmpc compare`` reports them (each search's own
   plan, and which one was kept: compare adopts the other search's plan when it is
   better on the cost, ``found_by``);
-* the energy plan's spread over Halton seeds 0-7 (each seed its own search);
+* the energy plan's spread over Halton seeds 0-7 (each seed its own search), and the
+  time plan's travel time for the same seeds (does every seed find a plan that holds
+  at 1 kHz?);
 * the energy plan of a long unweighted search (w = 1, 10 x the expansion budget, at
   most ``--long-time-s``) as the reference for how much the weighted, anytime search loses.
 
@@ -52,12 +54,14 @@ def main(argv=None) -> int:
         world = WO.resolve(scn)
         both = PL.plan_both(world)
         row = {"reported": {c: _summary(p) for c, p in both.items()}}
-        seeds = []
+        seeds, times = [], []
         for s in range(args.seeds):
             w = WO.resolve(replace(scn, planner=replace(scn.planner, seed=s)))
             seeds.append(PL.plan(w, "energy").energy_J)
+            times.append(PL.plan(w, "time").travel_time_s)
         found = [e for e in seeds if e is not None]
         row["energy_by_seed_J"] = seeds
+        row["time_plan_by_seed_s"] = times
         if found:
             row["seed_spread_pct"] = round(100 * (max(found) - min(found)) / min(found), 2)
             row["seed_median_J"] = statistics.median(found)
