@@ -117,6 +117,15 @@ def _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, D
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def _begin(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt):
+    """The start of every call of the compiled loop: the start node put in on the first
+    (no node yet); the cell table's shift and scratch space for a key and a child state."""
+    if cnt[C_NODES] == 0:
+        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
+    return _shift(table), np.empty(dims.shape[0], dtype=np.int64), np.empty(X.shape[1])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur, taken):
     """Pop the open set until a node to expand: returns (RUNNING, its id), its state
     copied into ``cur``; or (status, -1) when the search ends (FOUND, EXHAUSTED,
@@ -256,11 +265,8 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
     cheaper) resets the weight to 1."""
     expand = _expand_fn(fa[0], fa[1])
     heur = _heuristic_fn(fa[2], fa[3])
-    if cnt[C_NODES] == 0:
-        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
-    shift = _shift(table)
-    key = np.empty(dims.shape[0], dtype=np.int64)
-    child = np.empty(X.shape[1])
+    shift, key, child = _begin(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
+                               table, H, cnt)
     cur = np.empty(X.shape[1])
     # the controls of one expansion (all rows in order when every row is tried), their
     # rows in ``controls``, the children and edge costs
@@ -309,11 +315,8 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
     first (the pending children were merged), or (status, 0) when the search ends (as
     :func:`run_search`)."""
     heur = _heuristic_fn(fa[2], fa[3])
-    if cnt[C_NODES] == 0:
-        _start(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt)
-    shift = _shift(table)
-    key = np.empty(dims.shape[0], dtype=np.int64)
-    child = np.empty(X.shape[1])
+    shift, key, child = _begin(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
+                               table, H, cnt)
     for i in range(pending):
         _add_children(fa, weight, params, data, dims, res, snap, settle, BN[i], BR, CH, CO, i * nbranch, nbranch,
                       X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
