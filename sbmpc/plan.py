@@ -190,13 +190,13 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     controls, chk, fine, repairs = _checked(world, cost, controls, pred, X0, t0, budget, ps, drive)
     if missed is not None and time.perf_counter() - t0 < budget:
         # the polished line misses the goal at 1 kHz: repaired like a searched one, it
-        # is the plan when it then reaches the goal for less than the searched one
-        c2, chk2, fine2, rep2 = _checked(world, cost, missed.controls, predicted(world, cost, missed.controls, X0),
-                                         X0, t0, budget, ps)
-        if chk2.reached and chk2.miss_m == 0.0 and (not chk.reached or check_cost(chk2, cost) < check_cost(chk, cost)):
-            controls, chk, fine = c2, chk2, fine2
-            repairs += rep2
-            common["polish"] = missed
+        # is the plan when it then does better than the searched one (_better)
+        mpol, mdrive = missed
+        c2, chk2, fine2, rep2 = _checked(world, cost, mpol.controls, predicted(world, cost, mpol.controls, X0),
+                                         X0, t0, budget, ps, mdrive)
+        if _better(chk2, chk, cost):
+            controls, chk, fine, repairs = c2, chk2, fine2, rep2
+            common["polish"] = mpol
     common["repairs"] = repairs
     if not chk.reached:
         return Plan(world.scenario.name, cost, "no_path",
@@ -213,15 +213,31 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
                 planning_time_s=time.perf_counter() - t0, found_by=found_by, check=chk, **common)
 
 
+def _better(new: Check, old: Check, cost: str) -> bool:
+    """Whether a plan checked ``new`` at the controller rate beats one checked ``old``:
+    reaching the goal beats not reaching it; entering the disc beats passing it within
+    the drift allowance for up to APPROACH_SLACK more cost (as the last approach's
+    re-plan is judged in :func:`_checked`); else the one that misses by no more and
+    costs less."""
+    if not new.reached:
+        return False
+    if not old.reached:
+        return True
+    c_new, c_old = check_cost(new, cost), check_cost(old, cost)
+    if new.miss_m == 0.0 and old.miss_m > 0.0:
+        return c_new <= (1.0 + APPROACH_SLACK) * c_old
+    return new.miss_m <= old.miss_m and c_new < c_old
+
+
 def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float):
     """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.polish`)
     and its drive at the controller rate (:func:`sbmpc.check.controller_rate`'s result,
     for :func:`_checked`); polish and drive None when it gained nothing, or when its
     controls, driven at the controller rate, do not reach the goal (or only pass it
     where the searched ones entered it) or cost more there than the searched ones: the
-    polish is judged where every plan is. ``missed``: the polish when its drive misses
-    the goal (or only passes it) at the controller rate, for :func:`plan` to repair
-    (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
+    polish is judged where every plan is. ``missed``: (polish, drive) when the drive
+    misses the goal (or only passes it) at the controller rate, for :func:`plan` to
+    repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
     may pass just outside it at 1 kHz."""
@@ -238,10 +254,10 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     drive = controller_rate(world, cost, pol.controls, X0)
     new = drive[0]
     if not new.reached:
-        return None, None, pol
+        return None, None, (pol, drive)
     old = controller_rate(world, cost, controls, X0)[0]
     if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
-        return None, None, pol
+        return None, None, (pol, drive)
     if old.reached and check_cost(old, cost) <= check_cost(new, cost):
         return None, None, None
     return pol, drive, None
@@ -284,12 +300,15 @@ def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray
         if not dead:
             prob = problem(world, cost, Sj, dt)
             res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
-        repairs += 1
-        if dead or res.status != "found":
+            repairs += 1
+            dead = res.status != "found" and res.exhausted
+            if res.status != "found" and not dead:
+                break                          # a budget ran out
+        if dead:
             if chk.reached or j == 0:
                 break
             # no way on from there (the vehicle already on a flank it tips over from at
-            # every control): re-plan from further back, 2, 4, 8 ... controls
+            # every control, or stalled): re-plan from further back, 2, 4, 8 ... controls
             back = max(2, 2 * back)
             continue
         back = 0

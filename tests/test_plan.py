@@ -92,8 +92,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     assert any(w in q.reason for w in ("stalled", "tipped over", "outside the goal disc"))
 
 
-
-def test_a_repair_from_a_dead_end_steps_back():
+def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     """narrow_pass's time search with Halton seed 2 finds a path that, driven at 1 kHz,
     tips over just after the pass (x = 16.9 m, control 34 of 47). The re-plan from that
     edge's start finds every edge tipping (the vehicle is already on the flank): a dead
@@ -110,11 +109,8 @@ def test_a_repair_from_a_dead_end_steps_back():
         res = run(self, *a, **k)
         starts.append((float(self.problem.start[K.S_X]), res.status))
         return res
-    Search.run = spy
-    try:
-        p = PL.plan(world, "time")
-    finally:
-        Search.run = run
+    monkeypatch.setattr(Search, "run", spy)
+    p = PL.plan(world, "time")
     assert p.found and p.check.reached and p.check.miss_m == 0.0
     chk = CK.controller_rate(world, "time", p.controls, PL._start(world, None))[0]
     assert chk.reached and chk.miss_m == 0.0
@@ -123,6 +119,7 @@ def test_a_repair_from_a_dead_end_steps_back():
     assert [st for _, st in starts] == ["found", "no_path", "found"], starts
     assert starts[1][0] > 16.5 and 13.5 < starts[2][0] < starts[1][0]
     assert p.repairs == 2
+
 
 def test_steep_hill_every_plan_goes_around(plans):
     world, ps = plans["steep_hill"]

@@ -136,24 +136,32 @@ def test_moves_stay_in_range_and_a_moved_turn_keeps_the_heading(ws, i, s):
 
 def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper(monkeypatch):
     """A long plan's 20 ms line drifts from the 1 kHz one, so a polish can miss the goal
-    at the controller rate (hills_field: 0.7 m). Such a polish is repaired like a searched
-    plan (its last approach re-planned) and is the plan when it then reaches the goal
-    for less than the search's own. Here the 'polish' is flat's polished plan without
-    its last two controls: it stops about a metre short; repaired, it reaches the disc
-    (checked by an independent 1 kHz replay) for less than the unpolished plan."""
+    at the controller rate (hills_field seed 0: 0.7 m). Such a polish is repaired like a
+    searched plan (re-planned from where its 1 kHz drive failed, here its last control)
+    and is the plan when it then reaches the goal for less than the search's own. Here
+    the 'polish' is flat's polished plan without its last two controls: it stops about
+    a metre short; repaired, it reaches the disc (checked by an independent 1 kHz
+    replay) for less than the unpolished plan. A 'polish' that spins on the spot on the
+    way and misses too is repaired as well, but dearer: the searched plan stands."""
     w = _world(0)
     p = PL.plan(w, "energy")
     q = PL.plan(_world(0, polish_energy=False), "energy")
     X0 = PL._start(w, None)
     short = [tuple(c) for c in p.controls[:-2]]
-    miss = CK.controller_rate(w, "energy", short, X0)[0]
-    assert not miss.reached
+    assert not CK.controller_rate(w, "energy", short, X0)[0].reached
     fake = PO.Polished(short, 0.0, None, 0, 0.0)
-    monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, fake))
+    monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake, None)))
     r = PL.plan(w, "energy")
     assert r.found and r.polish is fake and r.repairs >= 1
-    assert r.controls[:len(short) - PL.APPROACH_CONTROLS] == short[:len(short) - PL.APPROACH_CONTROLS]
+    n = len(short) - PL.APPROACH_CONTROLS
+    assert r.controls[:n] == short[:n]
     chk = CK.controller_rate(w, "energy", r.controls, X0)[0]
     assert chk.reached and chk.miss_m == 0.0
     assert CK.check_cost(chk, "energy") == pytest.approx(r.energy_J, rel=1e-9)
     assert r.energy_J < q.energy_J
+    spin = [tuple(c) for c in q.controls[:3]] + [(-8.0, 8.0, 1.0), (8.0, -8.0, 1.0)] + [tuple(c) for c in q.controls[3:-2]]
+    assert not CK.controller_rate(w, "energy", spin, X0)[0].reached
+    fake2 = PO.Polished(spin, 0.0, None, 0, 0.0)
+    monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake2, None)))
+    r2 = PL.plan(w, "energy")
+    assert r2.found and r2.polish is None and r2.controls == q.controls and r2.energy_J == q.energy_J

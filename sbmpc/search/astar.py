@@ -163,7 +163,8 @@ class SearchResult:
     """Outcome of a search: ``status`` is 'found' or 'no_path' (with ``reason``);
     ``path`` the node ids from start to goal, ``states`` (len(path), state_dim),
     ``controls`` the row of ``problem.controls`` of each edge (len(path) - 1), ``cost``
-    the goal node's g."""
+    the goal node's g; ``exhausted``: no path because every reachable state was
+    explored (not because a budget ran out)."""
 
     status: str
     reason: str | None
@@ -177,6 +178,7 @@ class SearchResult:
     planning_time_s: float
     invalid: dict = field(default_factory=dict)
     first_solution_iterations: int = -1
+    exhausted: bool = False
 
 
 class Search:
@@ -374,7 +376,8 @@ class Search:
         if cnt[C_DEPTHCUT]:
             why += f"; {int(cnt[C_DEPTHCUT])} nodes at the depth limit {p.max_depth}"
         empty = np.zeros(0, np.int64)
-        return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty, **common)
+        return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty,
+                            exhausted=bool(st == EXHAUSTED), **common)
 
 
 def _with_best(progress, best):

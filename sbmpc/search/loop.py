@@ -34,7 +34,7 @@ GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 
 
 # explicit signatures: the model functions arrive as addresses (an int64 array, see
-# _addresses), so the compiled search is the same (and cached on disk) whatever the problem
+# sbmpc.search.astar._addresses), so the compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64, types.int64,
                        types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
@@ -44,7 +44,7 @@ _RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64,
 def _function_value(ftype):
     """An intrinsic that makes a first-class function value of type ``ftype`` from the
     addresses of its C wrapper and of its compiled body (0 if none): the search gets a
-    problem's functions as integers (:func:`_addresses`), because numba unboxes a function
+    problem's functions as integers (:func:`sbmpc.search.astar._addresses`), because numba unboxes a function
     object argument by calling two Python functions (3.5 us per argument and call), and
     calls the compiled body directly, without the wrapper, when it has its address."""
     @intrinsic
@@ -189,7 +189,7 @@ def _pick(controls, nbranch, nfixed, rotate, iters, U, crow, off):
 def _add_children(fa, weight, params, data, dims, res, snap, settle, n, crow, CH, CO, off, nbranch,
                   X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child):
     """Merge the children of node n (rows off.. off + nbranch of CH, CO and crow) into
-    the graph and the open set (module doc)."""
+    the graph and the open set (:mod:`sbmpc.search.astar`'s module doc)."""
     heur = _heuristic_fn(fa[2], fa[3])
     goal = _goal_fn(fa[4], fa[5])
     pcode = _code(KEYS[n])
@@ -248,7 +248,7 @@ def _full(cnt, table, H, cap, new):
 def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, H,
                cnt, best):
-    """Expand up to ``chunk`` nodes (module doc). Returns a status: FOUND (node id in
+    """Expand up to ``chunk`` nodes (:mod:`sbmpc.search.astar`'s module doc). Returns a status: FOUND (node id in
     cnt[C_GOAL]), EXHAUSTED (open set empty), ITERATIONS (max_iters reached), GROW (the
     arrays are too small for the next expansion) or RUNNING (chunk done). The first call
     (no node yet) puts the start node in.
@@ -260,7 +260,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
     grid) or that refinement budget was spent.
 
     A search may start with an incumbent found elsewhere (best[0] its cost, best[1] the
-    weight of h in the pruning test, see :meth:`Search.bound`): nodes with
+    weight of h in the pruning test, see :meth:`sbmpc.search.astar.Search.bound`): nodes with
     g + best[1] h >= best[0] are never opened; the first goal reached (necessarily
     cheaper) resets the weight to 1."""
     expand = _expand_fn(fa[0], fa[1])
