@@ -103,8 +103,9 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
     on the problem (params, data) of :mod:`sbmpc.problems.skidsteer` (module doc); wheel
     speeds kept in [lo, hi] [rad/s]. ``deadline``: a ``time.perf_counter()`` value at
     which to stop early. When the controls do not reach the goal disc of ``params`` (the
-    last held up to one period longer), the first trial that does is taken; None when
-    none does."""
+    last held up to one period longer), the first control, from the last one back, with
+    a trial that does gets its cheapest such trial before the sweeps; None when none
+    does."""
     t0 = time.perf_counter()
     ctrl = np.array([tuple(c) for c in controls], float).reshape(-1, 3)
     extra = int(params[SS.Q_NSTEP])        # the last control may be held one period longer
@@ -114,45 +115,64 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
     if reached:
         ctrl = ctrl[:used].copy()
         ctrl[-1, 2] = round(last, 9)
-    best = c0 if reached else np.inf        # else the first trial that reaches the goal is taken
+    best = c0 if reached else np.inf
     trials = 0
     top = max(abs(lo), abs(hi))
     energy = params[SS.Q_COST] != SS.COST_TIME
     col = K.S_E if energy else K.S_T
-    stop = False
     states = np.empty((len(ctrl), start.size))     # states[i]: before control i (kept current)
     SS.sequence_states(params, data, start, ctrl, states)
+
+    def attempt(i: int, s: float) -> bool:
+        """Try the moves of size s at control i; keep the best trial that reaches the
+        goal for less than the best so far. Whether one was kept."""
+        nonlocal ctrl, states, best, trials
+        moves = _moves(ctrl, i, s, top, lo, hi)
+        m = len(moves)
+        if not m:
+            return False
+        prefix = states[i, col] - start[col]
+        costs = np.empty(m)
+        used = np.empty(m, np.int64)
+        lasts = np.empty(m)
+        SS.sequence_costs(params, data, states[i], ctrl, i, moves, extra, best - prefix, costs, used, lasts)
+        trials += m
+        ok = np.flatnonzero((costs >= 0.0) & np.isfinite(costs))
+        if not ok.size:
+            return False
+        j = ok[np.argmin(costs[ok])]
+        if not prefix + costs[j] < best * (1.0 - MIN_GAIN):
+            return False
+        best = prefix + costs[j]
+        ctrl[i, :2] = moves[j, :2]
+        if i + 1 < len(ctrl):
+            ctrl[i + 1, :2] = moves[j, 2:]
+        ctrl = ctrl[:i + used[j]].copy()
+        ctrl[-1, 2] = round(lasts[j], 9)
+        states = states[:len(ctrl)]      # the prefix up to i is unchanged
+        SS.sequence_states(params, data, states[i], ctrl[i:], states[i:])
+        return True
+
+    def late() -> bool:
+        return deadline is not None and time.perf_counter() > deadline
+
+    if best == np.inf:
+        # the controls miss the goal: a sequence that reaches it first, from the last
+        # control backwards (a trial there drives a short tail, and with no bound every
+        # trial drives to the end), so that the sweeps have a cost to cut trials at
+        for i in range(len(ctrl) - 1, -1, -1):
+            if late() or attempt(i, STEPS[0]):
+                break
+    stop = False
     for s in STEPS:
         for _ in range(MAX_SWEEPS):
             improved = False
             i = 0
             while i < len(ctrl):
-                if deadline is not None and time.perf_counter() > deadline:
+                if late():
                     stop = True
                     break
-                moves = _moves(ctrl, i, s, top, lo, hi)
-                m = len(moves)
-                if m:
-                    prefix = states[i, col] - start[col]
-                    costs = np.empty(m)
-                    used = np.empty(m, np.int64)
-                    lasts = np.empty(m)
-                    SS.sequence_costs(params, data, states[i], ctrl, i, moves, extra, best - prefix,
-                                      costs, used, lasts)
-                    trials += m
-                    ok = np.flatnonzero((costs >= 0.0) & np.isfinite(costs))
-                    if ok.size:
-                        j = ok[np.argmin(costs[ok])]
-                        if prefix + costs[j] < best * (1.0 - MIN_GAIN):
-                            best = prefix + costs[j]
-                            ctrl[i, :2] = moves[j, :2]
-                            if i + 1 < len(ctrl):
-                                ctrl[i + 1, :2] = moves[j, 2:]
-                            ctrl = ctrl[:i + used[j]].copy()
-                            ctrl[-1, 2] = round(lasts[j], 9)
-                            states = states[:len(ctrl)]      # the prefix up to i is unchanged
-                            SS.sequence_states(params, data, states[i], ctrl[i:], states[i:])
-                            improved = True
+                improved |= attempt(i, s)
                 i += 1
             if stop or not improved:
                 break
