@@ -231,11 +231,12 @@ def _better(new: Check, old: Check, cost: str) -> bool:
 
 def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float):
     """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.polish`)
-    and its drive at the controller rate (:func:`sbmpc.check.controller_rate`'s result,
-    for :func:`_checked`); polish and drive None when it gained nothing, or when its
-    controls, driven at the controller rate, do not reach the goal (or only pass it
-    where the searched ones entered it) or cost more there than the searched ones: the
-    polish is judged where every plan is. ``missed``: (polish, drive) when the drive
+    and the controller-rate drive (:func:`sbmpc.check.controller_rate`'s result, for
+    :func:`_checked`) of the controls that stand: the polish's, or, where the polish is
+    None, the searched ones' when they were driven to judge it (else None). The polish
+    is None when it gained nothing, or when its controls, driven at the controller rate,
+    do not reach the goal (or only pass it where the searched ones entered it) or cost
+    more there than the searched ones: the polish is judged where every plan is. ``missed``: (polish, drive) when the drive
     misses the goal (or only passes it) at the controller rate, for :func:`plan` to
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
@@ -255,11 +256,12 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     new = drive[0]
     if not new.reached:
         return None, None, (pol, drive)
-    old = controller_rate(world, cost, controls, X0)[0]
+    searched = controller_rate(world, cost, controls, X0)
+    old = searched[0]
     if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
-        return None, None, (pol, drive)
+        return None, searched, (pol, drive)
     if old.reached and check_cost(old, cost) <= check_cost(new, cost):
-        return None, None, None
+        return None, searched, None
     return pol, drive, None
 
 
