@@ -5,11 +5,14 @@ side in one run; and how planning time grows with map size and branching factor.
     python bench/bench_planner.py            # writes bench/results/planner.json
 
 Numba is warmed up first (one small plan of each cost and configuration). Per scenario
-and cost, three configurations run one after another: ``serial`` (one thread, batch 1:
-the serial A*), ``threads`` (a node's edges on every core, batch 1: the same plan) and
-``batch4`` (every core, the 4 best nodes expanded together). The speed-up is the ratio
-of planning times within that run (these machines are noisy: compare ratios, not
-seconds across runs). Map size and branching rows use the default settings (every
+and cost, four configurations run one after another: ``serial`` (one thread, batch 1:
+the serial A*), ``threads`` (a node's edges on every core, batch 1), ``batch4`` and
+``batch16`` (every core, the edges of the next node and of the 3 or 15 open nodes next
+in line simulated together, those of the others kept for their expansion). All four
+expand the same nodes: ``same_plan`` says whether the controls came out the same, and
+``extra_edges`` how many more edges than the serial search a configuration simulated.
+The speed-up is the ratio of planning times within that run (these machines are noisy:
+compare ratios, not seconds across runs). Map size and branching rows use the default settings (every
 core, batch 1).
 """
 from __future__ import annotations
@@ -25,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "planner.json"
 
 
-CONFIGS = {"serial": dict(threads=1, batch=1), "threads": dict(threads=0, batch=1), "batch4": dict(threads=0, batch=4)}
+CONFIGS = {"serial": dict(threads=1, batch=1), "threads": dict(threads=0, batch=1), "batch4": dict(threads=0, batch=4),
+           "batch16": dict(threads=0, batch=16)}
 
 
 def row(plan) -> dict:
@@ -54,11 +58,14 @@ def main() -> int:
         scn = SC.load(path)
         out = {}
         for c in ("time", "energy"):
-            rows = {k: row(PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), c))
-                    for k, cfg in CONFIGS.items()}
+            plans = {k: PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), c)
+                     for k, cfg in CONFIGS.items()}
+            rows = {k: row(p) for k, p in plans.items()}
             s = rows["serial"]
-            for k in ("threads", "batch4"):
+            for k in list(CONFIGS)[1:]:
                 r = rows[k]
+                r["same_plan"] = plans[k].controls == plans["serial"].controls
+                r["extra_edges"] = round(r["edges"] / max(s["edges"], 1) - 1.0, 4)
                 if s["status"] == r["status"] == "found":
                     r["speedup"] = round(s["planning_time_s"] / r["planning_time_s"], 2)
                     key = "travel_time_s" if c == "time" else "energy_J"

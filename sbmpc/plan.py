@@ -163,7 +163,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
         search.bound(inc[0] * (1.0 + 1e-9))
     res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=batch_size(ps),
                                    threads=search_threads(ps))
-    common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges, nodes=res.nodes, invalid_edges=res.invalid)
+    common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges_simulated, nodes=res.nodes, invalid_edges=res.invalid)
     if res.status == "found":
         T = res.states[:, K.S_T]
         controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))

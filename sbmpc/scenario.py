@@ -39,7 +39,7 @@ class PlannerSettings:
     which the search gives up with the reason; seed: scrambles the Halton sequence;
     wheel_speeds: [low, high] range of desired wheel speeds sampled [rad/s] (default
     [-0.5, 1] x the no-load speed); samples: 'fixed' (the same Halton points at every
-    expansion) or 'rotating' (the next window of the sequence at every expansion);
+    expansion) or 'rotating' (each node its own window of the sequence, by node number);
     tip_over_deg: pitch or roll at which an edge is rejected; time_weight, energy_weight:
     w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
@@ -52,9 +52,9 @@ class PlannerSettings:
     the first; on the shipped scenarios refinement changed no time plan by more than
     0.04 s and did not recover what a weight of 2 lost for energy); threads: CPU threads
     that simulate a node's edges in parallel (0: all of numba's, one per core; the plan
-    is the serial search's); batch: nodes expanded together, their edges simulated as
-    one batch (1: the serial search's order; more expands some nodes the serial search
-    would not, which changes the plan slightly; 0: 1 on the CPU, 64 on a GPU); device:
+    is the serial search's); batch: nodes whose edges are simulated together, the next
+    node's and those of the open nodes next in line, kept until those are expanded (the
+    plan is the serial search's; 0: 1 on the CPU, 64 on a GPU); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
     one-line note and the CPU); polish_time, polish_energy: after the search, polish
     the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on

@@ -93,16 +93,16 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
 
 
 def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
-    """narrow_pass's time search with Halton seed 2 (and 7.5 deg heading cells) finds a path that, driven at 1 kHz,
-    tips over just after the pass (x = 16.9 m, control 34 of 47). The re-plan from that
-    edge's start finds every edge tipping (the vehicle is already on the flank): a dead
-    end. The next re-plan starts 2 controls back, in the pass, and the plan holds at
-    1 kHz (checked by an independent replay). Before, the repair gave up after the dead
-    end and the plan was refused."""
+    """narrow_pass's time search with Halton seed 7 (and 7.5 deg heading cells) finds a
+    path that, driven at 1 kHz, tips over in the pass (x = 15.5 m, control 30 of 47). The
+    re-plan from that edge's start (x = 15.1 m) finds no way on (the vehicle is already
+    on the flank): a dead end. The next re-plan starts 2 controls back, and the plan
+    holds at 1 kHz (checked by an independent replay). Before the step back, the repair
+    gave up after the dead end and the plan was refused."""
     from dataclasses import replace
     from sbmpc.search.astar import Search
     scn = SC.load(SCEN / "narrow_pass.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=2, cell_yaw_deg=7.5)))
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=7, cell_yaw_deg=7.5)))
     starts, run = [], Search.run
 
     def spy(self, *a, **k):
@@ -117,7 +117,7 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     assert CK.check_cost(chk, "time") == pytest.approx(p.travel_time_s, rel=1e-9)
     # the search, a dead end past the pass, then a re-plan from further back that succeeds
     assert [st for _, st in starts] == ["found", "no_path", "found"], starts
-    assert starts[1][0] > 16.5 and 13.5 < starts[2][0] < starts[1][0]
+    assert starts[1][0] > 15.0 and 13.5 < starts[2][0] < starts[1][0]
     assert p.repairs == 2
 
 
@@ -251,19 +251,23 @@ def test_cli_compare_writes_table_figure_and_recording(tmp_path, capsys):
     assert "/paths/time" in ents and "/paths/energy" in ents
 
 
-def test_parallel_edges_give_the_serial_plan_and_a_batch_stays_close():
-    """The skid-steer's batch expander runs a node's edges on numba's threads: with
-    batch 1 the plan is the serial search's, control for control. A batch of 4 nodes
-    expands other nodes too; its plan stays within 1 % here."""
+def test_parallel_edges_and_batches_give_the_serial_plan():
+    """The skid-steer's batch expander runs edges on numba's threads: with batch 1 a
+    node's, with batch 4 also those of the 3 open nodes next in line, simulated ahead
+    of their expansion. Either way the search expands the serial search's nodes (on
+    this hill, open nodes simulated ahead are often replaced by cheaper arrivals before
+    they are expanded: their cached edges must not be used) and the plan is the serial
+    one, control for control; the batch pays in edges simulated and never used."""
     from dataclasses import replace
     scn = SC.load(SCEN / "hill_tradeoff.yaml")
     def plan(batch, threads):
         return PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, batch=batch, threads=threads))), "time")
     serial, parallel, batched = plan(1, 1), plan(1, 2), plan(4, 2)
     assert serial.found and parallel.found and batched.found
-    assert parallel.controls == serial.controls
-    assert parallel.nodes_expanded == serial.nodes_expanded
-    assert batched.travel_time_s <= 1.01 * serial.travel_time_s
+    assert parallel.controls == serial.controls == batched.controls
+    assert parallel.nodes_expanded == serial.nodes_expanded == batched.nodes_expanded
+    assert parallel.edges_simulated == serial.edges_simulated < batched.edges_simulated
+    assert batched.travel_time_s == serial.travel_time_s
 
 
 def test_auto_threads_give_the_serial_plan():

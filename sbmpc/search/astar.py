@@ -53,7 +53,8 @@ from numba import types
 from numba.core.ccallback import CFunc
 
 from .cells import rehash
-from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, EXHAUSTED,
+from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SIMULATED,
+                       EXHAUSTED,
                        FOUND, GROW, ITERATIONS, MAX_CODE, NC, RUNNING)
 from .loop import _BATCH_SIG, _RUN_SIG, EXPAND, GOAL, HEURISTIC, _full, expand_nodes, run_batch, run_search
 
@@ -164,7 +165,9 @@ class SearchResult:
     ``path`` the node ids from start to goal, ``states`` (len(path), state_dim),
     ``controls`` the row of ``problem.controls`` of each edge (len(path) - 1), ``cost``
     the goal node's g; ``exhausted``: no path because every reachable state was
-    explored (not because a budget ran out)."""
+    explored (not because a budget ran out); ``edges``: the edges of the expanded
+    nodes, ``edges_simulated``: the edges simulated (a batched search also simulates
+    the edges of open nodes it then does not expand)."""
 
     status: str
     reason: str | None
@@ -179,6 +182,10 @@ class SearchResult:
     invalid: dict = field(default_factory=dict)
     first_solution_iterations: int = -1
     exhausted: bool = False
+    edges_simulated: int = 0
+
+
+CACHE_ROUNDS = 16      # the batched search's edge cache holds this many batches' nodes simulated ahead
 
 
 class Search:
@@ -247,14 +254,18 @@ class Search:
         ``budgets(max_iterations, time_budget_s)`` method is told this search's budgets
         first.
 
-        ``batch`` > 1: take the ``batch`` best open nodes at a time (in the serial
-        search's order, up to a goal) and simulate all their edges as one batch
+        ``batch`` > 1: expand the serial search's nodes in its order (the same plan, node
+        for node), but whenever the next node's edges are not known yet, simulate them
+        together with those of the ``batch`` - 1 open nodes next in line as one batch
         (``Problem.expand_batch``, on ``threads`` threads; "auto": every core, or the
-        serial expander when measurements say the cores are busy), then merge their children in
-        the same order. With batch 1 the search is the serial A*, with ``threads`` > 1
-        its edges run in parallel (the same nodes are expanded); a larger batch expands
-        some nodes the serial search would have skipped (the children of the batch's
-        first nodes could not yet be seen), in exchange for more edges at a time."""
+        serial expander when measurements say the cores are busy). Edges simulated
+        ahead are cached with the state they were simulated from, and used when their
+        node is expanded from that state (a node replaced by a cheaper arrival is
+        simulated again); those of nodes never expanded are the batch's price
+        (``SearchResult.edges_simulated`` against ``edges``). With batch 1 and
+        ``threads`` > 1 a node's edges run in parallel. Either way the nodes expanded,
+        and the plan, are the serial search's.
+        """
         if hasattr(progress, "budgets"):
             progress.budgets(max_iterations, time_budget_s)
         progress = _with_best(progress, self.best)
@@ -303,6 +314,15 @@ class Search:
         BR = np.zeros(E, np.int64)
         CH = np.zeros((E, ns))
         CO = np.zeros(E)
+        S = CACHE_ROUNDS * max(size - 1, 1)           # the edge cache: nodes simulated ahead
+        SN = np.full(S, -1, np.int64)
+        SX = np.zeros((S, ns))
+        SCH = np.zeros((S * nb, ns))
+        SCO = np.zeros(S * nb)
+        SCR = np.zeros(S * nb, np.int64)
+        sc = np.zeros(1, np.int64)
+        cand = np.zeros(4 * size + 2, np.int64)
+
         def serial(k):
             expand_nodes(self._fa, p.params, p.data, self.work, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb],
                          CO[:k * nb])
@@ -324,19 +344,20 @@ class Search:
         while True:
             st, k = run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
                         bool(p.rotate), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
-                        int(max_iterations), float(p.refine), size, pending, self.X, self.G, self.PAR, self.CTL,
-                        self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
-                        BN, BP, BO, BU, BR, CH, CO)
+                        int(max_iterations), float(p.refine), size, pending, int(chunk), self.X, self.G, self.PAR,
+                        self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
+                        BN, BP, BO, BU, BR, CH, CO, SN, SX, SCH, SCO, SCR, sc, cand)
             pending = 0
             if st == GROW:
-                self._grow(E + size)
+                self._grow(nb)
                 continue
             elapsed = time.perf_counter() - t0
-            if k == 0:
+            if st != RUNNING:
                 break
-            expand(k)
-            pending = k
-            if self.cnt[C_ITERS] - shown >= chunk:
+            if k > 0:
+                expand(k)
+                pending = k
+            if self.cnt[C_ITERS] - shown >= chunk or k == 0:
                 shown = self.cnt[C_ITERS]
                 elapsed = time.perf_counter() - t0
                 if progress is not None:
@@ -355,7 +376,7 @@ class Search:
                 name = p.codes[k - 1] if k - 1 < len(p.codes) else f"code {k}"
                 invalid[name] = int(cnt[C_INVALID + k])
         common = dict(first_solution_iterations=int(cnt[C_FIRST]), iterations=int(cnt[C_ITERS]), nodes=int(cnt[C_NODES]), edges=int(cnt[C_EDGES]),
-                      planning_time_s=elapsed, invalid=invalid)
+                      planning_time_s=elapsed, invalid=invalid, edges_simulated=int(cnt[C_SIMULATED]))
         if st == FOUND:
             path = []
             n = int(cnt[C_GOAL])

@@ -20,7 +20,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from .cells import _EMPTY, _code, _insert, _is_key, _lookup, _shift, cell_index
-from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SEQ, EXHAUSTED,
+from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SEQ,
+                       C_SIMULATED, EXHAUSTED,
                        FOUND, GROW, ITERATIONS, MAX_CODE, RUNNING)
 from .heap import SEQ_LIMIT, _pop, _push, _renumber
 
@@ -126,13 +127,10 @@ def _begin(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, D
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur, taken):
+def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur):
     """Pop the open set until a node to expand: returns (RUNNING, its id), its state
     copied into ``cur``; or (status, -1) when the search ends (FOUND, EXHAUSTED,
-    ITERATIONS). ``taken``: nodes already taken into the current batch; a goal popped
-    then goes back into the open set and (RUNNING, -1) ends the batch, so that the
-    batch's nodes, which come before it, are expanded first (as the serial search
-    would)."""
+    ITERATIONS)."""
     heur = _heuristic_fn(fa[2], fa[3])
     goal = _goal_fn(fa[4], fa[5])
     while True:
@@ -151,9 +149,6 @@ def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO
             CLO[n] = 1
             continue
         if goal(params, data, cur):
-            if taken > 0:
-                _push(H, cnt, G[n] + weight * heur(params, data, cur), n)
-                return RUNNING, -1
             if G[n] < best[0]:
                 best[0] = G[n]
                 best[1] = 1.0
@@ -173,11 +168,14 @@ def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _pick(controls, nbranch, nfixed, rotate, iters, U, crow, off):
-    """The controls of one expansion (the ``iters``-th) into rows off.. of U and their
-    rows in ``controls`` into crow (Problem's branching, fixed rows and rotation)."""
+def _pick(controls, nbranch, nfixed, rotate, n, U, crow, off):
+    """The controls of node n's expansion into rows off.. of U and their rows in
+    ``controls`` into crow (Problem's branching, fixed rows and rotation). With
+    ``rotate`` the window of rows follows the node's id, not the order of expansion, so
+    that a node's edges are known before it is taken (the batched search simulates
+    them ahead)."""
     m = controls.shape[0]
-    base = (iters - 1) * (nbranch - nfixed) if rotate else 0
+    base = n * (nbranch - nfixed) if rotate else 0
     for b in range(nbranch):
         c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
         crow[off + b] = c
@@ -281,64 +279,149 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
             return GROW
         if cnt[C_SEQ] > SEQ_LIMIT - 2 - nbranch:
             _renumber(H, cnt)
-        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur, 0)
+        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, cur)
         if n < 0:
             return st
         done += 1
         if not every:
-            _pick(controls, nbranch, nfixed, rotate, cnt[C_ITERS], U, crow, 0)
+            _pick(controls, nbranch, nfixed, rotate, n, U, crow, 0)
         expand(params, data, work, cur, U, CH, CO)
+        cnt[C_SIMULATED] += nbranch
         _add_children(fa, weight, params, data, dims, res, snap, settle, n, crow, CH, CO, 0, nbranch,
                       X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
     return RUNNING
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _cached(SN, SX, n, X):
+    """The slot of the edge cache that holds node n's edges simulated from its present
+    state, or -1 (a slot of n's for an earlier state, replaced since by a cheaper
+    arrival, is freed)."""
+    for s in range(SN.shape[0]):
+        if SN[s] == n:
+            for d in range(X.shape[1]):
+                if SX[s, d] != X[n, d]:
+                    SN[s] = -1
+                    return -1
+            return s
+    return -1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, BN, k, size, cand):
+    """Fill BN[k:size] with the open nodes next in the open set's order, without taking
+    them (a best-first walk down the heap from its root, at most 4 size entries):
+    closed nodes, goals, nodes at the depth limit, nodes already in the batch and nodes
+    whose edges are cached are passed over. Returns the new k."""
+    goal = _goal_fn(fa[4], fa[5])
+    h = cnt[C_HEAP]
+    nc = 0
+    if h > 0:
+        cand[0] = 0
+        nc = 1
+    seen = 0
+    while nc > 0 and k < size and seen < 4 * size:
+        bi = 0
+        for c in range(1, nc):
+            i = cand[c]
+            j = cand[bi]
+            if H[2 * i] < H[2 * j] or (H[2 * i] == H[2 * j] and H[2 * i + 1] < H[2 * j + 1]):
+                bi = c
+        i = cand[bi]
+        nc -= 1
+        cand[bi] = cand[nc]
+        seen += 1
+        for c in range(2 * i + 1, 2 * i + 3):
+            if c < h:
+                cand[nc] = c
+                nc += 1
+        n = H[2 * i + 1] & 0xFFFFFFFF
+        if CLO[n] or DEP[n] >= max_depth:
+            continue
+        dup = False
+        for b in range(k):
+            dup = dup or BN[b] == n
+        if dup or _cached(SN, SX, n, X) >= 0 or goal(params, data, X[n]):
+            continue
+        BN[k] = n
+        k += 1
+    return k
+
+
 _BATCH_SIG = types.UniTuple(types.int64, 2)(
     _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, _I1, _F1, types.boolean,
-    types.int64, types.int64, types.int64, types.float64, types.int64, types.int64,
+    types.int64, types.int64, types.int64, types.float64, types.int64, types.int64, types.int64,
     _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1,
-    _I1, _F2, _I1, _F2, _I1, _F2, _F1)
+    _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _F2, _F1, _I1, _I1, _I1)
 
 
 @njit(_BATCH_SIG, cache=True, error_model="numpy")
 def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, dims, res, snap,
-              max_depth, settle, max_iters, refine, size, pending,
+              max_depth, settle, max_iters, refine, size, pending, chunk,
               X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt, best,
-              BN, BP, BO, BU, BR, CH, CO):
-    """One round of the batched search: merge the children of the ``pending`` nodes of
-    the last batch (BN: their ids; rows i * nbranch.. of CH, CO: the edges of BN[i]),
-    then take up to ``size`` nodes to expand, in the serial search's order, into a new
-    batch: BN their ids, BP their states, and per edge e (nbranch per node) BO[e] the
-    row of its node in BP, BU[e] its control, BR[e] the control's row. Returns
-    (RUNNING, k) with k > 0 nodes taken (the caller simulates their k * nbranch edges
-    into CH, CO and calls again with pending = k), (GROW, 0) when the arrays must grow
-    first (the pending children were merged), or (status, 0) when the search ends (as
-    :func:`run_search`)."""
+              BN, BP, BO, BU, BR, CH, CO, SN, SX, SCH, SCO, SCR, sc, cand):
+    """One round of the batched search, which expands the serial search's nodes in the
+    serial search's order (the same plan, node for node) and simulates the edges of up
+    to ``size`` nodes at a time: the node to expand and the open nodes next in line.
+
+    A round first takes the ``pending`` nodes of the last batch (BN: their ids, BP the
+    states they were simulated from; rows i * nbranch.. of CH, CO, BR: the edges of
+    BN[i]): the children of BN[0], the node being expanded, are merged; the edges of
+    the others go into the edge cache (slots s of SN: node id, -1 when free; SX: the
+    state simulated from; rows s * nbranch.. of SCH, SCO, SCR: children, costs, control
+    rows; filled round robin, sc[0] the next slot). Then it expands nodes in order
+    (up to ``chunk``) as long as their edges are cached for their present state. At the
+    first that is not, it returns (RUNNING, k): BN[0] that node (taken, closed), BN[1:k]
+    the open nodes next in line (not taken), BP their states, and per edge e (nbranch
+    per node) BO[e] the row of its node in BP, BU[e] its control, BR[e] the control's
+    row; the caller simulates the k * nbranch edges into CH, CO and calls again with
+    pending = k. (RUNNING, 0): ``chunk`` nodes expanded from the cache; (GROW, 0) when
+    the arrays must grow first; (status, 0) when the search ends (as
+    :func:`run_search`). ``cand``: scratch of 4 size + 2 int64."""
     heur = _heuristic_fn(fa[2], fa[3])
     shift, key, child = _begin(heur, weight, params, data, start, dims, res, snap, X, G, PAR, CTL, DEP, CLO, KEYS,
                                table, H, cnt)
-    for i in range(pending):
-        _add_children(fa, weight, params, data, dims, res, snap, settle, BN[i], BR, CH, CO, i * nbranch, nbranch,
+    if pending > 0:
+        _add_children(fa, weight, params, data, dims, res, snap, settle, BN[0], BR, CH, CO, 0, nbranch,
                       X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
-    new = size * nbranch
-    if _full(cnt, table, H, X.shape[0], new + size):
-        return GROW, 0
-    if cnt[C_SEQ] > SEQ_LIMIT - 2 - new - size:
-        _renumber(H, cnt)
-    k = 0
-    st = RUNNING
-    while k < size:
-        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, BP[k], k)
+    for i in range(1, pending):
+        s = sc[0]
+        sc[0] = (s + 1) % SN.shape[0]
+        SN[s] = BN[i]
+        for d in range(X.shape[1]):
+            SX[s, d] = BP[i, d]
+        for b in range(nbranch):
+            SCO[s * nbranch + b] = CO[i * nbranch + b]
+            SCR[s * nbranch + b] = BR[i * nbranch + b]
+            for d in range(X.shape[1]):
+                SCH[s * nbranch + b, d] = CH[i * nbranch + b, d]
+    done = 0
+    while done < chunk:
+        if _full(cnt, table, H, X.shape[0], nbranch):
+            return GROW, 0
+        if cnt[C_SEQ] > SEQ_LIMIT - 2 - nbranch:
+            _renumber(H, cnt)
+        st, n = _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO, H, cnt, best, BP[0])
         if n < 0:
-            break
-        BN[k] = n
-        _pick(controls, nbranch, nfixed, rotate, cnt[C_ITERS], BU, BR, k * nbranch)
-        for b in range(k * nbranch, (k + 1) * nbranch):
-            BO[b] = k
-        k += 1
-    if k > 0:
+            return st, 0
+        done += 1
+        s = _cached(SN, SX, n, X)
+        if s >= 0:
+            SN[s] = -1
+            _add_children(fa, weight, params, data, dims, res, snap, settle, n, SCR, SCH, SCO, s * nbranch, nbranch,
+                          X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
+            continue
+        BN[0] = n
+        k = _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, BN, 1, size, cand)
+        for i in range(k):
+            for d in range(X.shape[1]):
+                BP[i, d] = X[BN[i], d]
+            _pick(controls, nbranch, nfixed, rotate, BN[i], BU, BR, i * nbranch)
+            for b in range(i * nbranch, (i + 1) * nbranch):
+                BO[b] = i
+        cnt[C_SIMULATED] += k * nbranch
         return RUNNING, k
-    return st, 0
+    return RUNNING, 0
 
 
 @njit(cache=True, error_model="numpy")
