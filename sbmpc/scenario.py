@@ -54,7 +54,7 @@ class PlannerSettings:
     that simulate a node's edges in parallel (0: all of numba's, one per core; the plan
     is the serial search's); batch: nodes whose edges are simulated together, the next
     node's and those of the open nodes next in line, kept until those are expanded (the
-    plan is the serial search's; 0: 1 on the CPU, 64 on a GPU); device:
+    plan is the serial search's; 0: 16 on several CPU threads, 1 on one, 64 on a GPU); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
     one-line note and the CPU); polish_time, polish_energy: after the search, polish
     the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on
