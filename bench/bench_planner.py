@@ -65,7 +65,7 @@ def main() -> int:
             for k in list(CONFIGS)[1:]:
                 r = rows[k]
                 r["same_plan"] = plans[k].controls == plans["serial"].controls
-                r["extra_edges"] = round(r["edges"] / max(s["edges"], 1) - 1.0, 4)
+                r["extra_edges"] = round(r["edges"] / s["edges"] - 1.0, 4) if s["edges"] else None
                 if s["status"] == r["status"] == "found":
                     r["speedup"] = round(s["planning_time_s"] / r["planning_time_s"], 2)
                     key = "travel_time_s" if c == "time" else "energy_J"

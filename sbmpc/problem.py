@@ -102,9 +102,9 @@ def on_gpu(ps) -> bool:
 def batch_size(ps) -> int:
     """Nodes whose edges are simulated together: the scenario's, or with 0 (auto)
     GPU_BATCH on a GPU, CPU_BATCH on several CPU threads and 1 on one. The plan is the
-    serial search's either way; on two cores a batch of 16 planned the large searches
-    2-8 % faster than one node at a time (bench/results/planner.json), simulating
-    0.05-0.7 % more edges (up to 32 % on searches of a few hundred expansions)."""
+    serial search's either way; on two cores a batch of 16 planned the searches of over
+    10 000 expansions 2-8 % faster than one node at a time (bench/results/planner.json),
+    simulating 0.03-3.6 % more edges than the serial search (10-32 % on smaller ones)."""
     if ps.batch:
         return ps.batch
     if on_gpu(ps):

@@ -173,23 +173,51 @@ def test_batched_search_does_not_use_edges_of_a_replaced_state(size):
     and the batched search simulates it again, so that it still expands the serial
     search's nodes, to the bit."""
     from sbmpc.search.astar import Search
+    stale = 0
     for seed in range(3):
         p = plane_problem(seed)
         serial = Search(p).run(20_000)
-        res = Search(p, capacity=8).run(20_000, batch=size)
+        batched = Search(p, capacity=8)
+        res = batched.run(20_000, batch=size)
         assert serial.status == res.status == "found"
         assert np.array_equal(res.path, serial.path) and np.array_equal(res.states, serial.states)
         assert (res.iterations, res.nodes, res.cost) == (serial.iterations, serial.nodes, serial.cost)
         assert res.edges_simulated > res.edges
+        stale += batched.cnt[counters.C_STALE]
+    assert stale > 0                  # the case under test happened
+
+
+@pytest.mark.parametrize("kw", [dict(refine=1.0), dict(max_depth=12), dict(weight=1.0)])
+def test_batched_search_follows_the_serial_one_when_refining_or_cut_by_depth(kw):
+    """Anytime refinement (goals reached become incumbents that prune), a depth limit
+    and plain A*: the batched search still expands the serial search's nodes."""
+    from dataclasses import replace
+    from sbmpc.search.astar import Search
+    p = replace(plane_problem(1), **kw)
+    serial = Search(p).run(20_000)
+    res = Search(p, capacity=8).run(20_000, batch=8)
+    assert (res.status, res.iterations, res.nodes, res.cost) == (serial.status, serial.iterations, serial.nodes,
+                                                                  serial.cost)
+    assert np.array_equal(res.path, serial.path)
+
+
+def test_a_batched_search_out_of_time_merges_the_node_it_took():
+    """A time budget that ends a batched search between rounds: the node it had taken
+    (counted as expanded) has its children merged, as the serial search's would be."""
+    from sbmpc.search.astar import Search
+    p = plane_problem(0)
+    s = Search(p, capacity=8)
+    res = s.run(20_000, time_budget_s=0.0, chunk=1, batch=4)
+    assert res.iterations >= 1 and res.edges == res.iterations * p.branching
 
 
 @pytest.mark.parametrize("size", [2, 5, 16])
 def test_batched_search_expands_the_serial_searchs_nodes(size):
     """K nodes' edges at a time, simulated ahead of their expansion: the nodes expanded,
-    the path and its cost are the serial search's (in snap mode a closed cell's node
-    takes a cheaper parent later, changing its state: the cache must not hand out the
-    edges of its old state), at the price of edges simulated and never used; an
-    unreachable goal is still reported as such."""
+    in the same order (iterations, nodes), the path and its cost are the serial
+    search's, at the price of edges simulated and never used; an unreachable goal is
+    still reported as such. (Here a node's state is its cell: the next test has states
+    that change.)"""
     from sbmpc.search.astar import Search
     for seed in range(4):
         rng = np.random.default_rng(seed)

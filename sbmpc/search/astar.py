@@ -122,7 +122,8 @@ class Problem:
     ``start`` (state_dim,); ``controls`` (m, control_dim); ``dims``/``res``: which state
     entries form the grid cell and the cell size of each; ``branching``: controls tried
     per expansion: the first ``fixed_controls`` rows always, then the next rows (the same
-    ones at every expansion, or with ``rotate`` the next window of the remaining rows);
+    ones at every expansion, or with ``rotate`` a window of the remaining rows that
+    follows the node's id);
     ``max_depth``: edges from the start; ``settle_depth``: children of nodes less than
     this many edges from the start that stay in their parent's cell are kept as nodes of
     their own instead of dropped (for states whose hidden part, such as a controller's,
@@ -185,7 +186,8 @@ class SearchResult:
     edges_simulated: int = 0
 
 
-CACHE_ROUNDS = 16      # the batched search's edge cache holds this many batches' nodes simulated ahead
+CACHE_ROUNDS = 16      # the batched search's edge cache holds this many batches' nodes simulated ahead ...
+CACHE_MAX = 4096       # ... but no more nodes than this (or than one batch)
 
 
 class Search:
@@ -204,6 +206,7 @@ class Search:
         self.DEP = np.empty(cap, np.int64)
         self.CLO = np.empty(cap, np.uint8)
         self.KEYS = np.empty((cap, kd), np.int64)
+        self.SL = np.full(cap, -1, np.int64)    # the batched search's edge-cache slot of each node
         self.table = _cell_table(cap)
         self.H = np.empty(4 * cap, np.int64)    # the open set: 2 int64 per entry
         self.cnt = np.zeros(NC, np.int64)       # no node: the first run puts the start in
@@ -229,9 +232,9 @@ class Search:
         n = self.cnt[C_NODES]
         if n + new > self.X.shape[0] or 4 * (n + new) > self.table.shape[0]:
             cap = 2 * self.X.shape[0]
-            for name in ("X", "G", "PAR", "CTL", "DEP", "CLO", "KEYS"):
+            for name in ("X", "G", "PAR", "CTL", "DEP", "CLO", "KEYS", "SL"):
                 a = getattr(self, name)
-                b = np.empty((cap,) + a.shape[1:], a.dtype)
+                b = np.full((cap,) + a.shape[1:], -1, a.dtype) if name == "SL" else np.empty((cap,) + a.shape[1:], a.dtype)
                 b[:n] = a[:n]
                 setattr(self, name, b)
             self.table = _cell_table(cap)
@@ -314,7 +317,7 @@ class Search:
         BR = np.zeros(E, np.int64)
         CH = np.zeros((E, ns))
         CO = np.zeros(E)
-        S = CACHE_ROUNDS * max(size - 1, 1)           # the edge cache: nodes simulated ahead
+        S = min(CACHE_ROUNDS * max(size - 1, 1), max(CACHE_MAX, size))   # the edge cache: nodes simulated ahead
         SN = np.full(S, -1, np.int64)
         SX = np.zeros((S, ns))
         SCH = np.zeros((S * nb, ns))
@@ -338,15 +341,18 @@ class Search:
         else:
             expand = serial
         run = _batch_entry()
+
+        def call(pending, chunk):         # one round (the arrays as they are now: _grow replaces them)
+            return run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
+                       bool(p.rotate), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
+                       int(max_iterations), float(p.refine), size, pending, int(chunk), self.X, self.G, self.PAR,
+                       self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
+                       BN, BP, BO, BU, BR, CH, CO, SN, SX, self.SL, SCH, SCO, SCR, sc, cand)
         t0 = time.perf_counter()
         pending = 0
         shown = 0
         while True:
-            st, k = run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
-                        bool(p.rotate), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
-                        int(max_iterations), float(p.refine), size, pending, int(chunk), self.X, self.G, self.PAR,
-                        self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
-                        BN, BP, BO, BU, BR, CH, CO, SN, SX, SCH, SCO, SCR, sc, cand)
+            st, k = call(pending, chunk)
             pending = 0
             if st == GROW:
                 self._grow(nb)
@@ -363,6 +369,8 @@ class Search:
                 if progress is not None:
                     progress(int(self.cnt[C_ITERS]), int(self.cnt[C_NODES]), elapsed)
                 if elapsed > time_budget_s:
+                    if pending:      # the node being expanded: its children merged, nothing else run
+                        call(pending, 0)
                     st = FOUND if self.cnt[C_GOAL] >= 0 else RUNNING
                     break
         return self._result(st, elapsed, max_iterations, time_budget_s)

@@ -4,9 +4,10 @@ counters (an int64 array) it keeps, shared by the search and its open set."""
 # ---- status of a chunk -----------------------------------------------------------
 RUNNING, FOUND, EXHAUSTED, ITERATIONS, GROW = 0, 1, 2, 3, 4
 # ---- counters (int64 array) ------------------------------------------------------
-C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST, C_SIMULATED = range(9)
+C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST, C_SIMULATED, C_STALE = range(10)
 # C_EDGES: edges merged (nbranch per expansion); C_SIMULATED: edges simulated (more in a
-# batched search, which simulates the edges of nodes it may never expand)
-C_INVALID = 9          # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
+# batched search, which simulates the edges of nodes it may never expand); C_STALE: nodes
+# whose edges were simulated ahead from a state a cheaper arrival then replaced
+C_INVALID = 10         # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
 MAX_CODE = 8
 NC = C_INVALID + MAX_CODE + 1

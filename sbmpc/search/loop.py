@@ -21,9 +21,9 @@ from numba.extending import intrinsic
 
 from .cells import _EMPTY, _code, _insert, _is_key, _lookup, _shift, cell_index
 from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SEQ,
-                       C_SIMULATED, EXHAUSTED,
+                       C_SIMULATED, C_STALE, EXHAUSTED,
                        FOUND, GROW, ITERATIONS, MAX_CODE, RUNNING)
-from .heap import SEQ_LIMIT, _pop, _push, _renumber
+from .heap import SEQ_LIMIT, _bits, _pop, _push, _renumber
 
 # ---- first-class function types of a problem -------------------------------------
 _ARR = types.float64[::1]
@@ -293,26 +293,31 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _cached(SN, SX, n, X):
+def _cached(SN, SX, SL, n, X, cnt):
     """The slot of the edge cache that holds node n's edges simulated from its present
-    state, or -1 (a slot of n's for an earlier state, replaced since by a cheaper
-    arrival, is freed)."""
-    for s in range(SN.shape[0]):
-        if SN[s] == n:
-            for d in range(X.shape[1]):
-                if SX[s, d] != X[n, d]:
-                    SN[s] = -1
-                    return -1
-            return s
-    return -1
+    state (the same bits), or -1; a slot of n's for an earlier state, replaced since by
+    a cheaper arrival, is freed (counted in C_STALE). SL[n]: n's last slot, which a
+    later node may have taken since."""
+    s = SL[n]
+    if s < 0 or SN[s] != n:
+        return -1
+    for d in range(X.shape[1]):
+        if _bits(SX[s, d]) != _bits(X[n, d]):
+            SN[s] = -1
+            cnt[C_STALE] += 1
+            return -1
+    return s
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, BN, k, size, cand):
+def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, SL, BN, k, size, cand):
     """Fill BN[k:size] with the open nodes next in the open set's order, without taking
     them (a best-first walk down the heap from its root, at most 4 size entries):
     closed nodes, goals, nodes at the depth limit, nodes already in the batch and nodes
-    whose edges are cached are passed over. Returns the new k."""
+    whose edges are cached are passed over. Returns the new k. (The walk picks each
+    next entry by a scan of its candidates and the batch is checked for duplicates by a
+    scan: O(size^2) a round, nothing next to a round's edges for the batches of tens of
+    nodes it is meant for.)"""
     goal = _goal_fn(fa[4], fa[5])
     h = cnt[C_HEAP]
     nc = 0
@@ -341,7 +346,7 @@ def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, BN, k, size
         dup = False
         for b in range(k):
             dup = dup or BN[b] == n
-        if dup or _cached(SN, SX, n, X) >= 0 or goal(params, data, X[n]):
+        if dup or _cached(SN, SX, SL, n, X, cnt) >= 0 or goal(params, data, X[n]):
             continue
         BN[k] = n
         k += 1
@@ -352,14 +357,14 @@ _BATCH_SIG = types.UniTuple(types.int64, 2)(
     _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, _I1, _F1, types.boolean,
     types.int64, types.int64, types.int64, types.float64, types.int64, types.int64, types.int64,
     _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1,
-    _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _F2, _F1, _I1, _I1, _I1)
+    _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _I1, _F2, _F1, _I1, _I1, _I1)
 
 
 @njit(_BATCH_SIG, cache=True, error_model="numpy")
 def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, dims, res, snap,
               max_depth, settle, max_iters, refine, size, pending, chunk,
               X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt, best,
-              BN, BP, BO, BU, BR, CH, CO, SN, SX, SCH, SCO, SCR, sc, cand):
+              BN, BP, BO, BU, BR, CH, CO, SN, SX, SL, SCH, SCO, SCR, sc, cand):
     """One round of the batched search, which expands the serial search's nodes in the
     serial search's order (the same plan, node for node) and simulates the edges of up
     to ``size`` nodes at a time: the node to expand and the open nodes next in line.
@@ -369,7 +374,8 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
     BN[i]): the children of BN[0], the node being expanded, are merged; the edges of
     the others go into the edge cache (slots s of SN: node id, -1 when free; SX: the
     state simulated from; rows s * nbranch.. of SCH, SCO, SCR: children, costs, control
-    rows; filled round robin, sc[0] the next slot). Then it expands nodes in order
+    rows; filled round robin, sc[0] the next slot; SL[n]: node n's slot, one int64 per
+    node, -1 or stale where it has none). Then it expands nodes in order
     (up to ``chunk``) as long as their edges are cached for their present state. At the
     first that is not, it returns (RUNNING, k): BN[0] that node (taken, closed), BN[1:k]
     the open nodes next in line (not taken), BP their states, and per edge e (nbranch
@@ -388,6 +394,7 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
         s = sc[0]
         sc[0] = (s + 1) % SN.shape[0]
         SN[s] = BN[i]
+        SL[BN[i]] = s
         for d in range(X.shape[1]):
             SX[s, d] = BP[i, d]
         for b in range(nbranch):
@@ -405,14 +412,14 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
         if n < 0:
             return st, 0
         done += 1
-        s = _cached(SN, SX, n, X)
+        s = _cached(SN, SX, SL, n, X, cnt)
         if s >= 0:
             SN[s] = -1
             _add_children(fa, weight, params, data, dims, res, snap, settle, n, SCR, SCH, SCO, s * nbranch, nbranch,
                           X, G, PAR, CTL, DEP, CLO, KEYS, table, shift, H, cnt, best, key, child)
             continue
         BN[0] = n
-        k = _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, BN, 1, size, cand)
+        k = _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, SL, BN, 1, size, cand)
         for i in range(k):
             for d in range(X.shape[1]):
                 BP[i, d] = X[BN[i], d]
