@@ -12,24 +12,25 @@ from scipy.sparse.csgraph import shortest_path
 from sbmpc.search import cells, counters, heap
 from sbmpc.search.astar import EXPAND, GOAL, HEURISTIC, Problem, search
 
-# ---- a 4-connected grid walker: state (i, j), controls unit moves, cost 1 --------------
-# params: [n, goal_i, goal_j]; data: blocked flags, row-major n x n
+# ---- a walker on an n x n map of cell weights: state (x, y), a control a move (dx, dy)
+# costing its length times the weight of the cell it ends in (weight 0: blocked).
+# params: [n, goal_x, goal_y]; data: the weights, row-major n x n. With unit moves and
+# weights 0 or 1, a 4-connected grid walk of cost 1 a step (snap: the state is the cell)
 
 
 @njit(EXPAND.signature, cache=True)
 def walk(params, data, work, state, controls, children, costs):
     n = int(params[0])
     for b in range(controls.shape[0]):
-        i = state[0] + controls[b, 0]
-        j = state[1] + controls[b, 1]
-        children[b, 0] = i
-        children[b, 1] = j
-        if i < 0 or j < 0 or i >= n or j >= n:
+        x = state[0] + controls[b, 0]
+        y = state[1] + controls[b, 1]
+        children[b, 0] = x
+        children[b, 1] = y
+        if x < 0 or y < 0 or x >= n or y >= n:
             costs[b] = -1.0
-        elif data[int(i) * n + int(j)] > 0:
-            costs[b] = -2.0
         else:
-            costs[b] = 1.0
+            weight = data[int(x) * n + int(y)]
+            costs[b] = -2.0 if weight <= 0.0 else math.hypot(controls[b, 0], controls[b, 1]) * weight
 
 
 @njit(HEURISTIC.signature, cache=True)
@@ -48,7 +49,7 @@ MOVES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 def grid_problem(blocked, goal):
     n = blocked.shape[0]
     return Problem(walk, manhattan, at_goal, np.array([n, goal[0], goal[1]], float),
-                   blocked.astype(float).ravel(), np.zeros(2), MOVES, np.array([0, 1], np.int64),
+                   (~blocked).astype(float).ravel(), np.zeros(2), MOVES, np.array([0, 1], np.int64),
                    np.ones(2), branching=4, snap=True, codes=("off the grid", "blocked"))
 
 
@@ -124,22 +125,7 @@ def test_batch_of_one_on_threads_expands_what_the_serial_search_expands():
     assert (serial.iterations, serial.nodes, serial.edges) == (batched.iterations, batched.nodes, batched.edges)
 
 
-# ---- a point on a plane of random terrain weights, exact states (no snap) ------------
-# params: [n, goal_x, goal_y]; data: per-cell weights, row-major n x n
-
-
-@njit(EXPAND.signature, cache=True)
-def drive(params, data, work, state, controls, children, costs):
-    n = int(params[0])
-    for b in range(controls.shape[0]):
-        x = state[0] + controls[b, 0]
-        y = state[1] + controls[b, 1]
-        children[b, 0] = x
-        children[b, 1] = y
-        if x < 0 or y < 0 or x >= n or y >= n:
-            costs[b] = -1.0
-        else:
-            costs[b] = math.hypot(controls[b, 0], controls[b, 1]) * data[int(x) * n + int(y)]
+# ---- the walker with moves of random lengths and directions, exact states (no snap)
 
 
 @njit(HEURISTIC.signature, cache=True)
@@ -161,7 +147,7 @@ def plane_problem(seed):
     ang = rng.uniform(0, 2 * np.pi, 60)
     rad = rng.uniform(0.7, 2.5, 60)
     controls = np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
-    return Problem(drive, straight, near_goal, np.array([n, 27.5, 26.5]), weights.ravel(), np.array([0.5, 0.5]),
+    return Problem(walk, straight, near_goal, np.array([n, 27.5, 26.5]), weights.ravel(), np.array([0.5, 0.5]),
                    controls, np.array([0, 1], np.int64), np.ones(2), branching=9, rotate=True, fixed_controls=1,
                    snap=False, weight=1.3)
 
