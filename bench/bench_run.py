@@ -8,7 +8,8 @@ Faults: the right tyres 8 % smaller (``wheel_radius``) and a viscous drag of
 0.2 N m s/rad per wheel (``viscous_friction``). For each, a 90 s measured-looking run of
 the faulty vehicle (``dynamics.synth``) is diagnosed (``dynamics.discrepancy``) and the
 scenario is run three times: planning with the baseline model, with the diagnosed
-(extended) vehicle, and with the true vehicle itself. One core, numba warm.
+(extended) vehicle, and with the true vehicle itself. The default planner settings (every
+core), numba warm.
 """
 from __future__ import annotations
 
