@@ -13,7 +13,7 @@ expand the same nodes: ``same_plan`` says whether the controls came out the same
 ``extra_edges`` how many more edges than the serial search a configuration simulated.
 The speed-up is the ratio of planning times within that run (these machines are noisy:
 compare ratios, not seconds across runs). Map size and branching rows use the default settings (every
-core, batch 1).
+core, batch 16).
 """
 from __future__ import annotations
 
