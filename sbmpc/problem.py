@@ -3,6 +3,7 @@
 its edges run on (the CPU's cores or a GPU)."""
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -124,3 +125,18 @@ def search_threads(ps):
         return ps.threads
     import numba
     return "auto" if numba.config.NUMBA_NUM_THREADS > 1 else 1
+
+
+@contextlib.contextmanager
+def cpu_threads(ps):
+    """Run the block's parallel CPU work (the polish's trials) on the scenario's
+    ``planner.threads`` (0: every core numba uses); numba's count is restored after."""
+    import numba
+    before = numba.get_num_threads()
+    if ps.threads:
+        numba.set_num_threads(max(1, min(int(ps.threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
