@@ -42,9 +42,7 @@ from dynamics import kernels as K
 from .problems import skidsteer as SS
 
 STEPS = (0.1, 0.03, 0.01)   # move sizes, x the top of the sampled wheel-speed range
-MAX_SWEEPS = 8              # sweeps over the sequence per move size ...
-SWEEP_GAIN = 1e-4           # ... while a sweep gains more than this (relative)
-DURATION = 1.0              # s: the unit of the duration moves (x s, in whole planner steps)
+MAX_SWEEPS = 4              # sweeps over the sequence per move size
 MIN_GAIN = 1e-6             # relative: smaller improvements are not taken
 
 
@@ -72,27 +70,17 @@ class Polished:
                 "seconds": round(self.seconds, 3)}
 
 
-def _durations(di: float, dn: float, s: float, dmin: float) -> list:
-    """Durations [s] (of control i, of control i + 1) of the duration moves: the switch
-    between them s x DURATION earlier or later (their sum kept), and control i held that
-    much longer or shorter; in whole planner steps of ``dmin`` [s], none shorter than one."""
-    k, a, b = max(1, round(s * DURATION / dmin)), round(di / dmin), round(dn / dmin)
-    return [(p * dmin, q * dmin) for p, q in ((a + k, b - k), (a - k, b + k), (a + k, b), (a - k, b))
-            if p >= 1 and q >= 1]
-
-
-def _moves(ctrl: np.ndarray, i: int, s: float, top: float, lo: float, hi: float, dmin: float) -> np.ndarray:
-    """The trials (m, 6) of controls i and i + 1, (wl, wr, duration) of each (module
-    doc); wheel speeds in [lo, hi] [rad/s], durations whole steps of ``dmin`` [s]."""
+def _moves(ctrl: np.ndarray, i: int, s: float, top: float, lo: float, hi: float) -> np.ndarray:
+    """The trial wheel speeds (m, 4) of controls i and i + 1 (module doc)."""
     n = len(ctrl)
-    wl, wr, di = ctrl[i]
-    nl, nr, dn = ctrl[i + 1] if i + 1 < n else (0.0, 0.0, 0.0)
+    wl, wr = ctrl[i, 0], ctrl[i, 1]
+    nl, nr = (ctrl[i + 1, 0], ctrl[i + 1, 1]) if i + 1 < n else (0.0, 0.0)
     d = s * top
     out = []
     for a, b in ((wl * (1 + s), wr * (1 + s)), (wl * (1 - s), wr * (1 - s)), (wl + d, wr - d), (wl - d, wr + d)):
         a, b = min(max(a, lo), hi), min(max(b, lo), hi)
         if (a, b) != (wl, wr):
-            out.append((a, b, di, nl, nr, dn))
+            out.append((a, b, nl, nr))
     if i + 2 < n:                                    # two full periods (not the cut last one)
         # a turn or a speed moved between the two (heading and distance after both kept
         # but where a wheel speed is clipped to the range)
@@ -101,14 +89,12 @@ def _moves(ctrl: np.ndarray, i: int, s: float, top: float, lo: float, hi: float,
             a, b = min(max(a, lo), hi), min(max(b, lo), hi)
             c, e = min(max(c, lo), hi), min(max(e, lo), hi)
             if (a, b, c, e) != (wl, wr, nl, nr):
-                out.append((a, b, di, c, e, dn))
-        for p, q in _durations(di, dn, s, dmin):
-            out.append((wl, wr, p, nl, nr, q))
+                out.append((a, b, c, e))
     if i + 2 < n and (wl, wr) != (nl, nr):
-        out.append((nl, nr, di, wl, wr, dn))
+        out.append((nl, nr, wl, wr))
         ml, mr = 0.5 * (wl + nl), 0.5 * (wr + nr)
-        out.append((ml, mr, di, ml, mr, dn))
-    return np.array(out, float).reshape(-1, 6)
+        out.append((ml, mr, ml, mr))
+    return np.array(out, float).reshape(-1, 4)
 
 
 def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo: float, hi: float,
@@ -141,7 +127,7 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
         """Try the moves of size s at control i; keep the best trial that reaches the
         goal for less than the best so far. Whether one was kept."""
         nonlocal ctrl, states, best, trials
-        moves = _moves(ctrl, i, s, top, lo, hi, params[SS.Q_DT])
+        moves = _moves(ctrl, i, s, top, lo, hi)
         m = len(moves)
         if not m:
             return False
@@ -158,9 +144,9 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
         if not prefix + costs[j] < best * (1.0 - MIN_GAIN):
             return False
         best = prefix + costs[j]
-        ctrl[i] = moves[j, :3]
+        ctrl[i, :2] = moves[j, :2]
         if i + 1 < len(ctrl):
-            ctrl[i + 1] = moves[j, 3:]
+            ctrl[i + 1, :2] = moves[j, 2:]
         ctrl = ctrl[:i + used[j]].copy()
         ctrl[-1, 2] = round(lasts[j], 9)
         states = states[:len(ctrl)]      # the prefix up to i is unchanged
@@ -180,15 +166,15 @@ def polish(params: np.ndarray, data: np.ndarray, start: np.ndarray, controls, lo
     stop = False
     for s in STEPS:
         for _ in range(MAX_SWEEPS):
-            before = best
+            improved = False
             i = 0
             while i < len(ctrl):
                 if late():
                     stop = True
                     break
-                attempt(i, s)
+                improved |= attempt(i, s)
                 i += 1
-            if stop or not best < before * (1.0 - SWEEP_GAIN):
+            if stop or not improved:
                 break
         if stop:
             break

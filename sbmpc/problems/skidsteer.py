@@ -356,14 +356,14 @@ def sequence_cost(params, data, state, ctrl, first, extra, bound, out):
 def sequence_costs(params, data, state, ctrl, first, moves, extra, bound, costs, used, last):
     """:func:`sequence_cost` of many variants of ``ctrl`` from ``state`` at control
     ``first``, in parallel over numba's threads: variant m replaces the wheel speeds of
-    controls ``first`` and ``first + 1`` by ``moves[m]`` (wl, wr, duration, wl', wr',
-    duration')."""
+    controls ``first`` and ``first + 1`` by ``moves[m]`` (wl, wr, wl', wr')."""
     for m in prange(moves.shape[0]):
         seq = ctrl.copy()
-        for d in range(3):
-            seq[first, d] = moves[m, d]
-            if first + 1 < seq.shape[0]:
-                seq[first + 1, d] = moves[m, 3 + d]
+        seq[first, 0] = moves[m, 0]
+        seq[first, 1] = moves[m, 1]
+        if first + 1 < seq.shape[0]:
+            seq[first + 1, 0] = moves[m, 2]
+            seq[first + 1, 1] = moves[m, 3]
         out = np.empty(state.shape[0])
         costs[m], used[m], last[m] = sequence_cost(params, data, state, seq, first, extra, bound, out)
 
