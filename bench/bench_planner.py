@@ -6,7 +6,7 @@ side in one run; and how planning time grows with map size and branching factor.
 
 Numba is warmed up first (one small plan of each cost and configuration). Per scenario
 and cost, four configurations run one after another: ``serial`` (one thread, batch 1:
-the serial A*), ``threads`` (a node's edges on every core, batch 1), ``batch4`` and
+the serial A*, and the polish of energy plans on one thread too), ``threads`` (a node's edges on every core, batch 1), ``batch4`` and
 ``batch16`` (every core, the edges of the next node and of the 3 or 15 open nodes next
 in line simulated together, those of the others kept for their expansion). All four
 expand the same nodes: ``same_plan`` says whether the controls came out the same, and
