@@ -120,6 +120,77 @@ def convergence(per_terrain: int, dt: float, period: float, seed: int, seeds: in
     return out
 
 
+MAP_SCENARIOS = ("hill_tradeoff", "steep_hill", "hills_field", "mixed_terrain", "narrow_pass")
+
+
+def map_convergence(per_map: int, seed: int, period: float = 1.0) -> dict:
+    """The planner's own edge (``problems.skidsteer.edge``: the map's grade under the
+    vehicle changes along the edge) at the planner's step against 1 ms, on the shipped
+    hilly maps: per map ``per_map`` edges from random places and headings (where the
+    vehicle stands), entry at rest, moving or turning, commands uniform over the sampled
+    wheel-speed range. The constant-grade edges of :func:`convergence` cannot show an
+    error that grows with the grade's change along the way."""
+    import math
+    from dynamics import kernels as K
+    from sbmpc import problem as PB, scenario as SC, world as WO
+    from sbmpc.problems import skidsteer as SS
+    out, allrows = {}, []
+    for name in MAP_SCENARIOS:
+        world = WO.resolve(SC.load(ROOT / "scenarios" / f"{name}.yaml"))
+        coarse = PB.pack_world(world, "energy")
+        fine = PB.pack_world(world, "energy", 1.0 / world.vehicle.controller_rate)
+        lo, hi = WO.wheel_speed_range(world)
+        X0 = WO.start_state(world)
+        e = world.emap
+        x0, x1, y0, y1 = e.extent
+        rng = np.random.default_rng(seed)
+        rows = []
+        while len(rows) < per_map:
+            x, y = rng.uniform(x0 + 3, x1 - 3), rng.uniform(y0 + 3, y1 - 3)
+            yaw = rng.uniform(-math.pi, math.pi)
+            pitch, roll = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
+            if max(abs(pitch), abs(roll)) > math.radians(world.scenario.planner.tip_over_deg) - 0.05:
+                continue
+            kind = len(rows) % 3
+            wl, wr = (0.0, 0.0) if kind == 0 else ((w := rng.uniform(0.1, 0.9) * hi), w) if kind == 1 \
+                else tuple(rng.uniform(lo, hi, size=2))
+            X = X0.copy()
+            X[:K.NS] = world.model(x, y).state(wl, wr, pitch, x, y, yaw, e.height(x, y))
+            X[SS.X_YAWW] = yaw
+            cl, cr = rng.uniform(lo, hi, size=2)
+            ends = []
+            for Q, data in (coarse, fine):
+                S = X.copy()
+                end, _ = SS.edge(Q, data, S, cl, cr, round(period / Q[SS.Q_DT]), np.zeros((0, K.NR)), 0, np.empty(K.NO))
+                ends.append((end, S))
+            (ec, Sc), (ef, Sf) = ends
+            if ec == SS.IN_GOAL or ef == SS.IN_GOAL or -SS.OFF_MAP in (ec, ef):
+                continue
+            de = Sf[K.S_E] - X[K.S_E]
+            rows.append((ec < 0, ef < 0, abs(Sc[K.S_E] - Sf[K.S_E]) <= max(0.02 * abs(de), 0.05),
+                         math.hypot(Sc[K.S_X] - Sf[K.S_X], Sc[K.S_Y] - Sf[K.S_Y]),
+                         math.degrees(math.remainder(Sc[K.S_YAW] - Sf[K.S_YAW], 2 * math.pi)),
+                         math.degrees(Sf[K.S_YAW] - X[K.S_YAW])))
+        allrows += rows
+        out[name] = _map_summary(rows)
+        print(name, out[name], flush=True)
+    out["all"] = _map_summary(allrows)
+    print("all maps", out["all"], flush=True)
+    return out
+
+
+def _map_summary(rows) -> dict:
+    r = np.array(rows, float)
+    both = (r[:, 0] == 0) & (r[:, 1] == 0)
+    pos, yaw, turn = r[both, 3], r[both, 4], r[both, 5]
+    return {"edges": len(r), "stall_agrees": round(float(np.mean(r[:, 0] == r[:, 1])), 4),
+            "energy_within_2pct": round(float(np.mean(r[both, 2])), 4),
+            "pose_within_5cm_2deg": round(float(np.mean((pos <= 0.05) & (np.abs(yaw) <= 2.0))), 4),
+            "pos_err_mm_median_p99": [round(1e3 * float(np.median(pos)), 3), round(1e3 * float(np.quantile(pos, 0.99)), 3)],
+            "yaw_err_deg_median_p99": [round(float(np.median(np.abs(yaw))), 5), round(float(np.quantile(np.abs(yaw), 0.99)), 4)],
+            "yaw_err_over_turn_median": round(float(np.median(np.abs(yaw) / np.maximum(np.abs(turn), 0.1))), 5)}
+
+
 SEARCH_EXPANSIONS = 5000   # the search whose nodes the second timer draws from
 
 
@@ -166,6 +237,7 @@ def main() -> int:
     ap.add_argument("--baseline", default=None, help="git revision to time against")
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--nodes", type=int, default=300)
+    ap.add_argument("--per-map", type=int, default=300, help="random edges on each shipped hilly map")
     args = ap.parse_args()
     if args.seeds < 1:
         ap.error("--seeds: expected at least 1")
@@ -173,7 +245,8 @@ def main() -> int:
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
            "dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,
            "seeds": args.seeds,
-           "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed, args.seeds)}
+           "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed, args.seeds),
+           "on_maps": map_convergence(args.per_map, args.seed, args.period)}
     res["cost"] = edge_cost(args.baseline, args.rounds, args.nodes)
     print("cost", res["cost"], flush=True)
     res["cost_on_search_nodes"] = edge_cost(args.baseline, args.rounds, args.nodes, search=True)

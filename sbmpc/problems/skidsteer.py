@@ -119,6 +119,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     kp = 0                              # the terrain (index into the layer's terrains) ...
     Pk = data[offt:offt + K.NP]         # ... its model parameters and friction table
     Tk = data[offt + K.NP:offt + block]
+    prev = 0.0
     for i in range(nsteps + 1):
         x = S[K.S_X]
         y = S[K.S_Y]
@@ -141,8 +142,13 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
                 Pk = data[a:a + K.NP]
                 Tk = data[a + K.NP:a + block]
                 kp = k
-        cp = 1.0 / math.sqrt(1.0 + along * along)     # the pitch's cosine and sine
-        K.step_slope(Pk, Tk, S, cmd_l, cmd_r, along * cp, cp, dt, False, O)
+        # the step integrates against the grade at its midpoint, extrapolated from the
+        # grades at this step's start and the last one's (at the start alone the step
+        # was first order on a changing grade)
+        g = along + 0.5 * (along - prev) if i > 0 else along
+        prev = along
+        cp = 1.0 / math.sqrt(1.0 + g * g)     # the pitch's cosine and sine
+        K.step_slope(Pk, Tk, S, cmd_l, cmd_r, g * cp, cp, dt, False, O)
         stepped = True
         if record and rows < rec.shape[0]:
             S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
