@@ -8,6 +8,11 @@ carries its speed and controller state: the entry speed into a hill matters.
 An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period,
 stepping ``dynamics.kernels.step_slope`` every ``dt`` with the slope under the vehicle from
 ``maps.slope_grades_at`` and the terrain under its centre from the map's terrain layer.
+Each step integrates against the grade at its midpoint, extrapolated linearly from the
+grades at its start and at the last step's start (the first step of an edge takes its
+start's): with the grade held from the step's start, the step was first order where
+the grade changes along the way (a 1 s turn up a hill's skirt turned 1.4 % more at
+20 ms than at 1 ms; now 0.05 %); the validity checks stay at each step's start.
 It is invalid (codes below) when the vehicle leaves the map, pitches or rolls beyond the
 tip-over limit, or stalls (drive saturated, commanded motion not achieved for
 ``STALL_TIME``). An edge that enters the goal disc ends there, so the last control of a
