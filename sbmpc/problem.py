@@ -139,4 +139,3 @@ def cpu_threads(ps):
         yield
     finally:
         numba.set_num_threads(before)
-
