@@ -51,8 +51,8 @@ class PlannerSettings:
     bound) for refine times the expansions it took, keeping the best plan (0: stop at
     the first; on the shipped scenarios refinement changed no time plan by more than
     0.04 s and did not recover what a weight of 2 lost for energy); threads: CPU threads
-    that simulate a node's edges in parallel (0: all of numba's, one per core; the plan
-    is the serial search's); batch: nodes whose edges are simulated together, the next
+    that simulate a node's edges and the polish's trials in parallel (0: all of numba's,
+    one per core; the plan is the serial search's); batch: nodes whose edges are simulated together, the next
     node's and those of the open nodes next in line, kept until those are expanded (the
     plan is the serial search's; 0: 16 on several CPU threads, 1 on one, 64 on a GPU); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a

@@ -41,7 +41,7 @@ def add_backend_flags(p):
     p.add_argument("--device", choices=("cpu", "cuda"),
                    help="where the edges are simulated (default: the scenario's planner.device, cpu); "
                    "cuda needs numba-cuda and an NVIDIA GPU, else a note and the CPU")
-    p.add_argument("--threads", type=int, help="CPU threads for the edges (default: the scenario's; 0: every core)")
+    p.add_argument("--threads", type=int, help="CPU threads for the edges and the polish (default: the scenario's; 0: every core)")
     p.add_argument("--batch", type=int, help="nodes expanded together (default: the scenario's; 0: 1 on the CPU, "
                    "64 on a GPU)")
     p.add_argument("--max-expansions", type=int, help="node budget (default: the scenario's planner.max_expansions)")
