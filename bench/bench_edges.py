@@ -134,6 +134,7 @@ def map_convergence(per_map: int, seed: int, period: float = 1.0) -> dict:
     from dynamics import kernels as K
     from sbmpc import problem as PB, scenario as SC, world as WO
     from sbmpc.problems import skidsteer as SS
+    from dynamics.convergence import _feasible
     out, allrows = {}, []
     for name in MAP_SCENARIOS:
         world = WO.resolve(SC.load(ROOT / "scenarios" / f"{name}.yaml"))
@@ -155,7 +156,9 @@ def map_convergence(per_map: int, seed: int, period: float = 1.0) -> dict:
             wl, wr = (0.0, 0.0) if kind == 0 else ((w := rng.uniform(0.1, 0.9) * hi), w) if kind == 1 \
                 else tuple(rng.uniform(lo, hi, size=2))
             X = X0.copy()
-            X[:K.NS] = world.model(x, y).state(wl, wr, pitch, x, y, yaw, e.height(x, y))
+            model = world.model(x, y)
+            # a steady entry the drive cannot hold enters at its limit (as in convergence)
+            X[:K.NS] = _feasible(model, model.state(wl, wr, pitch, x, y, yaw, e.height(x, y)))
             X[SS.X_YAWW] = yaw
             cl, cr = rng.uniform(lo, hi, size=2)
             ends = []
