@@ -11,7 +11,9 @@ Convergence: ``--per-terrain`` random edges (default 200) on every shipped terra
 the planner's whole sampled range (pivots included); grades up to the steepest
 sustainable grade + 5 deg, both ways. Each is rolled out for one planning period at the
 planner's step (0.02 s) and at the controller period (1 ms, the paper's 1 kHz digital
-PID) and compared: stall verdict, energy, end pose.
+PID) and compared: stall verdict, energy, end pose. Then the same on the shipped hilly
+maps (``--per-map`` edges on each, ``map_convergence``), through the planner's own edge,
+where the grade changes along the way.
 
 Cost: the planner's own expansion (``sbmpc.problems.skidsteer.expand``, all edges of a node) on
 nodes spread over the hill_tradeoff map, timed in a child process per source tree;
