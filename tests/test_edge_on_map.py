@@ -41,3 +41,21 @@ def test_a_turn_up_a_hills_skirt_turns_as_at_the_controller_rate(skirt, cmd):
             assert abs(S[outer]) == pytest.approx(world.vehicle.current_limit, rel=1e-6)
     assert turns[0.02] == pytest.approx(turns[0.001], rel=2e-3, abs=3e-3)
     assert math.copysign(1.0, turns[0.001]) == math.copysign(1.0, cmd[1] - cmd[0])
+
+
+def test_a_replay_without_a_record_drives_the_same_and_writes_nothing(skirt):
+    """``skidsteer.replay`` with an empty record array (numba checks no bounds: it once
+    wrote the start into row 0 regardless) returns 0 rows and the same end state, to
+    the bit, as with every step recorded."""
+    import numpy as np
+    from sbmpc import problem as PB
+    from sbmpc.problems import skidsteer as SS
+    world, X = skirt
+    Q, data = PB.pack_world(world, "energy")
+    cl, cr, n = np.array([6.0, 2.0]), np.array([7.0, 6.0]), np.array([50, 50], np.int64)
+    full = np.zeros((101, K.NR))
+    rows, S1, end1, e1 = SS.replay(Q, data, X, cl, cr, n, full)
+    empty = np.zeros((0, K.NR))
+    rows0, S0, end0, e0 = SS.replay(Q, data, X, cl, cr, n, empty)
+    assert rows == 101 and rows0 == 0
+    assert (end0, e0) == (end1, e1) and np.array_equal(S0, S1)

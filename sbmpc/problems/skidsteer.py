@@ -305,8 +305,9 @@ def is_goal(params, data, state):
 @njit(cache=True, error_model="numpy")
 def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
     """Replay controls (cmd_l[i], cmd_r[i]) each for nsteps[i] steps from ``start``,
-    recording every step into ``rec`` (row 0 the start). Returns (rows, end state, end
-    code of the last edge, index of the edge that ended the replay early or -1)."""
+    recording every step into ``rec`` (row 0 the start) while it has rows (none: nothing
+    recorded). Returns (rows, end state, end code of the last edge, index of the edge
+    that ended the replay early or -1)."""
     S = start.copy()
     O = np.zeros(K.NO)
     a = int(params[Q_OFFT])
@@ -316,8 +317,10 @@ def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
     H = data[:nx * ny].reshape((ny, nx))
     pitch, _ = pitch_roll_at(H, params[Q_RES], params[Q_OX], params[Q_OY], S[K.S_X], S[K.S_Y],
                              S[K.S_YAW], params[Q_HL], params[Q_HW])
-    K.record(S, O, pitch, rec[0])
-    rows = 1
+    rows = 0
+    if rec.shape[0] > 0:            # (numba checks no bounds: an empty rec is written nowhere)
+        K.record(S, O, pitch, rec[0])
+        rows = 1
     end = 0
     for e in range(cmd_l.shape[0]):
         end, rows = edge(params, data, S, cmd_l[e], cmd_r[e], nsteps[e], rec, rows, O)
