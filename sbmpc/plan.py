@@ -19,9 +19,9 @@ from dynamics import kernels as K
 from .check import Check, check_cost, controller_rate, fine_state, parting, predicted, replay
 from .heuristics import _max_rise, unreachable_reason
 from .polish import Polished, polish
-from .problem import batch_size, cpu_threads, problem, search_threads
+from .problem import batch_size, problem, search_threads
 from .problems import skidsteer as SS
-from .search.astar import Problem, Search, SearchResult
+from .search.astar import Problem, Search, SearchResult, numba_threads
 from .trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
 from .world import World, _start, capability, wheel_speed_range
 
@@ -247,7 +247,7 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     r = world.scenario.goal["radius"]
     for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
         params[SS.Q_GR] = r - margin
-        with cpu_threads(world.scenario.planner):
+        with numba_threads(world.scenario.planner.threads or None):   # the polish's trials: planner.threads
             pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
         if pol is not None:
             break

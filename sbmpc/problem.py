@@ -3,7 +3,6 @@
 its edges run on (the CPU's cores or a GPU)."""
 from __future__ import annotations
 
-import contextlib
 import math
 
 import numpy as np
@@ -103,9 +102,8 @@ def on_gpu(ps) -> bool:
 def batch_size(ps) -> int:
     """Nodes whose edges are simulated together: the scenario's, or with 0 (auto)
     GPU_BATCH on a GPU, CPU_BATCH on several CPU threads and 1 on one. The plan is the
-    serial search's either way; on two cores a batch of 16 planned the searches of over
-    10 000 expansions 2-8 % faster than one node at a time (bench/results/planner.json),
-    simulating 0.03-3.6 % more edges than the serial search (10-32 % on smaller ones)."""
+    serial search's either way; a batch pays in edges simulated for nodes the search
+    then does not expand (bench/results/planner.json, docs/performance.md#planner)."""
     if ps.batch:
         return ps.batch
     if on_gpu(ps):
@@ -126,16 +124,3 @@ def search_threads(ps):
     import numba
     return "auto" if numba.config.NUMBA_NUM_THREADS > 1 else 1
 
-
-@contextlib.contextmanager
-def cpu_threads(ps):
-    """Run the block's parallel CPU work (the polish's trials) on the scenario's
-    ``planner.threads`` (0: every core numba uses); numba's count is restored after."""
-    import numba
-    before = numba.get_num_threads()
-    if ps.threads:
-        numba.set_num_threads(max(1, min(int(ps.threads), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)

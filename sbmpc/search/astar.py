@@ -43,6 +43,7 @@ checks the wall-clock budget, shows progress and grows the arrays when asked (st
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import time
@@ -272,16 +273,12 @@ class Search:
         if hasattr(progress, "budgets"):
             progress.budgets(max_iterations, time_budget_s)
         progress = _with_best(progress, self.best)
-        import numba
-        before = numba.get_num_threads()      # each mode sets numba's threads: restored after
-        try:
+        with numba_threads():                 # each mode sets numba's threads: restored after
             if batch > 1 or threads == "auto" or (threads or 1) > 1:
                 return self._run_batched(max_iterations, time_budget_s, chunk, progress, int(batch), threads)
             if threads == 1:                # a problem's expander may loop in parallel: one thread
-                numba.set_num_threads(1)
+                set_threads(1)
             return self._run_serial(max_iterations, time_budget_s, chunk, progress)
-        finally:
-            numba.set_num_threads(before)
 
     def _run_serial(self, max_iterations, time_budget_s, chunk, progress) -> SearchResult:
         p = self.problem
@@ -330,10 +327,8 @@ class Search:
             expand_nodes(self._fa, p.params, p.data, self.work, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb],
                          CO[:k * nb])
         if p.expand_batch is not None:
-            import numba
             if threads is not None:             # (Search.run restores the count after)
-                n = numba.config.NUMBA_NUM_THREADS if threads == "auto" else int(threads)
-                numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+                set_threads(threads)
 
             def batched(k):
                 p.expand_batch(p.params, p.data, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb], CO[:k * nb])
@@ -407,6 +402,28 @@ class Search:
         empty = np.zeros(0, np.int64)
         return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty,
                             exhausted=bool(st == EXHAUSTED), **common)
+
+
+def set_threads(threads) -> None:
+    """Set numba's thread count to ``threads`` ("auto": every thread numba has), clamped
+    to [1, NUMBA_NUM_THREADS]."""
+    import numba
+    n = numba.config.NUMBA_NUM_THREADS if threads == "auto" else int(threads)
+    numba.set_num_threads(max(1, min(n, numba.config.NUMBA_NUM_THREADS)))
+
+
+@contextlib.contextmanager
+def numba_threads(threads=None):
+    """Run the block with numba's threads set to ``threads`` (:func:`set_threads`; None:
+    as they are); the count the block found is restored after, whatever it set."""
+    import numba
+    before = numba.get_num_threads()
+    try:
+        if threads is not None:
+            set_threads(threads)
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def _with_best(progress, best):
