@@ -75,7 +75,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     else:
         batch = SS.expand_batch
     return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
-                   dims, res, ps.branching, rotate=ps.samples == "rotating",
+                   dims, res, ps.branching, rotate=ps.samples == "rotating", hold=ps.hold,
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine, expand_batch=batch)
 

@@ -40,6 +40,8 @@ class PlannerSettings:
     wheel_speeds: [low, high] range of desired wheel speeds sampled [rad/s] (default
     [-0.5, 1] x the no-load speed); samples: 'fixed' (the same Halton points at every
     expansion) or 'rotating' (each node its own window of the sequence, by node number);
+    hold: one of the sampled controls is the one that reached the node (a control held
+    for several periods: a long gentle arc, a steady speed; docs/planner.md#controls);
     tip_over_deg: pitch or roll at which an edge is rejected; time_weight, energy_weight:
     w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
@@ -73,6 +75,7 @@ class PlannerSettings:
     seed: int = 0
     wheel_speeds: tuple | None = None
     samples: str = "rotating"
+    hold: bool = True
     tip_over_deg: float = 30.0
     time_weight: float = 1.1
     energy_weight: float = 1.1
@@ -345,7 +348,7 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
             probs.add("planner.device", "'cpu' or 'cuda'", spec["device"])
         else:
             kw["device"] = spec["device"]
-    for key in ("polish_time", "polish_energy"):
+    for key in ("hold", "polish_time", "polish_energy"):
         if key in spec:
             if not isinstance(spec[key], bool):
                 probs.add(f"planner.{key}", "true or false", spec[key])

@@ -37,6 +37,7 @@ def scenario() -> dict:
     planner = _ranges(_SETTING_RANGES)
     planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
                     "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]},
+                    "hold": {"type": "boolean"},
                     "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}

@@ -173,10 +173,11 @@ def test_batched_search_does_not_use_edges_of_a_replaced_state(size):
     assert stale > 0                  # the case under test happened
 
 
-@pytest.mark.parametrize("kw", [dict(refine=1.0), dict(max_depth=12), dict(weight=1.0)])
+@pytest.mark.parametrize("kw", [dict(refine=1.0), dict(max_depth=12), dict(weight=1.0), dict(hold=True)])
 def test_batched_search_follows_the_serial_one_when_refining_or_cut_by_depth(kw):
-    """Anytime refinement (goals reached become incumbents that prune), a depth limit
-    and plain A*: the batched search still expands the serial search's nodes."""
+    """Anytime refinement (goals reached become incumbents that prune), a depth limit,
+    plain A* and held controls (a node's rows depend on the edge that reached it): the
+    batched search still expands the serial search's nodes."""
     from dataclasses import replace
     from sbmpc.search.astar import Search
     p = replace(plane_problem(1), **kw)
@@ -366,3 +367,54 @@ def test_a_search_leaves_numbas_thread_count_as_it_found_it(kw):
         assert numba.get_num_threads() == mine
     finally:
         numba.set_num_threads(before)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 10_000), st.integers(-1, 59), st.integers(4, 12), st.integers(0, 3), st.booleans())
+def test_a_held_control_takes_the_last_row_of_the_window(n, reached_by, nbranch, nfixed, rotate):
+    """With ``hold`` a node's expansion tries the row of the edge that reached it (CTL[n])
+    in place of its window's last row, unless that row is a fixed one (tried anyway) or
+    the node is the start (CTL = -1); the fixed rows and the rest of the window stay."""
+    from sbmpc.search.loop import _pick
+    controls = np.column_stack([np.arange(60.0), -np.arange(60.0)])
+    CTL = np.full(n + 1, -7, np.int64)
+    CTL[n] = reached_by
+    rows = {}
+    for hold in (False, True):
+        U = np.zeros((nbranch, 2))
+        crow = np.zeros(nbranch, np.int64)
+        _pick(controls, nbranch, nfixed, rotate, hold, n, CTL, U, crow, 0)
+        assert np.array_equal(U, controls[crow])
+        rows[hold] = crow
+    assert list(rows[False][:nfixed]) == list(range(nfixed))
+    if reached_by >= nfixed:
+        assert rows[True][-1] == reached_by
+        assert np.array_equal(rows[True][:-1], rows[False][:-1])
+    else:
+        assert np.array_equal(rows[True], rows[False])
+
+
+@njit(HEURISTIC.signature, cache=True)
+def zero(params, data, state):
+    return 0.0
+
+
+def test_a_held_control_lets_the_search_repeat_a_rare_row():
+    """A walker whose only cheap move towards the goal is one Halton row, in a window of
+    its own only at some nodes: with ``hold`` the path repeats it (cost 14 over 14 steps
+    instead of 24 over 4 cells a step), without it the path takes the dear fixed moves."""
+    from dataclasses import replace
+    from sbmpc.search.astar import Search
+    n = 16
+    fixed = np.array([[1.0, 0.0], [0.0, 1.0]])          # 1 cell a move, on weight-4 ground
+    rare = np.array([[1.0, 1.0]])                      # the diagonal: weight-1 ground
+    filler = np.array([[-1.0, 0.0], [0.0, -1.0]] * 20)
+    controls = np.vstack([fixed, rare, filler])
+    w = np.full((n, n), 4.0)
+    np.fill_diagonal(w, 1.0 / math.sqrt(2.0))
+    p = Problem(walk, zero, at_goal, np.array([n, 14.0, 14.0]), w.ravel(), np.zeros(2), controls,
+                np.array([0, 1], np.int64), np.ones(2), branching=4, rotate=True, fixed_controls=2, snap=True)
+    held = Search(replace(p, hold=True)).run(100_000)
+    plain = Search(p).run(100_000)
+    assert held.status == plain.status == "found"
+    assert held.cost == pytest.approx(14.0) and plain.cost > 1.5 * held.cost

@@ -143,9 +143,9 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     a metre short; repaired, it reaches the disc (checked by an independent 1 kHz
     replay) for less than the unpolished plan. A 'polish' that spins on the spot on the
     way and misses too is repaired as well, but dearer: the searched plan stands."""
-    w = _world(0)
+    w = _world(0, hold=False)         # the searched plan of this case (before held controls)
     p = PL.plan(w, "energy")
-    q = PL.plan(_world(0, polish_energy=False), "energy")
+    q = PL.plan(_world(0, polish_energy=False, hold=False), "energy")
     X0 = PL._start(w, None)
     short = [tuple(c) for c in p.controls[:-2]]
     assert not CK.controller_rate(w, "energy", short, X0)[0].reached

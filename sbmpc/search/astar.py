@@ -124,7 +124,8 @@ class Problem:
     entries form the grid cell and the cell size of each; ``branching``: controls tried
     per expansion: the first ``fixed_controls`` rows always, then the next rows (the same
     ones at every expansion, or with ``rotate`` a window of the remaining rows that
-    follows the node's id);
+    follows the node's id); with ``hold`` the last of those is the row of the edge that
+    reached the node, where that is not a fixed row (a control held over periods);
     ``max_depth``: edges from the start; ``settle_depth``: children of nodes less than
     this many edges from the start that stay in their parent's cell are kept as nodes of
     their own instead of dropped (for states whose hidden part, such as a controller's,
@@ -151,6 +152,7 @@ class Problem:
     branching: int
     rotate: bool = False
     fixed_controls: int = 0
+    hold: bool = False
     snap: bool = False
     max_depth: int = 1 << 30
     settle_depth: int = 0
@@ -285,7 +287,7 @@ class Search:
         t0 = time.perf_counter()
         while True:
             st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.start, p.controls,
-                            int(p.branching), int(p.fixed_controls), bool(p.rotate), p.dims, p.res, bool(p.snap),
+                            int(p.branching), int(p.fixed_controls), bool(p.rotate), bool(p.hold), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best)
             if st == GROW:
@@ -339,7 +341,7 @@ class Search:
 
         def call(pending, chunk):         # one round (the arrays as they are now: _grow replaces them)
             return run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
-                       bool(p.rotate), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
+                       bool(p.rotate), bool(p.hold), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
                        int(max_iterations), float(p.refine), size, pending, int(chunk), self.X, self.G, self.PAR,
                        self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
                        BN, BP, BO, BU, BR, CH, CO, SN, SX, self.SL, SCH, SCO, SCR, sc, cand)

@@ -38,7 +38,7 @@ GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 # sbmpc.search.astar._addresses), so the compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64, types.int64,
-                       types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
+                       types.boolean, types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1)
 
 
@@ -168,16 +168,21 @@ def _next(fa, weight, params, data, refine, max_iters, max_depth, X, G, DEP, CLO
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _pick(controls, nbranch, nfixed, rotate, n, U, crow, off):
+def _pick(controls, nbranch, nfixed, rotate, hold, n, CTL, U, crow, off):
     """The controls of node n's expansion into rows off.. of U and their rows in
-    ``controls`` into crow (Problem's branching, fixed rows and rotation). With
+    ``controls`` into crow (Problem's branching, fixed rows, rotation and hold). With
     ``rotate`` the window of rows follows the node's id, not the order of expansion, so
     that a node's edges are known before it is taken (the batched search simulates
-    them ahead)."""
+    them ahead). With ``hold`` the last of them is the row that reached n (CTL[n], its
+    parent's edge) where that is not a fixed row, tried anyway: a control can be held
+    over several periods."""
     m = controls.shape[0]
     base = n * (nbranch - nfixed) if rotate else 0
+    held = CTL[n] if hold else -1
     for b in range(nbranch):
         c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
+        if b == nbranch - 1 and held >= nfixed:
+            c = held
         crow[off + b] = c
         for d in range(U.shape[1]):
             U[off + b, d] = controls[c, d]
@@ -243,7 +248,7 @@ def _full(cnt, table, H, cap, new):
 
 
 @njit(_RUN_SIG, cache=True, error_model="numpy")
-def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, dims, res,
+def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, hold, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, H,
                cnt, best):
     """Expand up to ``chunk`` nodes (:mod:`sbmpc.search.astar`'s module doc). Returns a status: FOUND (node id in
@@ -284,7 +289,7 @@ def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed,
             return st
         done += 1
         if not every:
-            _pick(controls, nbranch, nfixed, rotate, n, U, crow, 0)
+            _pick(controls, nbranch, nfixed, rotate, hold, n, CTL, U, crow, 0)
         expand(params, data, work, cur, U, CH, CO)
         cnt[C_SIMULATED] += nbranch
         _add_children(fa, weight, params, data, dims, res, snap, settle, n, crow, CH, CO, 0, nbranch,
@@ -354,14 +359,14 @@ def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, SL, BN, k, 
 
 
 _BATCH_SIG = types.UniTuple(types.int64, 2)(
-    _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, _I1, _F1, types.boolean,
+    _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, types.boolean, _I1, _F1, types.boolean,
     types.int64, types.int64, types.int64, types.float64, types.int64, types.int64, types.int64,
     _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1,
     _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _I1, _F2, _F1, _I1, _I1, _I1)
 
 
 @njit(_BATCH_SIG, cache=True, error_model="numpy")
-def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, dims, res, snap,
+def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, hold, dims, res, snap,
               max_depth, settle, max_iters, refine, size, pending, chunk,
               X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt, best,
               BN, BP, BO, BU, BR, CH, CO, SN, SX, SL, SCH, SCO, SCR, sc, cand):
@@ -423,7 +428,7 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
         for i in range(k):
             for d in range(X.shape[1]):
                 BP[i, d] = X[BN[i], d]
-            _pick(controls, nbranch, nfixed, rotate, BN[i], BU, BR, i * nbranch)
+            _pick(controls, nbranch, nfixed, rotate, hold, BN[i], CTL, BU, BR, i * nbranch)
             for b in range(i * nbranch, (i + 1) * nbranch):
                 BO[b] = i
         cnt[C_SIMULATED] += k * nbranch
