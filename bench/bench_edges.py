@@ -46,6 +46,11 @@ import numba
 import numpy as np
 numba.set_num_threads(1)               # one core (an expander may loop in parallel)
 sys.path.insert(0, sys.argv[1])
+# only the tree given: an editable install's finder would fill in the modules an old
+# tree lacks from the working tree (a mix of the two)
+sys.meta_path = [f for f in sys.meta_path if "editable" not in getattr(f, "__module__", "") + repr(f)]
+sys.path_hooks = [h for h in sys.path_hooks if "editable" not in getattr(h, "__module__", "") + repr(h)]
+sys.path_importer_cache.clear()
 from sbmpc import scenario as SC
 try:                                   # the layout since plan.py's split
     from sbmpc import problem as PB, world as WO
