@@ -10,6 +10,7 @@ import math
 import numpy as np
 from numba import njit
 from scipy import ndimage
+from scipy.optimize import brentq
 
 from dynamics.params import G
 from maps import ElevationMap
@@ -118,6 +119,53 @@ def ke_factor(f_roll, rise, d, c) -> float:
     return float(max(1.0, slope.max())) if slope.size else 1.0
 
 
+CARRY_S = 0.02     # s: the most a climb entered at the top speed can save against its steady
+                   # top speed (the P3-AT sheds the speed it carries in within about 50 ms:
+                   # 0.012 s entering 10 deg of grass at 0.955 m/s; tests/test_heuristics.py)
+OVERSHOOT = 0.02   # of the commanded top wheel speed: the PID's overshoot downhill (1.5 % measured)
+SPEED_GRADES = 64  # grades tabulated for the steady top speeds, 0 to the steepest sustainable
+
+
+def step_speed_bounds(world: World, terrain: np.ndarray, grade: np.ndarray, vb: float) -> np.ndarray:
+    """Upper bounds [m/s] of the speed over grid steps of the given ``grade`` [rad] (rise
+    over run along the step; arrays broadcast) on ``terrain`` (indices into
+    world.terrains): the steady top speed of straight driving at the top command up that
+    grade (``dynamics.limits.top_speed``: the drive's voltage limit, eq. 27, against
+    rolling, climb and viscous resistance; a turn only slows the vehicle), times the
+    larger wheel radius scale, read from a table at the tabulated grade at or below the
+    step's (the speed falls with the grade, so that reads high). On the level the
+    drive is already at its voltage limit below the commanded top (0.924 m/s on
+    asphalt against 0.955). Downhill the drive holds the commanded top wheel speed, its
+    PID overshooting it by up to 1.5 % (OVERSHOOT: 2 %), as far down as it can brake at
+    its continuous torque; steeper (0.99 m/s down 20 deg of asphalt), or beyond the
+    steepest grade the terrain holds (a run-up: only momentum crosses it), ``vb``, the
+    straight-line bound (the commanded top wheel speed with 5 % to spare).
+    Speed carried into a climb from above its steady top is shed within a few tens of
+    milliseconds (CARRY_S, which the heuristic subtracts)."""
+    from dynamics.limits import required_torque, steepest_grade, top_speed
+    v = world.vehicle
+    scale = max(v.radius_scale_left, v.radius_scale_right)
+    w_top = wheel_speed_range(world)[1]
+    held = min(vb, (1.0 + OVERSHOOT) * scale * v.wheel_radius * w_top)
+    terrain, grade = np.broadcast_arrays(np.asarray(terrain), np.asarray(grade, float))
+    out = np.full(grade.shape, vb)
+    for k, t in enumerate(world.terrains):
+        # downhill, as far as the drive brakes to the command at its continuous torque
+        brake = lambda g: -required_torque(v, t, g, w_top) - v.continuous_torque
+        steep = -0.5 * math.pi if brake(-0.5 * math.pi) <= 0.0 else brentq(brake, -0.5 * math.pi, 0.0)
+        out[(terrain == k) & (grade < 0.0) & (grade >= steep)] = held
+        top = steepest_grade(v, t)
+        if top <= 0.0:
+            continue
+        nodes = np.linspace(0.0, top, SPEED_GRADES)
+        # (1 + 1e-9: the root finder's tolerance, so that the table reads high)
+        table = np.array([min(vb, (1.0 + 1e-9) * scale * top_speed(v, t, g)) for g in nodes])
+        m = (terrain == k) & (grade >= 0.0) & (grade <= top)
+        i = np.clip(np.searchsorted(nodes, grade[m], side="right") - 1, 0, SPEED_GRADES - 1)
+        out[m] = table[i]
+    return out
+
+
 RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle
 
 
@@ -169,7 +217,8 @@ def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
 @functools.lru_cache(maxsize=8)
 def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
-    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`), the largest rolling
+    over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`; a time step takes its
+    length over :func:`step_speed_bounds`, an energy step :func:`least_step_energy`), the largest rolling
     force [N] of the map's cells (for the heuristic's bound of the way from a node to a
     pose between the nodes, ``skidsteer._node_to_pose``), the factor
     its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
@@ -195,9 +244,10 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
     blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:
-        mu = np.array([t.mu_roll for t in world.terrains])[e.terrain_layer[j0:j1, i0:i1]].ravel()
+        terrain = e.terrain_layer[j0:j1, i0:i1].ravel()
     else:
-        mu = np.full(nx * ny, world.terrains[0].mu_roll)
+        terrain = np.zeros(nx * ny, np.int64)
+    mu = np.array([t.mu_roll for t in world.terrains])[terrain]
     gy, gx = np.gradient(H, res)
     # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
     froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
@@ -216,7 +266,10 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
             up = (H.ravel()[q] - H.ravel()[p]) / d
             p, q = p[up <= climb], q[up <= climb]
             if cost == "time":
-                wt = np.full(p.size, d / vb)
+                # the faster of the two cells' terrains: either may be under the vehicle
+                grade = np.arctan(up[up <= climb])
+                wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
+                                    step_speed_bounds(world, terrain[q], grade, vb))
             else:
                 f = np.minimum(froll_cell[p], froll_cell[q])
                 rise = mg * (H.ravel()[q] - H.ravel()[p])
@@ -274,6 +327,8 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     frmax = float(froll_cell.max())
     gap = _goal_gap(e, g, X.ravel()[goal_nodes], Y.ravel()[goal_nodes], H.ravel()[goal_nodes],
                     cost, vb, frmax, mg, copper)
+    if cost == "time":
+        gap += CARRY_S            # a climb entered faster than its steady top speed
     return out, frmax, kegrid, gap
 
 
@@ -284,8 +339,8 @@ def _goal_gap(e: ElevationMap, goal: dict, qx, qy, qz, cost, vb, frmax, mg, copp
     edge (``n`` samples, their spacing added to the distances), of the least bound of
     the way from b to one of the goal's nodes q (``qx, qy, qz``): distance / v_bound for
     time, the energy step bound at the map's largest rolling force for the climb from b
-    to q. The heuristic subtracts it: its constant shift of every value leaves the
-    weighted search's order as it is."""
+    to q. The heuristic subtracts it (for time with CARRY_S added by :func:`cost_to_go`):
+    its constant shift of every value leaves the weighted search's order as it is."""
     if len(qx) == 0:
         return 0.0
     r = goal["radius"]

@@ -228,3 +228,58 @@ def test_the_heuristic_stays_below_a_real_drive_into_a_disc_off_the_grids_nodes(
             break
     assert SS.is_goal(prob.params, prob.data, S)
     assert SS.heuristic(prob.params, prob.data, X) <= c
+
+
+# ---- the time step bound (step_speed_bounds) ------------------------------------------
+@pytest.mark.parametrize("name", ["narrow_pass", "steep_hill", "hills_field"])     # asphalt, packed dirt, grass
+def test_the_time_step_bound_is_the_steady_drives_speed_from_above(name):
+    """Straight drives at the top command at 1 kHz, from rest and from the commanded top
+    speed, down 10 deg, level, and up half and nearly all of the steepest grade the
+    terrain holds: after 2 s the speed is at most the step bound, and within 2.1 % of it
+    downhill (the PID's overshoot allowed for) and 0.5 % on the level and half way up:
+    the bound is tight. (Near the steepest grade a drive from rest settles at 0.28 m/s
+    with its wheels slipping, from the top speed at 0.757 m/s; the bound, 0.759 m/s,
+    is the faster.) Entered at the commanded top speed, more than the steady one on the
+    level and uphill, the drive gains on the bound by less than CARRY_S (0.018 s near
+    the steepest grade)."""
+    world = WO.resolve(SC.load(SCEN / f"{name}.yaml"))
+    v, t = world.vehicle, world.terrains[0]
+    m = Model(v, t)
+    _, hi = HE.wheel_speed_range(world)
+    vb = HE._bounds(world)[0]
+    top = math.degrees(steepest_grade(v, t))
+    for deg, slack in ((-10.0, 0.021), (0.0, 0.005), (0.5 * top, 0.005), (top - 0.5, 1.0)):
+        th = math.radians(deg)
+        bound = float(HE.step_speed_bounds(world, np.zeros(1, int), np.array([th]), vb)[0])
+        assert bound < vb
+        for w0 in (0.0, hi):
+            tr = simulate(m, hold(hi, 5, 1e-3), hold(hi, 5, 1e-3), state=m.state(w0, w0, th), pitch=th, dt=1e-3)
+            s, tt = tr.data["s"], tr.data["t"]
+            k = tt >= 2.0
+            speed = (s[k][-1] - s[k][0]) / (tt[k][-1] - tt[k][0])
+            assert (1.0 - slack) * bound <= speed <= bound
+            lead = np.max(s - s[0] - bound * (tt - tt[0]))
+            assert lead <= HE.CARRY_S * bound
+
+
+@pytest.mark.parametrize("name", ["hill_tradeoff", "mixed_terrain", "steep_hill"])
+def test_the_time_heuristic_never_exceeds_what_the_found_path_still_takes(name):
+    """Along the time search's own path (its states at the planner's step) the heuristic
+    at every node is at most the time the path still takes, and most of it: the grid's
+    steps take the steady top speed of their terrain and grade (mixed_terrain's rough
+    field 0.85 m/s, its road 0.91 m/s) where they took the commanded top wheel speed
+    (1.00 m/s with its margin), which left 20 % of mixed_terrain's plan unseen."""
+    from sbmpc import problem as PB
+    from sbmpc.problems import skidsteer as SS
+    from sbmpc.search.astar import Search
+    from dynamics import kernels as K
+    world = WO.resolve(SC.load(SCEN / f"{name}.yaml"))
+    prob = PB.problem(world, "time")
+    res = Search(prob).run(world.scenario.planner.max_expansions)
+    assert res.status == "found"
+    T = res.states[:, K.S_T]
+    h = np.array([SS.heuristic(prob.params, prob.data, X) for X in res.states])
+    assert np.all(h <= T[-1] - T + 1e-9)
+    assert h[0] > 0.7 * (T[-1] - T[0])
+    if name == "mixed_terrain":
+        assert h[0] > 0.85 * (T[-1] - T[0])
