@@ -16,7 +16,7 @@ import numpy as np
 
 from dynamics import kernels as K
 
-from .check import Check, check_cost, controller_rate, fine_state, parting, predicted, replay
+from .check import HOLD_LAST_S, Check, check_cost, controller_rate, fine_state, parting, predicted, replay
 from .heuristics import _max_rise, unreachable_reason
 from .polish import Polished, polish
 from .problem import batch_size, problem, search_threads
@@ -120,10 +120,13 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
 
 def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | None:
     """(cost, controls) of a control sequence replayed from ``start`` when it ends in the
-    goal (its last control cut where it enters the goal disc); else None."""
+    goal (its last control cut where it enters the goal disc; held HOLD_LAST_S longer
+    first, as the controller-rate check holds it: the rest of a plan whose last control
+    was cut where its 1 kHz drive entered the disc may end a step short of it at the
+    planner's step); else None."""
     if not controls:
         return None
-    traj, end, S, used = replay(world, cost, controls, every=1 << 30, start=start)
+    traj, end, S, used = replay(world, cost, controls, every=1 << 30, start=start, hold_last=HOLD_LAST_S)
     if end != SS.IN_GOAL:
         return None
     dt = world.scenario.planner.dt
@@ -197,6 +200,16 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
         if _better(chk2, chk, cost):
             controls, chk, fine, repairs = c2, chk2, fine2, rep2
             common["polish"] = mpol
+    if inc is not None and res.status == "found":
+        # the search beat the incumbent at its own step; at the controller rate the new
+        # plan may still cost more (a perfect-model run would then do worse than its
+        # first plan): the two are judged where every plan is
+        ichk, ifine, ikept = controller_rate(world, cost, inc[1], X0)
+        if ichk.reached and not _better(chk, ichk, cost):
+            controls, chk, fine, repairs = ikept, ichk, ifine, 0
+            common["polish"] = None
+            found_by = ("previous plan (warm start: the search's new plan, cheaper at the planner's step, "
+                        "was not at the controller rate)")
     common["repairs"] = repairs
     if not chk.reached:
         return Plan(world.scenario.name, cost, "no_path",
