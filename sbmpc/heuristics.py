@@ -142,28 +142,38 @@ def step_speed_bounds(world: World, terrain: np.ndarray, grade: np.ndarray, vb: 
     straight-line bound (the commanded top wheel speed with 5 % to spare).
     Speed carried into a climb from above its steady top is shed within a few tens of
     milliseconds (CARRY_S, which the heuristic subtracts)."""
+    terrain, grade = np.broadcast_arrays(np.asarray(terrain), np.asarray(grade, float))
+    out = np.full(grade.shape, vb)
+    for k, (steep, held, nodes, table) in enumerate(_speed_tables(world, vb)):
+        out[(terrain == k) & (grade < 0.0) & (grade >= steep)] = held
+        if nodes.size:
+            m = (terrain == k) & (grade >= 0.0) & (grade <= nodes[-1])
+            i = np.clip(np.searchsorted(nodes, grade[m], side="right") - 1, 0, nodes.size - 1)
+            out[m] = table[i]
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _speed_tables(world: World, vb: float) -> tuple:
+    """Per terrain of ``world``, what :func:`step_speed_bounds` reads: (steepest descent
+    [rad] the drive brakes to the command on, the speed bound there [m/s], the grades
+    [rad] tabulated from 0 to the steepest sustainable one, their top speeds [m/s])."""
     from dynamics.limits import required_torque, steepest_grade, top_speed
     v = world.vehicle
     scale = max(v.radius_scale_left, v.radius_scale_right)
     w_top = wheel_speed_range(world)[1]
     held = min(vb, (1.0 + OVERSHOOT) * scale * v.wheel_radius * w_top)
-    terrain, grade = np.broadcast_arrays(np.asarray(terrain), np.asarray(grade, float))
-    out = np.full(grade.shape, vb)
-    for k, t in enumerate(world.terrains):
+    out = []
+    for t in world.terrains:
         # downhill, as far as the drive brakes to the command at its continuous torque
         brake = lambda g: -required_torque(v, t, g, w_top) - v.continuous_torque
         steep = -0.5 * math.pi if brake(-0.5 * math.pi) <= 0.0 else brentq(brake, -0.5 * math.pi, 0.0)
-        out[(terrain == k) & (grade < 0.0) & (grade >= steep)] = held
         top = steepest_grade(v, t)
-        if top <= 0.0:
-            continue
-        nodes = np.linspace(0.0, top, SPEED_GRADES)
+        nodes = np.linspace(0.0, top, SPEED_GRADES) if top > 0.0 else np.zeros(0)
         # (1 + 1e-9: the root finder's tolerance, so that the table reads high)
         table = np.array([min(vb, (1.0 + 1e-9) * scale * top_speed(v, t, g)) for g in nodes])
-        m = (terrain == k) & (grade >= 0.0) & (grade <= top)
-        i = np.clip(np.searchsorted(nodes, grade[m], side="right") - 1, 0, SPEED_GRADES - 1)
-        out[m] = table[i]
-    return out
+        out.append((steep, held, nodes, table))
+    return tuple(out)
 
 
 RUNUP_DEG = 3.0    # deg: how much steeper than its steepest sustainable grade a run-up may carry the vehicle
