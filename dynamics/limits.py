@@ -36,6 +36,14 @@ def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> fl
     return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, math.pi / 2)
 
 
+def steepest_braked_grade(vehicle: Vehicle, terrain: Terrain, omega: float) -> float:
+    """Steepest downhill grade [rad, <= 0] on which the drive holds wheel speed omega
+    [rad/s] straight down, braking at most its continuous torque (eqs. 24, 25 with
+    q'' = 0, the braking torque -required_torque); -pi/2 if it holds it on any."""
+    brake = lambda b: -required_torque(vehicle, terrain, b, omega) - vehicle.continuous_torque
+    return -0.5 * math.pi if brake(-0.5 * math.pi) <= 0.0 else brentq(brake, -0.5 * math.pi, 0.0)
+
+
 def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
     """Highest constant straight speed [m/s] on a grade [rad]; 0 if the grade cannot be held."""
     f = lambda w: available_torque(vehicle, w) - required_torque(vehicle, terrain, grade, w)

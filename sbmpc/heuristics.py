@@ -10,7 +10,6 @@ import math
 import numpy as np
 from numba import njit
 from scipy import ndimage
-from scipy.optimize import brentq
 
 from dynamics.params import G
 from maps import ElevationMap
@@ -158,16 +157,14 @@ def _speed_tables(world: World, vb: float) -> tuple:
     """Per terrain of ``world``, what :func:`step_speed_bounds` reads: (steepest descent
     [rad] the drive brakes to the command on, the speed bound there [m/s], the grades
     [rad] tabulated from 0 to the steepest sustainable one, their top speeds [m/s])."""
-    from dynamics.limits import required_torque, steepest_grade, top_speed
+    from dynamics.limits import steepest_braked_grade, steepest_grade, top_speed
     v = world.vehicle
     scale = max(v.radius_scale_left, v.radius_scale_right)
     w_top = wheel_speed_range(world)[1]
     held = min(vb, (1.0 + OVERSHOOT) * scale * v.wheel_radius * w_top)
     out = []
     for t in world.terrains:
-        # downhill, as far as the drive brakes to the command at its continuous torque
-        brake = lambda g: -required_torque(v, t, g, w_top) - v.continuous_torque
-        steep = -0.5 * math.pi if brake(-0.5 * math.pi) <= 0.0 else brentq(brake, -0.5 * math.pi, 0.0)
+        steep = steepest_braked_grade(v, t, w_top)    # downhill, as far as the drive brakes to the command
         top = steepest_grade(v, t)
         nodes = np.linspace(0.0, top, SPEED_GRADES) if top > 0.0 else np.zeros(0)
         # (1 + 1e-9: the root finder's tolerance, so that the table reads high)
@@ -274,10 +271,11 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         a, b = a[ok], b[ok]
         for p, q in ((a, b), (b, a)):          # step from p to q
             up = (H.ravel()[q] - H.ravel()[p]) / d
-            p, q = p[up <= climb], q[up <= climb]
+            keep = up <= climb
+            p, q, up = p[keep], q[keep], up[keep]
             if cost == "time":
                 # the faster of the two cells' terrains: either may be under the vehicle
-                grade = np.arctan(up[up <= climb])
+                grade = np.arctan(up)
                 wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
                                     step_speed_bounds(world, terrain[q], grade, vb))
             else:

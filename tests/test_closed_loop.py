@@ -6,7 +6,7 @@ from hypothesis import given, strategies as st
 
 from dynamics import kernels as K
 from dynamics import Model, load_terrain, shipped_terrains
-from dynamics.limits import steepest_grade, top_speed
+from dynamics.limits import steepest_braked_grade, steepest_grade, top_speed
 from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
 from dynamics.simulate import hold, simulate
 
@@ -385,3 +385,23 @@ def test_the_solves_starting_guess_does_not_decide_the_step(terrain):
                | (np.abs(x[:, K.S_E] - ref[:, K.S_E]) > np.maximum(0.02 * np.abs(de), 0.05))
                | (x[:, K.S_STALLED] != ref[:, K.S_STALLED]))
         assert off.sum() <= 2, (mode, np.flatnonzero(off))
+
+
+@pytest.mark.parametrize("terrain", ["asphalt", "vinyl"])
+def test_down_the_steepest_braked_grade_the_drive_holds_its_command_and_beyond_runs_away(terrain):
+    """dynamics.limits.steepest_braked_grade: 1 deg gentler, the drive brakes the vehicle
+    to the commanded wheel speed; 2 deg steeper its continuous torque no longer holds it
+    and the vehicle runs faster than commanded (the time heuristic's downhill bound
+    rests on this)."""
+    m = Model.load("p3at", terrain)
+    w = 8.68
+    limit = math.degrees(steepest_braked_grade(m.vehicle, m.terrain, w))
+    assert -30.0 < limit < -10.0
+    for deg, held in ((limit + 1.0, True), (limit - 2.0, False)):
+        th = math.radians(deg)
+        tr = simulate(m, hold(w, 5, 1e-3), hold(w, 5, 1e-3), state=m.state(w, w, th), pitch=th, dt=1e-3)
+        v_end = tr.v[-1]
+        if held:
+            assert v_end == pytest.approx(w * m.vehicle.wheel_radius, rel=2e-3)
+        else:
+            assert v_end > 1.01 * w * m.vehicle.wheel_radius
