@@ -56,7 +56,8 @@ class PlannerSettings:
     that simulate a node's edges and the polish's trials in parallel (0: all of numba's,
     one per core; the plan is the serial search's); batch: nodes whose edges are simulated together, the next
     node's and those of the open nodes next in line, kept until those are expanded (the
-    plan is the serial search's; 0: 16 on several CPU threads, 1 on one, 64 on a GPU); device:
+    plan is the serial search's; 0: 16 on several CPU threads, 1 on one, 64 on a GPU;
+    the batch grows to it with the search, by one node every 32 expansions); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
     one-line note and the CPU); polish_time, polish_energy: after the search, polish
     the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on

@@ -164,7 +164,7 @@ def test_batched_search_does_not_use_edges_of_a_replaced_state(size):
         p = plane_problem(seed)
         serial = Search(p).run(20_000)
         batched = Search(p, capacity=8)
-        res = batched.run(20_000, batch=size)
+        res = batched.run(20_000, batch=size, ramp=0)     # (the whole batch from the start)
         assert serial.status == res.status == "found"
         assert np.array_equal(res.path, serial.path) and np.array_equal(res.states, serial.states)
         assert (res.iterations, res.nodes, res.cost) == (serial.iterations, serial.nodes, serial.cost)
@@ -182,7 +182,7 @@ def test_batched_search_follows_the_serial_one_when_refining_or_cut_by_depth(kw)
     from sbmpc.search.astar import Search
     p = replace(plane_problem(1), **kw)
     serial = Search(p).run(20_000)
-    res = Search(p, capacity=8).run(20_000, batch=8)
+    res = Search(p, capacity=8).run(20_000, batch=8, ramp=0)
     assert (res.status, res.iterations, res.nodes, res.cost) == (serial.status, serial.iterations, serial.nodes,
                                                                   serial.cost)
     assert np.array_equal(res.path, serial.path)
@@ -213,7 +213,7 @@ def test_batched_search_expands_the_serial_searchs_nodes(size):
         p = grid_problem(blocked, (29, 29))
         d = bfs_distance(blocked, (29, 29))
         serial = Search(p).run(100_000)
-        res = Search(p, capacity=8).run(100_000, batch=size)
+        res = Search(p, capacity=8).run(100_000, batch=size, ramp=0)
         if math.isinf(d):
             assert serial.status == res.status == "no_path" and "explored" in res.reason
             assert (res.iterations, res.nodes) == (serial.iterations, serial.nodes)
@@ -226,8 +226,31 @@ def test_batched_search_expands_the_serial_searchs_nodes(size):
         assert np.all(steps == 1) and not blocked[tuple(res.states.astype(int).T)].any()
     blocked = np.zeros((20, 20), bool)
     blocked[:, 10] = True
-    res = Search(grid_problem(blocked, (19, 19))).run(50, batch=size)
+    res = Search(grid_problem(blocked, (19, 19))).run(50, batch=size, ramp=0)
     assert res.status == "no_path" and "budget of 50 expansions" in res.reason
+
+
+@pytest.mark.parametrize("ramp", [1, 4, 32])
+def test_the_batch_grows_with_the_search(ramp):
+    """By default the batch grows by one node every ``ramp`` expansions up to its size:
+    a short search (here 57 expansions straight across an open grid, greedy with w = 2)
+    simulates fewer edges ahead for open nodes it never expands than a batch of 16
+    from the start, which simulates nearly twice the edges it uses. The nodes
+    expanded and the path stay the serial search's."""
+    from dataclasses import replace
+    from sbmpc.search.astar import Search
+    p = replace(grid_problem(np.zeros((30, 30), bool), (29, 28)), weight=2.0)
+    serial = Search(p).run(100_000)
+    full = Search(p).run(100_000, batch=16, ramp=0)
+    grown = Search(p).run(100_000, batch=16, ramp=ramp)
+    assert serial.iterations == full.iterations == grown.iterations == 57
+    assert np.array_equal(grown.path, serial.path) and np.array_equal(full.path, serial.path)
+    assert full.edges_simulated > 1.9 * serial.edges
+    # rounds of k nodes while 1 + iterations // ramp = k: at most sum(min(16, 1 + i // ramp)) edges' nodes
+    bound = sum(min(16, 1 + i // ramp) for i in range(57)) * p.branching
+    assert serial.edges <= grown.edges_simulated <= bound
+    if ramp == 32:
+        assert grown.edges_simulated <= 1.5 * serial.edges
 
 
 def test_a_problem_with_arrays_of_the_wrong_kind_is_refused_with_its_field():
