@@ -200,6 +200,9 @@ def shown_number(value) -> str:
     return Verbatim(shown(value) + text_number_hint(value))
 
 
+MISSING = Verbatim("nothing (the key is missing)")
+
+
 class _Problems:
     """Collects every problem of a file, then raises one InputError listing them."""
 
@@ -223,7 +226,7 @@ class _Problems:
 def _num(d: dict, key: str, where: str, probs: _Problems, default=None, lo=-math.inf, hi=math.inf, what="a number"):
     if key not in d:
         if default is None:
-            probs.add(f"{where}.{key}", what, None)
+            probs.add(f"{where}.{key}", what, MISSING)
             return math.nan
         return default
     v = d[key]
@@ -400,7 +403,7 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     start, goal = {}, {}
     s = data.get("start")
     if not isinstance(s, dict):
-        probs.add("start", "a mapping {x:, y:, yaw_deg:, v:}", s)
+        probs.add("start", "a mapping {x:, y:, yaw_deg:, v:}", MISSING if "start" not in data else s)
     else:
         _unknown(s, {"x", "y", "yaw_deg", "v"}, "start", probs)
         start = {"x": _num(s, "x", "start", probs), "y": _num(s, "y", "start", probs),
@@ -408,7 +411,7 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
                  "v": _num(s, "v", "start", probs, default=0.0, lo=-2.0, hi=2.0, what="a speed in [-2, 2] m/s")}
     g = data.get("goal")
     if not isinstance(g, dict):
-        probs.add("goal", "a mapping {x:, y:, radius:}", g)
+        probs.add("goal", "a mapping {x:, y:, radius:}", MISSING if "goal" not in data else g)
     else:
         _unknown(g, {"x", "y", "radius"}, "goal", probs)
         goal = {"x": _num(g, "x", "goal", probs), "y": _num(g, "y", "goal", probs),

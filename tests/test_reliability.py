@@ -146,6 +146,26 @@ def test_binary_and_special_files_are_named_as_such(tmp_path, capsys):
     assert "binary data" in one_line_error(capsys, 2, rc)
 
 
+def test_a_package_shadowed_by_left_over_folders_is_named_not_a_traceback(capsys, monkeypatch):
+    """After a plain ``pip install .`` and an uninstall, numba's cache files keep folders
+    of the package in site-packages; a later install is then shadowed by them (Python
+    takes them for a namespace package: no __init__ runs, ``__version__`` is missing)
+    and building the parser fails. One line names the folders, exit 3."""
+    import sbmpc
+    from sbmpc.commands import cli
+    def shadowed():
+        raise ImportError("cannot import name '__version__' from 'sbmpc' (unknown location)")
+    monkeypatch.setattr(cli, "build_parser", shadowed)
+    monkeypatch.setattr(sbmpc, "__file__", None)
+    monkeypatch.setattr(sbmpc, "__path__", ["/site-packages/sbmpc"])
+    err = one_line_error(capsys, 3, main(["--help"]))
+    assert "shadowed" in err and "/site-packages/sbmpc" in err and "remove them" in err
+    monkeypatch.undo()
+    monkeypatch.setattr(cli, "build_parser", shadowed)
+    err = one_line_error(capsys, 3, main(["--help"]))
+    assert "incomplete" in err and "pip install -e ." in err
+
+
 def test_an_internal_error_is_one_line_and_exit_3_and_debug_shows_it(work, capsys, monkeypatch):
     from sbmpc import plan as PL
     def broken(*a, **k):

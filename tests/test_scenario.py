@@ -82,6 +82,18 @@ def test_cli_bad_scenarios_exit_2_with_one_message(tmp_path, capsys, change, wor
     assert p.read_bytes() == before           # input files are never modified
 
 
+def test_a_missing_key_is_said_to_be_missing(tmp_path):
+    """Not "found None": the file lacks the key (a key written with no value is None)."""
+    doc = {k: v for k, v in GOOD.items() if k != "goal"}
+    with pytest.raises(InputError) as e:
+        SC.load(write(tmp_path, dict(doc, start={"y": 2.0})))
+    assert "goal: expected a mapping {x:, y:, radius:}, found nothing (the key is missing)" in str(e.value)
+    assert "start.x: expected a number, found nothing (the key is missing)" in str(e.value)
+    with pytest.raises(InputError) as e:
+        SC.load(write(tmp_path, dict(GOOD, goal=None)))
+    assert "goal: expected a mapping {x:, y:, radius:}, found None" in str(e.value)
+
+
 def test_cli_missing_scenario_exits_2(tmp_path, capsys):
     assert main(["plan", str(tmp_path / "none.yaml")]) == 2
     assert "no such file" in capsys.readouterr().err

@@ -32,6 +32,18 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _broken_install(exc: ImportError) -> str:
+    """What an import error while building the parser means: most often folders left in
+    site-packages by an earlier plain install (numba's cache files, which pip does not
+    remove), which Python then takes for the package in place of the installed one."""
+    import sbmpc
+    if getattr(sbmpc, "__file__", None) is None:          # a namespace package: no __init__ ran
+        where = ", ".join(str(p) for p in getattr(sbmpc, "__path__", []))
+        return (f"the sbmpc package is shadowed by folders without its code ({where}): left over from an "
+                f"earlier install (pip leaves numba's cache files behind); remove them and install again")
+    return f"the installation is incomplete: {exc} (install again: pip install -e .)"
+
+
 def main(argv=None) -> int:
     """Run one command. Exit codes: 0 done, 1 no result (no path, a failed run), 2 bad
     input (one line saying which file, key or flag, what was expected and what was
@@ -41,7 +53,11 @@ def main(argv=None) -> int:
     debug = "--debug" in argv
     if debug:
         argv.remove("--debug")
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except ImportError as exc:
+        print(f"sbmpc: error: {_broken_install(exc)}", file=sys.stderr)
+        return 3
     args = parser.parse_args(argv)
     import warnings
 

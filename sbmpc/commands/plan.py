@@ -42,8 +42,8 @@ def add_backend_flags(p):
                    help="where the edges are simulated (default: the scenario's planner.device, cpu); "
                    "cuda needs numba-cuda and an NVIDIA GPU, else a note and the CPU")
     p.add_argument("--threads", type=int, help="CPU threads for the edges and the polish (default: the scenario's; 0: every core)")
-    p.add_argument("--batch", type=int, help="nodes expanded together (default: the scenario's; 0: 1 on the CPU, "
-                   "64 on a GPU)")
+    p.add_argument("--batch", type=int, help="nodes whose edges are simulated together (default: the scenario's; "
+                   "0: 16 on several CPU threads, 1 on one, 64 on a GPU; the batch grows to it with the search)")
     p.add_argument("--max-expansions", type=int, help="node budget (default: the scenario's planner.max_expansions)")
     p.add_argument("--time-budget", type=float, help="wall-clock budget [s] (default: the scenario's)")
     p.add_argument("--start", help="start pose X,Y[,YAW_DEG] [m, m, deg] (default: the scenario's)")
@@ -108,7 +108,7 @@ def _world(args):
 
 def compile_note(quiet: bool = False) -> None:
     """One line on stderr when numba's on-disk cache of the planner is missing (a fresh
-    install or changed source): the first plan then compiles for about a minute."""
+    install or changed source): the first plan then compiles for 1-2 minutes."""
     if quiet:
         return
     try:
@@ -119,7 +119,8 @@ def compile_note(quiet: bool = False) -> None:
     except Exception:          # numba's cache internals moved: say nothing
         return
     if cold:
-        print("compiling the planner (first run only, about a minute) ...", file=sys.stderr, flush=True)
+        print("compiling the planner (first run only, about 1-2 minutes; planning times include it) ...",
+              file=sys.stderr, flush=True)
 
 
 class Progress:
