@@ -196,6 +196,35 @@ def blocked_cells(world: World) -> np.ndarray:
     return b
 
 
+@functools.lru_cache(maxsize=8)
+def off_limits(world: World) -> np.ndarray:
+    """(ny, nx) grid nodes no way of the vehicle passes: where it tips over at every
+    heading (:func:`blocked_cells`) and those closer to the map's edge than its
+    footprint's half-diagonal (``World.margin``: an edge whose centre comes closer
+    ends as "left the map"). The cost-to-go grid and its reachability checks avoid
+    them: a grid that let the way run along the edge sent the search there."""
+    e = world.emap
+    ny, nx = e.shape
+    m = world.margin / e.resolution
+    i, j = np.arange(nx), np.arange(ny)
+    near_x = (i < m - 1e-9) | (i > nx - 1 - m + 1e-9)
+    near_y = (j < m - 1e-9) | (j > ny - 1 - m + 1e-9)
+    out = blocked_cells(world) | near_y[:, None] | near_x[None, :]
+    out.setflags(write=False)
+    return out
+
+
+def _node(world: World, x: float, y: float) -> tuple:
+    """(j, i): the grid node nearest (x, y) [m] outside the band along the map's edge
+    that :func:`off_limits` keeps the vehicle's centre out of (a position the vehicle
+    may take, at least ``World.margin`` inside, can round into it)."""
+    e = world.emap
+    ny, nx = e.shape
+    k = min(int(math.ceil(world.margin / e.resolution - 1e-9)), (min(nx, ny) - 1) // 2)
+    return (min(max(int(round((y - e.origin[1]) / e.resolution)), k), ny - 1 - k),
+            min(max(int(round((x - e.origin[0]) / e.resolution)), k), nx - 1 - k))
+
+
 CTG_MAX_CELLS = 1_000_000    # larger maps get a cost-to-go window around start and goal
 
 
@@ -219,6 +248,27 @@ def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
         if (i1 - i0) * (j1 - j0) <= max_cells or margin < 2.0 * e.resolution:
             return j0, j1, i0, i1
         margin *= 0.7
+
+
+def grid_steps(H: np.ndarray, blocked: np.ndarray, res: float, climb: float):
+    """The 8-neighbour steps of the cost-to-go grid over heights H (ny, nx) [m] at
+    resolution ``res`` [m], each direction taken both ways: yields (p, q, up, d), the
+    flat indices of the cells a step leaves and reaches, its grade (rise over run) and
+    length [m], for the steps that touch no ``blocked`` cell (flat, ny * nx) and climb
+    no steeper than ``climb`` (a grade)."""
+    ny, nx = H.shape
+    Hr = H.ravel()
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        a = idx[:ny - dj, max(0, -di):nx - max(0, di)].ravel()
+        b = idx[dj:, max(0, di):nx - max(0, -di)].ravel()      # the cell (j + dj, i + di)
+        d = res * math.hypot(di, dj)
+        ok = ~(blocked[a] | blocked[b])
+        a, b = a[ok], b[ok]
+        for p, q in ((a, b), (b, a)):          # step from p to q
+            up = (Hr[q] - Hr[p]) / d
+            keep = up <= climb
+            yield p[keep], q[keep], up[keep], d
 
 
 @functools.lru_cache(maxsize=8)
@@ -249,7 +299,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     res = e.resolution
     vb, froll, mg = _bounds(world)
     ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
-    blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
+    blocked = off_limits(world)[j0:j1, i0:i1].ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:
         terrain = e.terrain_layer[j0:j1, i0:i1].ravel()
     else:
@@ -258,36 +308,25 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     gy, gx = np.gradient(H, res)
     # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
     froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
-    idx = np.arange(nx * ny).reshape(ny, nx)
-    climb = math.tan(climb_limit(world))
     copper = copper_coefficient(world)
     src, dst, w = [], [], []
     kegrid = 1.0
-    for dj, di in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        a = idx[:ny - dj, max(0, -di):nx - max(0, di)].ravel()
-        b = idx[dj:, max(0, di):nx - max(0, -di)].ravel()      # the cell (j + dj, i + di)
-        d = res * math.hypot(di, dj)
-        ok = ~(blocked[a] | blocked[b])
-        a, b = a[ok], b[ok]
-        for p, q in ((a, b), (b, a)):          # step from p to q
-            up = (H.ravel()[q] - H.ravel()[p]) / d
-            keep = up <= climb
-            p, q, up = p[keep], q[keep], up[keep]
-            if cost == "time":
-                # the faster of the two cells' terrains: either may be under the vehicle
-                grade = np.arctan(up)
-                wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
-                                    step_speed_bounds(world, terrain[q], grade, vb))
-            else:
-                f = np.minimum(froll_cell[p], froll_cell[q])
-                rise = mg * (H.ravel()[q] - H.ravel()[p])
-                wt = least_step_energy(f, rise, d, copper)
-                if p.size:
-                    kegrid = max(kegrid, ke_factor(f, rise, d, copper))
-            # reversed edges: Dijkstra runs from the goal
-            src.append(q)
-            dst.append(p)
-            w.append(wt / OCTILE + 1e-12)
+    for p, q, up, d in grid_steps(H, blocked, res, math.tan(climb_limit(world))):
+        if cost == "time":
+            # the faster of the two cells' terrains: either may be under the vehicle
+            grade = np.arctan(up)
+            wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
+                                step_speed_bounds(world, terrain[q], grade, vb))
+        else:
+            f = np.minimum(froll_cell[p], froll_cell[q])
+            rise = mg * (H.ravel()[q] - H.ravel()[p])
+            wt = least_step_energy(f, rise, d, copper)
+            if p.size:
+                kegrid = max(kegrid, ke_factor(f, rise, d, copper))
+        # reversed edges: Dijkstra runs from the goal
+        src.append(q)
+        dst.append(p)
+        w.append(wt / OCTILE + 1e-12)
     X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
     g = scn.goal
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
@@ -389,25 +428,75 @@ def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
     return out
 
 
+def steepest_climb_needed(world: World, xy: tuple | None = None, tol_deg: float = 0.05) -> float | None:
+    """The least, over the ways from the start (or the position ``xy``) to the goal disc,
+    of the steepest uphill grade [rad] a way climbs (a bottleneck path over the cost-to-go
+    grid's 8-neighbour steps, :func:`grid_steps`, from the cell nearest the position,
+    bisected to ``tol_deg``): every way climbs at least this steeply somewhere. None when
+    not even the grid's steps (up to :func:`climb_limit`) reach the position, on maps
+    over CTG_MAX_CELLS cells (not checked) or when the goal disc holds no grid node.
+    Computed on a failed search only (about ten grid searches, 10-40 ms each)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order
+    e, scn = world.emap, world.scenario
+    ny, nx = e.shape
+    if nx * ny > CTG_MAX_CELLS:
+        return None
+    sx, sy = xy if xy is not None else (scn.start["x"], scn.start["y"])
+    ox, oy = e.origin
+    res = e.resolution
+    j, i = _node(world, sx, sy)
+    start = j * nx + i
+    X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
+    g = scn.goal
+    blocked = off_limits(world).ravel()
+    goal = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)
+    if goal.size == 0:
+        return None
+
+    def reaches(grade: float) -> bool:
+        src, dst = [np.full(goal.size, nx * ny)], [goal]          # a source joined to the goal's nodes
+        for p, q, _, _ in grid_steps(e.heights, blocked, res, math.tan(grade)):
+            src.append(q)                                          # reversed: searched from the goal
+            dst.append(p)
+        src, dst = np.concatenate(src), np.concatenate(dst)
+        G = coo_matrix((np.ones(src.size), (src, dst)), shape=(nx * ny + 1, nx * ny + 1)).tocsr()
+        return bool(np.isin(start, breadth_first_order(G, nx * ny, return_predecessors=False)))
+    lo, hi = 0.0, climb_limit(world)
+    if not reaches(hi):
+        return None
+    if reaches(lo):
+        return 0.0
+    while hi - lo > math.radians(tol_deg):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if reaches(mid) else (mid, hi)
+    return hi
+
+
 def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
     """Why no path can exist, when the goal disc is cut off from the start (or from the
-    position ``xy``) by cells where the vehicle tips over at every heading (checked at
-    cell centres); else None."""
+    position ``xy``) by cells where the vehicle tips over at every heading, or by those
+    and the band along the map's edge its centre cannot enter (:func:`off_limits`;
+    checked at cell centres); else None."""
     e, scn = world.emap, world.scenario
     sx, sy = xy if xy is not None else (scn.start["x"], scn.start["y"])
     ox, oy = e.origin
-    labels, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
-    def cell(x, y):
-        return (min(max(int(round((y - oy) / e.resolution)), 0), e.shape[0] - 1),
-                min(max(int(round((x - ox) / e.resolution)), 0), e.shape[1] - 1))
+    labels, _ = ndimage.label(~off_limits(world), structure=np.ones((3, 3)))
+    cell = functools.partial(_node, world)
     s = labels[cell(sx, sy)]
     ny, nx = e.shape
     X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
     g = scn.goal
     in_goal = (X - g["x"]) ** 2 + (Y - g["y"]) ** 2 <= max(g["radius"], 0.5 * e.resolution) ** 2
+    in_goal[cell(g["x"], g["y"])] = True
     if s == 0:
         return f"the start stands on a slope beyond the tip-over limit of {scn.planner.tip_over_deg:g} deg at every heading"
     if not np.any(labels[in_goal] == s):
+        tip, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
+        if tip[cell(sx, sy)] != 0 and np.any(tip[in_goal] == tip[cell(sx, sy)]):
+            return (f"the only ways from the start to the goal between slopes beyond the tip-over limit of "
+                    f"{scn.planner.tip_over_deg:g} deg run along the map's edge, closer to it than the vehicle's "
+                    f"half-diagonal ({world.margin:.2f} m): no path can exist")
         return (f"the goal is cut off from the start by slopes beyond the tip-over limit of "
                 f"{scn.planner.tip_over_deg:g} deg (no heading crosses them); no path can exist")
     return None

@@ -17,7 +17,7 @@ import numpy as np
 from dynamics import kernels as K
 
 from .check import HOLD_LAST_S, Check, check_cost, controller_rate, fine_state, parting, predicted, replay
-from .heuristics import _max_rise, unreachable_reason
+from .heuristics import _max_rise, steepest_climb_needed, unreachable_reason
 from .polish import Polished, polish
 from .problem import batch_size, problem, search_threads
 from .problems import skidsteer as SS
@@ -95,16 +95,56 @@ class Plan:
         }
 
 
-def _remedy(world: World, res: SearchResult, limit_note: str | None) -> str:
+def _closest(world: World, search: Search, res: SearchResult) -> str:
+    """Where a failed search came closest to the goal: the expanded state nearest the
+    goal disc, how far from it, and the ground between (the height to climb and the
+    steepest slope along the straight line to the goal's centre, from the map), so a
+    user sees whether the goal stands on ground the vehicle cannot drive. Empty when
+    nothing was expanded."""
+    n = int(res.nodes)
+    if res.iterations <= 0 or n <= 0:
+        return ""
+    closed = search.CLO[:n].astype(bool)
+    X = search.X[:n][closed]
+    if not len(X):
+        return ""
+    g = world.scenario.goal
+    d = np.hypot(X[:, K.S_X] - g["x"], X[:, K.S_Y] - g["y"])
+    k = int(np.argmin(d))
+    x, y = float(X[k, K.S_X]), float(X[k, K.S_Y])
+    e = world.emap
+    t = np.linspace(0.0, 1.0, max(2, int(d[k] / (0.5 * e.resolution)) + 1))
+    xs, ys = x + t * (g["x"] - x), y + t * (g["y"] - y)
+    z = np.array([e.height(a, b) for a, b in zip(xs, ys)])
+    step = max(d[k] / (len(t) - 1), 1e-9)
+    steepest = math.degrees(math.atan(float(np.max(np.abs(np.diff(z))) / step))) if len(z) > 1 else 0.0
+    out = f"; closest approach {max(d[k] - g['radius'], 0.0):.1f} m from the goal disc, at ({x:.1f}, {y:.1f})"
+    if len(z) > 1 and steepest > 1.0:
+        out += (f", from where the straight line to the goal climbs {z.max() - z[0]:.1f} m on grades up to "
+                f"{steepest:.0f} deg")
+    return out
+
+
+def _remedy(world: World, res: SearchResult, limit_note: str | None, xy: tuple | None = None) -> str:
     """What to try after a failed search, from what it measured: the budget it used up,
-    the share of edges that stalled (the vehicle's limits against the map's slopes), the
-    vehicle's turning limit."""
+    a way that needs a run-up (every way from ``xy``, default the start, climbs
+    steeper than the vehicle holds somewhere: ``heuristics.steepest_climb_needed``),
+    the share of edges that stalled (the vehicle's limits against the map's slopes),
+    the vehicle's turning limit."""
     ps = world.scenario.planner
     out = []
     if "node budget" in (res.reason or ""):
         out.append(f"raise the node budget (planner.max_expansions or --max-expansions {2 * ps.max_expansions})")
     elif "time budget" in (res.reason or ""):
         out.append(f"raise the time budget (planner.time_budget_s or --time-budget {2 * ps.time_budget_s:g})")
+    if "budget" in (res.reason or ""):
+        from dynamics.limits import steepest_grade
+        need = steepest_climb_needed(world, xy)
+        held = max(steepest_grade(world.vehicle, t) for t in world.terrains)
+        if need is not None and need > held:
+            out.append(f"every way to the goal climbs {math.degrees(need):.1f} deg or more somewhere, steeper than "
+                       f"the {world.vehicle.name} holds ({math.degrees(held):.1f} deg): only speed carried into "
+                       f"that ramp crosses it (a run-up), and few of the ways searched carry enough")
     stalled = res.invalid.get(SS.CODES[SS.STALL - 1], 0)
     if res.edges and stalled > 0.3 * res.edges:
         from dynamics.limits import steepest_grade
@@ -177,7 +217,9 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
         found_by = ("previous plan (warm start: the search found nothing cheaper than its remaining "
                     f"{inc[0]:.4g} {'s' if cost == 'time' else 'J'} within its budgets)")
     else:
-        return Plan(world.scenario.name, cost, "no_path", res.reason + _remedy(world, res, limit_note),
+        return Plan(world.scenario.name, cost, "no_path",
+                    res.reason + _closest(world, search, res)
+                    + _remedy(world, res, limit_note, (float(X0[K.S_X]), float(X0[K.S_Y]))),
                     planning_time_s=time.perf_counter() - t0, **common)
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):

@@ -267,3 +267,58 @@ def test_the_time_step_bound_is_the_steady_drives_speed_from_above(name):
             lead = np.max(s - s[0] - bound * (tt - tt[0]))
             assert lead <= HE.CARRY_S * bound
 
+
+
+# ---- the band along the map's edge; why a search found nothing --------------------------
+def _wall_world(gap_rows: int):
+    """A 20 x 10 m asphalt map cut by a 3 m wall with 60 deg flanks at x = 10 m, open
+    only in its first ``gap_rows`` rows of 0.25 m cells along the map's edge y = 0."""
+    import sbmpc
+    res = 0.25
+    H = np.zeros((41, 81))
+    x = res * np.arange(81)
+    wall = np.clip(3.0 - math.tan(math.radians(60)) * np.abs(x - 10.0), 0.0, None)
+    H[gap_rows:, :] = wall[None, :]
+    scn = {"name": "wall", "terrain": "asphalt", "start": {"x": 3.0, "y": 5.0}, "goal": {"x": 17.0, "y": 5.0, "radius": 0.5}}
+    return sbmpc.load_world(scn, heights=H, resolution=res)
+
+
+def test_the_band_along_the_edge_is_off_limits_to_the_grid_and_the_reachability_check():
+    """The vehicle's centre never comes closer to the map's edge than its footprint's
+    half-diagonal (an edge that does ends as "left the map"): the cost-to-go grid and
+    the reachability check avoid those nodes. A wall whose only gap runs along the edge,
+    narrower than that band, cuts the goal off (the grid used to lead the search there:
+    a random hilly map's searches spent 150 000 expansions along the edge); a gap wider
+    than the band leaves it reachable."""
+    world = _wall_world(2)                                    # nodes y = 0, 0.25: both in the band
+    assert world.margin > 0.25
+    band = HE.off_limits(world) & ~HE.blocked_cells(world)
+    assert band[:, 0].all() and band[:, 1].all() and not band[20, 2]
+    why = HE.unreachable_reason(world)
+    assert why is not None and "along the map's edge" in why and f"{world.margin:.2f} m" in why
+    ctg, *_ = HE.cost_to_go.__wrapped__(world, "time")
+    j, i = HE._node(world, 3.0, 5.0)
+    assert ctg[j, i] >= 1e11                                 # the grid agrees: no way
+    assert HE.steepest_climb_needed(world) is None
+    open_world = _wall_world(6)                               # 1.5 m of level ground along the edge
+    assert HE.unreachable_reason(open_world) is None
+    ctg, *_ = HE.cost_to_go.__wrapped__(open_world, "time")
+    assert ctg[j, i] < 1e11 and HE.steepest_climb_needed(open_world) == 0.0
+
+
+def test_a_search_that_fails_says_where_it_came_closest_and_whether_a_run_up_is_needed():
+    """runup_ramp's ramp (20.6 deg) is steeper than the P3-AT holds on packed dirt
+    (13.9 deg): every way climbs 14.9 deg or more somewhere (the grid's 8-neighbour
+    steps), so a search cut short is told that only a run-up crosses it, and where it
+    came closest to the goal."""
+    from sbmpc import plan as PL
+    scn = SC.load(SCEN / "runup_ramp.yaml")
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, max_expansions=30)))
+    need = HE.steepest_climb_needed(world)
+    assert math.degrees(need) == pytest.approx(14.9, abs=0.1)
+    assert need > steepest_grade(world.vehicle, world.terrains[0])
+    p = PL.plan(world, "time")
+    assert p.status == "no_path"
+    assert "closest approach" in p.reason and "run-up" in p.reason and "14.9 deg or more" in p.reason
+    flat = WO.resolve(SC.load(SCEN / "flat.yaml"))
+    assert HE.steepest_climb_needed(flat) == 0.0
