@@ -201,8 +201,10 @@ def off_limits(world: World) -> np.ndarray:
     """(ny, nx) grid nodes no way of the vehicle passes: where it tips over at every
     heading (:func:`blocked_cells`) and those closer to the map's edge than its
     footprint's half-diagonal (``World.margin``: an edge whose centre comes closer
-    ends as "left the map"). The cost-to-go grid and its reachability checks avoid
-    them: a grid that let the way run along the edge sent the search there."""
+    ends as "left the map"). The reachability checks avoid them
+    (:func:`unreachable_reason`, :func:`steepest_climb_needed`); the cost-to-go grid
+    avoids the first only (it stays a lower bound: excluding the band too changed no
+    plan but by redrawing the weighted search's ties, docs/performance.md#unseen-maps)."""
     e = world.emap
     ny, nx = e.shape
     m = world.margin / e.resolution
@@ -299,7 +301,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     res = e.resolution
     vb, froll, mg = _bounds(world)
     ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
-    blocked = off_limits(world)[j0:j1, i0:i1].ravel()
+    blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
     if e.terrain_layer is not None and len(world.terrains) > 1:
         terrain = e.terrain_layer[j0:j1, i0:i1].ravel()
     else:

@@ -285,25 +285,27 @@ def _wall_world(gap_rows: int):
 
 def test_the_band_along_the_edge_is_off_limits_to_the_grid_and_the_reachability_check():
     """The vehicle's centre never comes closer to the map's edge than its footprint's
-    half-diagonal (an edge that does ends as "left the map"): the cost-to-go grid and
-    the reachability check avoid those nodes. A wall whose only gap runs along the edge,
-    narrower than that band, cuts the goal off (the grid used to lead the search there:
-    a random hilly map's searches spent 150 000 expansions along the edge); a gap wider
-    than the band leaves it reachable."""
+    half-diagonal (an edge that does ends as "left the map"): the reachability check
+    avoids those nodes. A wall whose only gap runs along the edge, narrower than that
+    band, cuts the goal off, and the plan is refused before any search (the cost-to-go
+    grid, a lower bound, still passes there; before, so did the check, and the search
+    started); a gap wider than the band leaves it reachable."""
+    from sbmpc import plan as PL
     world = _wall_world(2)                                    # nodes y = 0, 0.25: both in the band
     assert world.margin > 0.25
     band = HE.off_limits(world) & ~HE.blocked_cells(world)
     assert band[:, 0].all() and band[:, 1].all() and not band[20, 2]
     why = HE.unreachable_reason(world)
     assert why is not None and "along the map's edge" in why and f"{world.margin:.2f} m" in why
+    assert HE.steepest_climb_needed(world) is None
+    p = PL.plan(world, "time")
+    assert p.status == "no_path" and p.nodes_expanded == 0 and "along the map's edge" in p.reason
     ctg, *_ = HE.cost_to_go.__wrapped__(world, "time")
     j, i = HE._node(world, 3.0, 5.0)
-    assert ctg[j, i] >= 1e11                                 # the grid agrees: no way
-    assert HE.steepest_climb_needed(world) is None
+    assert ctg[j, i] < 1e11                                   # the grid's bound passes the band
     open_world = _wall_world(6)                               # 1.5 m of level ground along the edge
     assert HE.unreachable_reason(open_world) is None
-    ctg, *_ = HE.cost_to_go.__wrapped__(open_world, "time")
-    assert ctg[j, i] < 1e11 and HE.steepest_climb_needed(open_world) == 0.0
+    assert HE.steepest_climb_needed(open_world) == 0.0
 
 
 def test_a_search_that_fails_says_where_it_came_closest_and_whether_a_run_up_is_needed():
