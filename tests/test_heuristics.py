@@ -324,3 +324,23 @@ def test_a_search_that_fails_says_where_it_came_closest_and_whether_a_run_up_is_
     assert "closest approach" in p.reason and "run-up" in p.reason and "14.9 deg or more" in p.reason
     flat = WO.resolve(SC.load(SCEN / "flat.yaml"))
     assert HE.steepest_climb_needed(flat) == 0.0
+
+
+def test_a_start_facing_a_grade_steeper_than_the_vehicle_holds_is_named():
+    """A start on a 20 deg plane of asphalt (the P3-AT holds 14.8 deg), heading up the
+    fall line: every edge stalls, and the reason names the grade the start faces
+    against what the drive holds. Heading along the contour the same start is level
+    along its heading and the plan is found (the roll, 20 deg, is within the tip-over
+    limit)."""
+    import sbmpc
+    res = 0.25
+    y = res * np.arange(41)
+    H = np.tile((math.tan(math.radians(20.0)) * y)[:, None], (1, 61))
+    scn = {"name": "tilted", "terrain": "asphalt", "start": {"x": 3.0, "y": 5.0, "yaw_deg": 90.0},
+           "goal": {"x": 12.0, "y": 5.0, "radius": 0.5}}
+    p = sbmpc.plan_scenario(scn, heights=H, resolution=res)
+    assert p.status == "no_path"
+    assert ("the start faces a grade of 20.0 deg along its heading (the ground there slopes 20.0 deg), "
+            "steeper than the p3at holds (14.8 deg)") in p.reason
+    p = sbmpc.plan_scenario(dict(scn, start={"x": 3.0, "y": 5.0, "yaw_deg": 0.0}), heights=H, resolution=res)
+    assert p.found
