@@ -146,6 +146,21 @@ def test_binary_and_special_files_are_named_as_such(tmp_path, capsys):
     assert "binary data" in one_line_error(capsys, 2, rc)
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["plan", str(SCEN / "flat.yaml"), "--cost", "fast"], "sbmpc plan: error: --cost: expected one of 'time', 'energy', found 'fast'"),
+    (["compare", str(SCEN / "flat.yaml"), "--device", "tpu"], "--device: expected one of 'cpu', 'cuda', found 'tpu'"),
+    (["frobnicate"], "sbmpc: error: command: expected one of 'simulate', 'plan'"),
+])
+def test_a_wrong_choice_reads_like_every_other_bad_flag(capsys, argv, says):
+    """argparse's "invalid choice" in the form of the other messages: the flag, what was
+    expected, what was found; one line, exit 2."""
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and says in err and "invalid choice" not in err
+
+
 def test_a_package_shadowed_by_left_over_folders_is_named_not_a_traceback(capsys, monkeypatch):
     """After a plain ``pip install .`` and an uninstall, numba's cache files keep folders
     of the package in site-packages; a later install is then shadowed by them (Python

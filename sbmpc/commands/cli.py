@@ -2,15 +2,20 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 
 from ..errors import InputError, NoResult
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as one line and exit code 2."""
+    """argparse that reports a usage error as one line and exit code 2, a wrong choice
+    in the form of every other message (the flag, what was expected, what was found)."""
 
     def error(self, message):  # noqa: D401
+        m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: invalid choice: (.+?) \(choose from (.+)\)", message)
+        if m:
+            message = f"{m.group(1)}: expected one of {m.group(3)}, found {m.group(2)}"
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
