@@ -496,6 +496,8 @@ def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
     in_goal = (X - g["x"]) ** 2 + (Y - g["y"]) ** 2 <= max(g["radius"], 0.5 * e.resolution) ** 2
     in_goal[cell(g["x"], g["y"])] = True
     if s == 0:
+        if not blocked_cells(world)[cell(sx, sy)]:
+            return None       # in the band only (a map barely wider than the footprint): the search judges
         return f"the start stands on a slope beyond the tip-over limit of {scn.planner.tip_over_deg:g} deg at every heading"
     if not np.any(labels[in_goal] == s):
         tip, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))

@@ -117,9 +117,10 @@ def _closest(world: World, search: Search, res: SearchResult) -> str:
     xs, ys = x + t * (g["x"] - x), y + t * (g["y"] - y)
     z = np.array([e.height(a, b) for a, b in zip(xs, ys)])
     step = max(d[k] / (len(t) - 1), 1e-9)
-    steepest = math.degrees(math.atan(float(np.max(np.abs(np.diff(z))) / step))) if len(z) > 1 else 0.0
+    rises = np.diff(z) if len(z) > 1 else np.zeros(1)
+    steepest = math.degrees(math.atan(max(float(rises.max()), 0.0) / step))
     out = f"; closest approach {max(d[k] - g['radius'], 0.0):.1f} m from the goal disc, at ({x:.1f}, {y:.1f})"
-    if len(z) > 1 and steepest > 1.0:
+    if z.max() - z[0] > 0.05 and steepest > 1.0:
         out += (f", from where the straight line to the goal climbs {z.max() - z[0]:.1f} m on grades up to "
                 f"{steepest:.0f} deg")
     return out
@@ -127,8 +128,8 @@ def _closest(world: World, search: Search, res: SearchResult) -> str:
 
 def _remedy(world: World, res: SearchResult, limit_note: str | None, xy: tuple | None = None) -> str:
     """What to try after a failed search, from what it measured: the budget it used up,
-    a start (``xy``: x, y [m], yaw [rad]) facing a grade steeper than the vehicle
-    holds, a way that needs a run-up (every way from there climbs steeper than the
+    a start at rest (``xy``: x, y [m], yaw [rad], speed [m/s]) facing uphill a grade
+    steeper than the vehicle holds, a way that needs a run-up (every way from there climbs steeper than the
     vehicle holds somewhere: ``heuristics.steepest_climb_needed``),
     the share of edges that stalled (the vehicle's limits against the map's slopes),
     the vehicle's turning limit."""
@@ -140,12 +141,12 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None, xy: tuple |
         out.append(f"raise the time budget (planner.time_budget_s or --time-budget {2 * ps.time_budget_s:g})")
     from dynamics.limits import steepest_grade
     held = max(steepest_grade(world.vehicle, t) for t in world.terrains)
-    if xy is not None:
+    if xy is not None and abs(xy[3] if len(xy) > 3 else 0.0) < 0.05:      # at rest (a re-plan may carry speed)
         pitch, _ = world.emap.pitch_roll(xy[0], xy[1], xy[2], world.half_length, world.half_width)
         slope = math.atan(math.hypot(*world.emap.gradient(xy[0], xy[1])))
         here = steepest_grade(world.vehicle, world.terrain_at(xy[0], xy[1]))
-        if abs(pitch) > here:
-            out.append(f"the start faces a grade of {math.degrees(abs(pitch)):.1f} deg along its heading (the ground "
+        if pitch > here:                                                      # uphill, nose up
+            out.append(f"the start faces a grade of {math.degrees(pitch):.1f} deg along its heading (the ground "
                        f"there slopes {math.degrees(slope):.1f} deg), steeper than the {world.vehicle.name} holds "
                        f"({math.degrees(here):.1f} deg): a start heading across the slope is gentler")
     if "budget" in (res.reason or ""):
@@ -227,7 +228,8 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     else:
         return Plan(world.scenario.name, cost, "no_path",
                     res.reason + _closest(world, search, res)
-                    + _remedy(world, res, limit_note, (float(X0[K.S_X]), float(X0[K.S_Y]), float(X0[K.S_YAW]))),
+                    + _remedy(world, res, limit_note, (float(X0[K.S_X]), float(X0[K.S_Y]), float(X0[K.S_YAW]),
+                                                       float(X0[SS.X_V]))),
                     planning_time_s=time.perf_counter() - t0, **common)
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):

@@ -267,7 +267,7 @@ def _terrain(spec, probs: _Problems):
     _unknown(spec, {"default", "regions", "raster"}, "terrain", probs)
     default = spec.get("default")
     if not isinstance(default, str):
-        probs.add("terrain.default", "a terrain name or path", default)
+        probs.add("terrain.default", "a terrain name or path", MISSING if "default" not in spec else default)
     raster = spec.get("raster")
     if raster is not None:
         ok = (isinstance(raster, dict) and set(raster) <= {"file", "classes"} and isinstance(raster.get("file"), str)
@@ -290,7 +290,7 @@ def _terrain(spec, probs: _Problems):
             continue
         _unknown(r, {"terrain", "rect", "circle", "polygon"}, w, probs)
         if not isinstance(r.get("terrain"), str):
-            probs.add(f"{w}.terrain", "a terrain name or path", r.get("terrain"))
+            probs.add(f"{w}.terrain", "a terrain name or path", MISSING if "terrain" not in r else r.get("terrain"))
         shapes = [k for k in ("rect", "circle", "polygon") if k in r]
         if len(shapes) != 1:
             probs.add(w, "exactly one of rect, circle, polygon", shapes or None)
@@ -395,7 +395,7 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
         probs.add("description", "a string", desc)
     map_spec = data.get("map")
     if not isinstance(map_spec, dict):
-        probs.add("map", "a mapping with 'file' or 'generate'", map_spec)
+        probs.add("map", "a mapping with 'file' or 'generate'", MISSING if "map" not in data else map_spec)
     terrain = _terrain(data.get("terrain", "vinyl"), probs)
     vehicle = data.get("vehicle", "p3at")
     if not isinstance(vehicle, str):

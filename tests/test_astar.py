@@ -370,6 +370,33 @@ def test_auto_threads_keep_the_faster_expander_and_measure_again():
     assert c.choices == ["serial", "parallel"] and calls[-5:] == ["p"] * 5
 
 
+def test_auto_threads_choose_on_full_batches_only():
+    """While the batch still grows (rounds of fewer nodes than the batch), before the
+    first choice, the rounds run parallel and are not measured: the choice is made on
+    full batches, where it matters (rounds of one node spread over the cores say little
+    about rounds of 16)."""
+    import time as _time
+    from sbmpc.search.astar import _Chooser
+    calls = []
+
+    def parallel(k):
+        calls.append(("p", k))
+
+    def serial(k):
+        calls.append(("s", k))
+        _time.sleep(0.001 if k < 16 else 0.0)          # serial slower on small rounds only
+    c = _Chooser(parallel, serial, 16)
+    for k in range(1, 16):
+        c(k)
+    assert calls == [("p", k) for k in range(1, 16)] and c.calls == 0 and not c.choices
+    for _ in range(2 * c.TRIES + 3):
+        _time.sleep(0.0)
+        c(16)
+    assert c.choices and calls[15:17] == [("p", 16), ("s", 16)]
+    c(3)                                               # after the first choice: the chosen mode
+    assert calls[-1][0] == ("p" if c.best == 0 else "s")
+
+
 @pytest.mark.parametrize("kw", [dict(threads=1), dict(threads=2), dict(batch=4, threads=2), dict(threads="auto")])
 def test_a_search_leaves_numbas_thread_count_as_it_found_it(kw):
     """Each mode sets numba's threads for its expander (one thread for the serial search,

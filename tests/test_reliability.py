@@ -161,6 +161,19 @@ def test_a_wrong_choice_reads_like_every_other_bad_flag(capsys, argv, says):
     assert "\n" not in err and says in err and "invalid choice" not in err
 
 
+@pytest.mark.parametrize("message", [
+    "argument --cost: invalid choice: 'fast' (choose from 'time', 'energy')",     # Python 3.11
+    "argument --cost: invalid choice: 'fast' (choose from time, energy)",         # 3.12.7+ (unquoted)
+    "argument -c/--cost: invalid choice: 'fast' (choose from 'time', 'energy')",  # a flag with an alias
+])
+def test_the_wrong_choice_message_does_not_depend_on_the_python_version(capsys, message):
+    from sbmpc.commands.cli import build_parser
+    with pytest.raises(SystemExit) as e:
+        build_parser().error(message)
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip() == "sbmpc: error: --cost: expected one of 'time', 'energy', found 'fast'"
+
+
 def test_a_package_shadowed_by_left_over_folders_is_named_not_a_traceback(capsys, monkeypatch):
     """After a plain ``pip install .`` and an uninstall, numba's cache files keep folders
     of the package in site-packages; a later install is then shadowed by them (Python

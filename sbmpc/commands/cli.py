@@ -13,9 +13,10 @@ class _Parser(argparse.ArgumentParser):
     in the form of every other message (the flag, what was expected, what was found)."""
 
     def error(self, message):  # noqa: D401
-        m = re.fullmatch(r"argument (\S+?)(?:/\S+)?: invalid choice: (.+?) \(choose from (.+)\)", message)
-        if m:
-            message = f"{m.group(1)}: expected one of {m.group(3)}, found {m.group(2)}"
+        m = re.match(r"argument (\S+): invalid choice: (.+?) \(choose from (.+?)\)", message)
+        if m:          # (the choices quoted or not, by Python version; a flag's long name)
+            choices = ", ".join(repr(c.strip().strip("'")) for c in m.group(3).split(","))
+            message = f"{m.group(1).split('/')[-1]}: expected one of {choices}, found {m.group(2)}"
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
@@ -61,6 +62,8 @@ def main(argv=None) -> int:
     try:
         parser = build_parser()
     except ImportError as exc:
+        if debug:
+            raise
         print(f"sbmpc: error: {_broken_install(exc)}", file=sys.stderr)
         return 3
     args = parser.parse_args(argv)

@@ -340,7 +340,7 @@ class Search:
 
             def batched(k):
                 p.expand_batch(p.params, p.data, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb], CO[:k * nb])
-            expand = _Chooser(batched, serial) if threads == "auto" else batched
+            expand = _Chooser(batched, serial, size if ramp > 0 else 1) if threads == "auto" else batched
         else:
             expand = serial
         run = _batch_entry()
@@ -461,19 +461,26 @@ class _Chooser:
     2 x TRIES rounds alternate the two and keep the one with the smaller median time per
     edge (the first round of each is a warm-up and not counted); the choice is measured
     again every RECHECK rounds (other work may have taken or freed cores: with both
-    cores busy elsewhere, parallel rounds ran many times slower than serial ones)."""
+    cores busy elsewhere, parallel rounds ran many times slower than serial ones). While
+    the batch still grows (rounds of fewer than ``full`` nodes, the first few hundred
+    expansions) before the first choice, rounds run parallel and are not measured: the
+    choice is made on full batches."""
 
     TRIES = 12
     RECHECK = 2048
 
-    def __init__(self, parallel, serial):
+    def __init__(self, parallel, serial, full: int = 1):
         self.modes = (parallel, serial)
+        self.full = full          # rounds of fewer nodes (a batch still growing) run parallel, unmeasured
         self.calls = 0
         self.times = ([], [])
         self.best = 0
         self.choices = []
 
     def __call__(self, k):
+        if k < self.full and not self.choices:
+            self.modes[0](k)
+            return
         phase = self.calls % self.RECHECK
         self.calls += 1
         if phase < 2 * self.TRIES:
