@@ -440,8 +440,8 @@ def steepest_climb_needed(world: World, xy: tuple | None = None, tol_deg: float 
     bisected to ``tol_deg``): every way climbs at least this steeply somewhere. None when
     not even the grid's steps (up to :func:`climb_limit`) reach the position, on maps
     over CLIMB_CHECK_MAX_CELLS cells (not checked) or when the goal disc holds no grid
-    node. Computed on a failed search only (about twelve breadth-first searches of the
-    grid: 0.03 s on a 120 x 120 map, 0.6 s on 500 x 500)."""
+    node. Computed on a failed search only (the grid's steps once, then about twelve
+    breadth-first searches over those up to a grade: 0.03 s on a 120 x 120 map)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order
     e, scn = world.emap, world.scenario
@@ -460,15 +460,17 @@ def steepest_climb_needed(world: World, xy: tuple | None = None, tol_deg: float 
     if goal.size == 0:
         return None
 
-    def reaches(grade: float) -> bool:
-        src, dst = [np.full(goal.size, nx * ny)], [goal]          # a source joined to the goal's nodes
-        for p, q, _, _ in grid_steps(e.heights, blocked, res, math.tan(grade)):
-            src.append(q)                                          # reversed: searched from the goal
-            dst.append(p)
-        src, dst = np.concatenate(src), np.concatenate(dst)
-        G = coo_matrix((np.ones(src.size), (src, dst)), shape=(nx * ny + 1, nx * ny + 1)).tocsr()
-        return bool(np.isin(start, breadth_first_order(G, nx * ny, return_predecessors=False)))
     lo, hi = 0.0, climb_limit(world)
+    # every step up to the grid's climb limit, once; each test keeps those up to its grade
+    steps = list(grid_steps(e.heights, blocked, res, math.tan(hi)))
+    src = np.concatenate([np.full(goal.size, nx * ny)] + [q for _, q, _, _ in steps])   # reversed: from the goal
+    dst = np.concatenate([goal] + [p for p, _, _, _ in steps])
+    up = np.concatenate([np.full(goal.size, -np.inf)] + [u for _, _, u, _ in steps])  # (the source joins the goal)
+
+    def reaches(grade: float) -> bool:
+        k = up <= math.tan(grade)
+        G = coo_matrix((np.ones(int(k.sum())), (src[k], dst[k])), shape=(nx * ny + 1, nx * ny + 1)).tocsr()
+        return bool(np.isin(start, breadth_first_order(G, nx * ny, return_predecessors=False)))
     if not reaches(hi):
         return None
     if reaches(lo):
@@ -489,19 +491,20 @@ def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
     ox, oy = e.origin
     labels, _ = ndimage.label(~off_limits(world), structure=np.ones((3, 3)))
     cell = functools.partial(_node, world)
-    s = labels[cell(sx, sy)]
+    here = cell(sx, sy)
+    s = labels[here]
     ny, nx = e.shape
     X, Y = np.meshgrid(ox + e.resolution * np.arange(nx), oy + e.resolution * np.arange(ny))
     g = scn.goal
     in_goal = (X - g["x"]) ** 2 + (Y - g["y"]) ** 2 <= max(g["radius"], 0.5 * e.resolution) ** 2
     in_goal[cell(g["x"], g["y"])] = True
     if s == 0:
-        if not blocked_cells(world)[cell(sx, sy)]:
+        if not blocked_cells(world)[here]:
             return None       # in the band only (a map barely wider than the footprint): the search judges
         return f"the start stands on a slope beyond the tip-over limit of {scn.planner.tip_over_deg:g} deg at every heading"
     if not np.any(labels[in_goal] == s):
         tip, _ = ndimage.label(~blocked_cells(world), structure=np.ones((3, 3)))
-        if tip[cell(sx, sy)] != 0 and np.any(tip[in_goal] == tip[cell(sx, sy)]):
+        if tip[here] != 0 and np.any(tip[in_goal] == tip[here]):
             return (f"the only ways from the start to the goal between slopes beyond the tip-over limit of "
                     f"{scn.planner.tip_over_deg:g} deg run along the map's edge, closer to it than the vehicle's "
                     f"half-diagonal ({world.margin:.2f} m): no path can exist")

@@ -126,11 +126,11 @@ def _closest(world: World, search: Search, res: SearchResult) -> str:
     return out
 
 
-def _remedy(world: World, res: SearchResult, limit_note: str | None, xy: tuple | None = None) -> str:
+def _remedy(world: World, res: SearchResult, limit_note: str | None, start: np.ndarray | None = None) -> str:
     """What to try after a failed search, from what it measured: the budget it used up,
-    a start at rest (``xy``: x, y [m], yaw [rad], speed [m/s]) facing uphill a grade
-    steeper than the vehicle holds, a way that needs a run-up (every way from there climbs steeper than the
-    vehicle holds somewhere: ``heuristics.steepest_climb_needed``),
+    a ``start`` (the planner state searched from) at rest facing uphill a grade steeper
+    than the vehicle holds, a way that needs a run-up (every way from there climbs
+    steeper than the vehicle holds somewhere: ``heuristics.steepest_climb_needed``),
     the share of edges that stalled (the vehicle's limits against the map's slopes),
     the vehicle's turning limit."""
     ps = world.scenario.planner
@@ -141,26 +141,26 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None, xy: tuple |
         out.append(f"raise the time budget (planner.time_budget_s or --time-budget {2 * ps.time_budget_s:g})")
     from dynamics.limits import steepest_grade
     held = max(steepest_grade(world.vehicle, t) for t in world.terrains)
-    if xy is not None and abs(xy[3] if len(xy) > 3 else 0.0) < 0.05:      # at rest (a re-plan may carry speed)
-        pitch, _ = world.emap.pitch_roll(xy[0], xy[1], xy[2], world.half_length, world.half_width)
-        slope = math.atan(math.hypot(*world.emap.gradient(xy[0], xy[1])))
-        here = steepest_grade(world.vehicle, world.terrain_at(xy[0], xy[1]))
+    xy = None if start is None else (float(start[K.S_X]), float(start[K.S_Y]))
+    if start is not None and abs(start[SS.X_V]) < 0.05:                  # at rest (a re-plan may carry speed)
+        pitch, _ = world.emap.pitch_roll(*xy, float(start[K.S_YAW]), world.half_length, world.half_width)
+        slope = math.atan(math.hypot(*world.emap.gradient(*xy)))
+        here = steepest_grade(world.vehicle, world.terrain_at(*xy))
         if pitch > here:                                                      # uphill, nose up
             out.append(f"the start faces a grade of {math.degrees(pitch):.1f} deg along its heading (the ground "
                        f"there slopes {math.degrees(slope):.1f} deg), steeper than the {world.vehicle.name} holds "
                        f"({math.degrees(here):.1f} deg): a start heading across the slope is gentler")
     if "budget" in (res.reason or ""):
-        need = steepest_climb_needed(world, xy[:2] if xy is not None else None)
+        need = steepest_climb_needed(world, xy)
         if need is not None and need > held:
             out.append(f"every way to the goal climbs {math.degrees(need):.1f} deg or more somewhere, steeper than "
                        f"the {world.vehicle.name} holds ({math.degrees(held):.1f} deg): only speed carried into "
                        f"that ramp crosses it (a run-up), and few of the ways searched carry enough")
     stalled = res.invalid.get(SS.CODES[SS.STALL - 1], 0)
     if res.edges and stalled > 0.3 * res.edges:
-        g = held
         steep = math.degrees(math.atan(_max_rise(world.emap.heights, world.emap.resolution, 1.0)))
         out.append(f"{100 * stalled / res.edges:.0f} % of the edges stalled: the {world.vehicle.name} holds at most "
-                   f"{math.degrees(g):.1f} deg here and the map's slopes reach {steep:.1f} deg (a stronger vehicle, "
+                   f"{math.degrees(held):.1f} deg here and the map's slopes reach {steep:.1f} deg (a stronger vehicle, "
                    f"a gentler map, or a map without height steps)")
     if limit_note:
         out.append(limit_note)
@@ -228,8 +228,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     else:
         return Plan(world.scenario.name, cost, "no_path",
                     res.reason + _closest(world, search, res)
-                    + _remedy(world, res, limit_note, (float(X0[K.S_X]), float(X0[K.S_Y]), float(X0[K.S_YAW]),
-                                                       float(X0[SS.X_V]))),
+                    + _remedy(world, res, limit_note, X0),
                     planning_time_s=time.perf_counter() - t0, **common)
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
