@@ -27,6 +27,7 @@ from .world import World, _start, capability, wheel_speed_range
 
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
 POLISH_GOAL_MARGIN = 0.1   # m (at most half the goal radius): the polish aims this far inside the goal disc
+POLISH_TIP_MARGIN_DEG = 3.0   # deg: the tip-over limit lowered by this for a second polish (_polished)
 APPROACH_CONTROLS = 3   # a plan that only passes the goal within the drift allowance is
 APPROACH_SLACK = 0.05   # re-planned from this many controls before its end (or from where
                         # it parted) and the result kept when it enters the goal disc at
@@ -305,22 +306,34 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
-    may pass just outside it at 1 kHz."""
+    may pass just outside it at 1 kHz. Where the polished controls tip the vehicle over
+    at 1 kHz, they are polished again from the searched ones with the tip-over limit
+    lowered by POLISH_TIP_MARGIN_DEG: the polish presses a path against the limit (the
+    flanks of narrow_pass's pass), where the 1 kHz drive, a few centimetres off the
+    20 ms line, tips (four of narrow_pass's eight seeds did)."""
     lo, hi = wheel_speed_range(world)
-    params = prob.params.copy()
     r = world.scenario.goal["radius"]
-    for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
-        params[SS.Q_GR] = r - margin
-        with numba_threads(world.scenario.planner.threads or None):   # the polish's trials: planner.threads
-            pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
-        if pol is not None:
+    missed = None
+    for tip_margin in (0.0, math.radians(POLISH_TIP_MARGIN_DEG)):
+        params = prob.params.copy()
+        params[SS.Q_TIP] -= tip_margin
+        for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
+            params[SS.Q_GR] = r - margin
+            with numba_threads(world.scenario.planner.threads or None):   # the polish's trials: planner.threads
+                pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
+            if pol is not None:
+                break
+        if pol is None or pol.gain <= 0.0:
+            return None, None, missed
+        drive = controller_rate(world, cost, pol.controls, X0)
+        new = drive[0]
+        if new.reached:
             break
-    if pol is None or pol.gain <= 0.0:
-        return None, None, None
-    drive = controller_rate(world, cost, pol.controls, X0)
-    new = drive[0]
-    if not new.reached:
-        return None, None, (pol, drive)
+        missed = (pol, drive)
+        if not new.reason.startswith("the vehicle tipped") or time.perf_counter() > deadline:
+            return None, None, missed
+    else:
+        return None, None, missed
     searched = controller_rate(world, cost, controls, X0)
     old = searched[0]
     if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
