@@ -3,6 +3,7 @@ simulated true vehicle, re-plan from the measured state."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -152,3 +153,42 @@ def test_a_command_delay_in_the_truth_is_executed(flat):
     assert res.status == "reached"
     assert res.travel_time_s > res.predicted["travel_time_s"] + 0.2
     assert res.trajectory["v"][res.trajectory["t"] <= 0.3].max() < 1e-6       # nothing moves before the delay
+
+
+def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch):
+    """A time plan only grazes the goal disc: with the right tyres 8 % smaller, a last
+    plan aimed at the disc itself ran out 1 cm outside it, past its centre, and one more
+    plan had to turn the vehicle back (23.34 s). Re-plans aim AIM_MARGIN inside the
+    disc: every re-plan's 1 kHz check ends that far inside, the first plan is the plain
+    plan (the disc itself), no plan runs out short of the goal, and the run takes
+    under 21 s. A re-plan that finds no way into the inner disc is made again for the
+    disc, and both searches count in its planning time."""
+    truth = flat.vehicle.replace(radius_scale_right=0.92)
+    res = R.run(flat, "time", truth)
+    g = flat.scenario.goal
+    inner = g["radius"] - min(R.AIM_MARGIN, 0.25 * g["radius"])
+    assert res.status == "reached" and res.replans >= 2
+    assert all(r.why != "the plan ended short of the goal" for r in res.plans)
+    assert res.travel_time_s < 21.0
+
+    def end_distance(p):
+        return math.hypot(p.trajectory["x"][-1] - g["x"], p.trajectory["y"][-1] - g["y"])
+    assert end_distance(res.plans[0].plan) > inner
+    assert all(end_distance(r.plan) <= inner + 1e-9 for r in res.plans[1:])
+    # the inner disc out of reach: each re-plan falls back to the disc
+    real = R.PL.plan
+    calls = []
+
+    def no_inner(world, *a, **k):
+        calls.append(world.scenario.goal["radius"])
+        p = real(world, *a, **k)
+        if world.scenario.goal["radius"] < g["radius"]:
+            return replace(p, status="no_path", reason="(test) the inner disc is out of reach", controls=[],
+                           planning_time_s=5.0)
+        return p
+
+    monkeypatch.setattr(R.PL, "plan", no_inner)
+    res2 = R.run(flat, "time", truth)
+    assert res2.status == "reached" and res2.replans >= 2
+    assert calls[0] == g["radius"] and calls[1:3] == [inner, g["radius"]]
+    assert all(r.plan.found and r.plan.planning_time_s > 5.0 for r in res2.plans[1:])
