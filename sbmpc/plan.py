@@ -339,7 +339,7 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
         return None, searched, (pol, drive)
     if old.reached and check_cost(old, cost) <= check_cost(new, cost):
-        return None, searched, None
+        return None, searched, missed          # (a first polish that tipped, to repair)
     return pol, drive, None
 
 

@@ -32,6 +32,7 @@ planner's search does not model a delay.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -185,13 +186,16 @@ class _Executor:
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
 
+@functools.lru_cache(maxsize=8)
 def _aim(world: WO.World) -> WO.World:
     """The world a run re-plans in: its goal disc shrunk by AIM_MARGIN. A time plan only
     grazes the disc, and a vehicle that drives a little off its plan (a flat tyre) then
     passes just outside it and must be turned back by one more plan (2.4 s more on
     flat.yaml). The first plan aims at the disc itself (it is what ``sbmpc plan``
     reports and the run's prediction), and a re-plan that finds no way into the inner
-    disc (a goal on a slope the vehicle barely climbs) is made again for the disc."""
+    disc (a goal on a slope the vehicle barely climbs) is made again for the disc. Cached
+    per world (worlds hash by identity), so that runs on one world share the inner
+    disc's cost-to-go grid."""
     g = world.scenario.goal
     m = min(AIM_MARGIN, 0.25 * g["radius"])
     return replace(world, scenario=replace(world.scenario, goal=dict(g, radius=g["radius"] - m)))
@@ -247,14 +251,17 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             tail = current.controls[k:] if (current is not None and warm) else None
             label = "first plan" if first else f"re-plan {len(out.plans)}"
             budget = None if first else rs.replan_time_budget_s
-            # re-plans aim inside the goal disc; where nothing reaches the inner disc, at the disc
+            # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
+            # reaches the inner disc, at the disc itself in what is left of it
             p = PL.plan(world if first else aim, cost, progress=progress(label) if progress else None,
-                        start=X, incumbent=tail, time_budget_s=budget)
+                        start=X, incumbent=tail, time_budget_s=budget if first else 0.5 * budget)
             if not p.found and not first:
                 inner = p
-                p = PL.plan(world, cost, progress=progress(label) if progress else None, start=X,
-                            incumbent=tail, time_budget_s=budget)
+                p = PL.plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
+                            start=X, incumbent=tail, time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
                 p.planning_time_s += inner.planning_time_s      # both searches count
+                p.nodes_expanded += inner.nodes_expanded
+                p.edges_simulated += inner.edges_simulated
             out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail)))
             if p.found:
                 if first:

@@ -162,7 +162,7 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     disc: every re-plan's 1 kHz check ends that far inside, the first plan is the plain
     plan (the disc itself), no plan runs out short of the goal, and the run takes
     under 21 s. A re-plan that finds no way into the inner disc is made again for the
-    disc, and both searches count in its planning time."""
+    disc, the two sharing the re-plan's time budget, and both count in its planning time."""
     truth = flat.vehicle.replace(radius_scale_right=0.92)
     res = R.run(flat, "time", truth)
     g = flat.scenario.goal
@@ -177,10 +177,11 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     assert all(end_distance(r.plan) <= inner + 1e-9 for r in res.plans[1:])
     # the inner disc out of reach: each re-plan falls back to the disc
     real = R.PL.plan
-    calls = []
+    calls, budgets = [], []
 
     def no_inner(world, *a, **k):
         calls.append(world.scenario.goal["radius"])
+        budgets.append(k.get("time_budget_s"))
         p = real(world, *a, **k)
         if world.scenario.goal["radius"] < g["radius"]:
             return replace(p, status="no_path", reason="(test) the inner disc is out of reach", controls=[],
@@ -192,3 +193,6 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     assert res2.status == "reached" and res2.replans >= 2
     assert calls[0] == g["radius"] and calls[1:3] == [inner, g["radius"]]
     assert all(r.plan.found and r.plan.planning_time_s > 5.0 for r in res2.plans[1:])
+    # the two searches of a re-plan share its budget: half for the inner disc, the rest after
+    rb = flat.scenario.run.replan_time_budget_s
+    assert budgets[1] == pytest.approx(0.5 * rb) and budgets[2] == pytest.approx(rb - 5.0)
