@@ -226,3 +226,15 @@ def test_a_polish_that_tips_over_at_1khz_is_polished_again_within_a_margin(monke
     new = CK.controller_rate(w, "energy", pol.controls, X0)[0]
     assert new.reached and drive[0].energy_J == new.energy_J
     assert new.energy_J < q.energy_J
+    # the second polish tips over too: nothing is polished, and the second is handed
+    # back to be repaired (plan._checked); past the deadline, no second polish
+    lat = [(top, top, 1.0)] * 17
+    monkeypatch.setattr(PL, "polish", lambda params, *a, **k: PO.Polished(
+        over if params[SS.Q_TIP] == pytest.approx(np.radians(tip)) else lat, 1.0, 2.0, 0, 0.0))
+    pol, drive, missed = PL._polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], np.inf)
+    assert pol is None and drive is None and missed[0].controls == lat
+    assert missed[1][0].reason.startswith("the vehicle tipped over")
+    limits.clear()
+    monkeypatch.setattr(PL, "polish", spy)
+    pol, drive, missed = PL._polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], 0.0)
+    assert len(limits) == 1 and pol is None and missed[0].controls == over
