@@ -60,13 +60,14 @@ class Replan:
     why: str
     plan: PL.Plan
     warm: bool               # an incumbent (the rest of the previous plan) was handed to the search
+    goal_radius: float       # the radius of the goal disc the plan aimed at [m] (re-plans: AIM_MARGIN inside)
 
     def to_json(self) -> dict:
         p = self.plan
         return {"t": self.t, "x": self.x, "y": self.y, "why": self.why, "status": p.status, "reason": p.reason,
                 "planning_time_s": p.planning_time_s, "nodes_expanded": p.nodes_expanded,
                 "predicted_travel_time_s": p.travel_time_s, "predicted_energy_J": p.energy_J,
-                "controls": len(p.controls), "warm_start": self.warm,
+                "controls": len(p.controls), "warm_start": self.warm, "goal_radius_m": self.goal_radius,
                 "found_by": p.found_by or ("search" if p.found else None)}
 
 
@@ -255,14 +256,15 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # reaches the inner disc, at the disc itself in what is left of it
             p = PL.plan(world if first else aim, cost, progress=progress(label) if progress else None,
                         start=X, incumbent=tail, time_budget_s=budget if first else 0.5 * budget)
+            aimed = (world if first else aim).scenario.goal["radius"]
             if not p.found and not first:
-                inner = p
+                inner, aimed = p, world.scenario.goal["radius"]
                 p = PL.plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
                             start=X, incumbent=tail, time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
                 p.planning_time_s += inner.planning_time_s      # both searches count
                 p.nodes_expanded += inner.nodes_expanded
                 p.edges_simulated += inner.edges_simulated
-            out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail)))
+            out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail), aimed))
             if p.found:
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0

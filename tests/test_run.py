@@ -175,6 +175,8 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
         return math.hypot(p.trajectory["x"][-1] - g["x"], p.trajectory["y"][-1] - g["y"])
     assert end_distance(res.plans[0].plan) > inner
     assert all(end_distance(r.plan) <= inner + 1e-9 for r in res.plans[1:])
+    js = res.to_json()["plans"]
+    assert js[0]["goal_radius_m"] == g["radius"] and all(r["goal_radius_m"] == inner for r in js[1:])
     # the inner disc out of reach: each re-plan falls back to the disc
     real = R.PL.plan
     calls, budgets = [], []
@@ -193,6 +195,7 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     assert res2.status == "reached" and res2.replans >= 2
     assert calls[0] == g["radius"] and calls[1:3] == [inner, g["radius"]]
     assert all(r.plan.found and r.plan.planning_time_s > 5.0 for r in res2.plans[1:])
+    assert all(r.goal_radius == g["radius"] for r in res2.plans)
     # the two searches of a re-plan share its budget: half for the inner disc, the rest after
     rb = flat.scenario.run.replan_time_budget_s
     assert budgets[1] == pytest.approx(0.5 * rb) and budgets[2] == pytest.approx(rb - 5.0)
