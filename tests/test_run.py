@@ -196,6 +196,10 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     assert calls[0] == g["radius"] and calls[1:3] == [inner, g["radius"]]
     assert all(r.plan.found and r.plan.planning_time_s > 5.0 for r in res2.plans[1:])
     assert all(r.goal_radius == g["radius"] for r in res2.plans)
+    from sbmpc.commands.run import summary
+    text = summary(res2)
+    assert text.count("aimed at the goal disc itself") == res2.replans
+    assert "aimed at the goal disc itself" not in summary(res)
     # the two searches of a re-plan share its budget: half for the inner disc, the rest after
     rb = flat.scenario.run.replan_time_budget_s
     assert budgets[1] == pytest.approx(0.5 * rb) and budgets[2] == pytest.approx(rb - 5.0)
