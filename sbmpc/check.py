@@ -44,7 +44,9 @@ class Check:
     """A plan's controls replayed at the vehicle's controller rate (the paper's 1 kHz
     digital PID): does the vehicle really get there, and at what cost? ``miss_m`` [m]:
     how far outside the goal disc the replay's closest approach stays (0 when it enters);
-    ``drift_m`` [m]: the allowance for that (DRIFT_PER_M of the distance driven)."""
+    ``drift_m`` [m]: the allowance for that (DRIFT_PER_M of the distance driven);
+    ``end``: how the replay ended (the replay's end code: ``skidsteer.IN_GOAL``, 0, or
+    minus ``skidsteer.OFF_MAP``, ``STALL``, ``TIP``)."""
 
     dt: float
     reached: bool
@@ -53,6 +55,7 @@ class Check:
     reason: str | None
     miss_m: float = 0.0
     drift_m: float = 0.0
+    end: int = 0
 
     def to_json(self) -> dict:
         return {"dt": self.dt, "reached": self.reached, "travel_time_s": self.travel_time_s,
@@ -96,7 +99,7 @@ def controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple:
         done = float(ends[k - 1]) if k else 0.0
         kept = [tuple(c) for c in controls[:k]] + [(controls[k][0], controls[k][1], round(t - done, 9))]
         traj = {name: v[:i + 1] for name, v in traj.items()}
-        return Check(dt, True, t, e, None, miss, drift), traj, kept
+        return Check(dt, True, t, e, None, miss, drift, int(end)), traj, kept
     tt = float(S[K.S_T] - X0[K.S_T])
     where = f"at ({S[K.S_X]:.2f}, {S[K.S_Y]:.2f}), t = {tt:.2f} s, control {used} of {len(controls)}"
     if end < 0:
@@ -104,7 +107,7 @@ def controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple:
     else:
         why = (f"the controls pass {miss:.2f} m outside the goal disc (allowed: {drift:.2f} m of "
                f"open-loop drift), ending {where}")
-    return Check(dt, False, tt, float(S[K.S_E] - X0[K.S_E]), why, miss, drift), traj, list(controls)
+    return Check(dt, False, tt, float(S[K.S_E] - X0[K.S_E]), why, miss, drift, int(end)), traj, list(controls)
 
 
 def check(world: World, cost: str, controls, start: np.ndarray | None = None) -> Check:

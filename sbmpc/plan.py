@@ -330,7 +330,7 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
         if new.reached:
             break
         missed = (pol, drive)
-        if not new.reason.startswith("the vehicle tipped") or time.perf_counter() > deadline:
+        if new.end != -SS.TIP or time.perf_counter() > deadline:
             return None, None, missed
     else:
         return None, None, missed

@@ -254,9 +254,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             budget = None if first else rs.replan_time_budget_s
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
-            p = PL.plan(world if first else aim, cost, progress=progress(label) if progress else None,
+            target = world if first else aim
+            p = PL.plan(target, cost, progress=progress(label) if progress else None,
                         start=X, incumbent=tail, time_budget_s=budget if first else 0.5 * budget)
-            aimed = (world if first else aim).scenario.goal["radius"]
+            aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]
                 p = PL.plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
