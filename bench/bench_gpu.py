@@ -143,7 +143,7 @@ def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:
     t0 = time.perf_counter()
     for cfg in CONFIGS.values():                   # compile / load the caches
         for cost in ("time", "energy"):
-            PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
+            PL.search_plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
     res["warmup_s"] = round(time.perf_counter() - t0, 1)
     order = ["flat", "runup_ramp", "hill_tradeoff", "mixed_terrain", "narrow_pass", "hills_field", "steep_hill"]
     paths = {p.stem: p for p in (ROOT / "scenarios").glob("*.yaml")}
@@ -156,7 +156,7 @@ def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:
                     res["skipped"].append(f"{stem} {cost} {key}")
                     continue
                 made.clear()
-                p = PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), cost)
+                p = PL.search_plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), cost)
                 r = {"status": p.status, "planning_time_s": round(p.planning_time_s, 3),
                      "expansions": p.nodes_expanded, "edges": p.edges_simulated,
                      "cost": p.travel_time_s if cost == "time" else p.energy_J}

@@ -157,7 +157,7 @@ def main(argv=None) -> int:
     from sbmpc import plan as PL
     from sbmpc import world as WO
     from sbmpc import scenario as SC
-    PL.plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba
+    PL.search_plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba
     out = {"budget_s": args.budget, "scenarios": {}}
     for name in args.scenarios:
         scn = SC.load(ROOT / "scenarios" / f"{name}.yaml")
@@ -165,7 +165,7 @@ def main(argv=None) -> int:
         world = WO.resolve(scn)
         rows = {}
         for cost in ("time", "energy"):
-            p = PL.plan(world, cost)
+            p = PL.search_plan(world, cost)
             rows[f"SBMPC/{cost}"] = [{"solved": p.found, "time_s": p.planning_time_s, "edges": p.edges_simulated,
                                       "travel_time_s": p.travel_time_s, "energy_J": p.energy_J}]
         for pl in ("RRT", "KPIECE1"):

@@ -13,7 +13,9 @@ expand the same nodes: ``same_plan`` says whether the controls came out the same
 ``extra_edges`` how many more edges than the serial search a configuration simulated.
 The speed-up is the ratio of planning times within that run (these machines are noisy:
 compare ratios, not seconds across runs). Map size and branching rows use the default settings (every
-core, batch 16).
+core, batch 16). Each row is one search's plan (``sbmpc.plan.search_plan``): ``sbmpc plan
+--cost energy`` also runs the time search, to check its plan against
+(``planner.energy_vs_time``), and takes the time row's planning time more.
 """
 from __future__ import annotations
 
@@ -49,7 +51,7 @@ def main() -> int:
     flat = SC.load(ROOT / "scenarios" / "flat.yaml")
     for cfg in CONFIGS.values():                  # compile / load the cache (energy: the polish too)
         for cost in ("time", "energy"):
-            PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
+            PL.search_plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
     warm = time.perf_counter() - t0
     res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
                  "cores": numba.config.NUMBA_NUM_THREADS, "configs": CONFIGS,
@@ -58,7 +60,7 @@ def main() -> int:
         scn = SC.load(path)
         out = {}
         for c in ("time", "energy"):
-            plans = {k: PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), c)
+            plans = {k: PL.search_plan(WO.resolve(replace(scn, planner=replace(scn.planner, **cfg))), c)
                      for k, cfg in CONFIGS.items()}
             rows = {k: row(p) for k, p in plans.items()}
             s = rows["serial"]
@@ -80,14 +82,14 @@ def main() -> int:
         gen["features"] = [dict(gen["features"][0], count=int(round(24 * (L / 60) ** 2)))]
         scn = replace(field, map_spec={"generate": gen}, goal=dict(field.goal, x=L - 5.0, y=L - 5.0))
         world = WO.resolve(scn)
-        r = {"size_m": L, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
+        r = {"size_m": L, **{c: row(PL.search_plan(world, c)) for c in ("time", "energy")}}
         res["map_size"].append(r)
         print("size", r, flush=True)
     # growth with the branching factor, on the hill trade-off
     hill = SC.load(ROOT / "scenarios" / "hill_tradeoff.yaml")
     for b in (8, 12, 16, 24, 32):
         world = WO.resolve(replace(hill, planner=replace(hill.planner, branching=b)))
-        r = {"branching": b, **{c: row(PL.plan(world, c)) for c in ("time", "energy")}}
+        r = {"branching": b, **{c: row(PL.search_plan(world, c)) for c in ("time", "energy")}}
         res["branching"].append(r)
         print("branching", r, flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -55,6 +55,7 @@ class Plan:
     check: Check | None = None    # the controls replayed at the controller rate
     repairs: int = 0              # re-plans from where the controller-rate replay parted from the search
     polish: "Polished | None" = None   # the local search over the found controls (sbmpc.polish)
+    rival: dict | None = None     # the time plan an energy plan was checked against (plan())
 
     @property
     def found(self) -> bool:
@@ -93,6 +94,7 @@ class Plan:
             "controller_rate_check": self.check.to_json() if self.check else None,
             "repairs": self.repairs,
             "polish": self.polish.to_json() if self.polish else None,
+            "rival": self.rival,
         }
 
 
@@ -188,8 +190,50 @@ def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | 
 
 
 def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
-         incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
-    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's).
+         incumbent: list | None = None, time_budget_s: float | None = None, time_progress=None) -> Plan:
+    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's): the plan
+    of :func:`search_plan`, except that an energy plan (without ``incumbent``) is checked
+    against the time plan when ``planner.energy_vs_time`` is on (the default): the time
+    search runs first (``time_progress`` reports it), and where its plan, driven at the
+    controller rate, uses less energy than the energy search's own, or the energy search
+    finds nothing, the time plan is the energy plan (``found_by`` says so). The search
+    for the cheapest energy merges states on its grid and samples its own wheel speeds,
+    so it can lose a way the time search kept; a user who asks for the least energy
+    never gets a plan dearer than the fastest one. ``planning_time_s`` counts both
+    searches; ``rival`` holds the time plan's figures."""
+    cost = cost or world.scenario.cost
+    if cost != "energy" or incumbent is not None or not world.scenario.planner.energy_vs_time:
+        return search_plan(world, cost, progress, start, incumbent, time_budget_s)
+    fast = search_plan(world, "time", time_progress, start, None, time_budget_s)
+    own = search_plan(world, "energy", progress, start, None, time_budget_s)
+    out = cross_checked(own, fast)
+    return replace(out, planning_time_s=own.planning_time_s + fast.planning_time_s, rival=_rival(fast))
+
+
+def _rival(p: Plan) -> dict:
+    """The figures of the plan an energy plan was checked against (plan JSON ``rival``)."""
+    return {"cost": p.cost, "status": p.status, "travel_time_s": p.travel_time_s, "energy_J": p.energy_J,
+            "planning_time_s": p.planning_time_s}
+
+
+def cross_checked(own: Plan, other: Plan) -> Plan:
+    """``own`` checked against ``other`` (planned for the other cost) on own's cost, both
+    as driven at the controller rate: the other plan (adopted, :func:`_adopt`) where it
+    does better, or where own's search found nothing and the other's did; else own."""
+    cost = own.cost
+    if own.found and other.found:
+        better = (other.energy_J < own.energy_J if cost == "energy"
+                  else other.travel_time_s < own.travel_time_s)
+        return _adopt(other, cost, own) if better else own
+    if other.found and not own.found:
+        return _adopt(other, cost, own, why=f"its own search found no path: {own.reason}")
+    return own
+
+
+def search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
+                incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
+    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
+    search: search, polish, check at the controller rate and repair.
 
     ``start``: a planner state to plan from (default: the scenario's start; a receding-
     horizon run passes the measured state). ``incumbent``: controls [(wl, wr, duration_s)]
@@ -414,21 +458,12 @@ def plan_both(world: World, progress=None) -> dict:
     against the other on its own cost; the better one is kept, a search that found
     nothing takes the other's plan (its own reason is kept in ``found_by``), and
     ``found_by`` says which search produced it (reported by ``sbmpc compare``)."""
-    plans = {c: plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy")}
-    t, e = plans["time"], plans["energy"]
-    if t.found and e.found:
-        if e.travel_time_s < t.travel_time_s:      # (both the controller-rate replays')
-            plans["time"] = _adopt(e, "time", t)
-        if t.energy_J < e.energy_J:
-            plans["energy"] = _adopt(t, "energy", e)
-    elif t.found != e.found:
-        own, other = (e, t) if t.found else (t, e)
-        plans[own.cost] = _adopt(other, own.cost, own, why=f"its own search found no path: {own.reason}")
-    return plans
+    t, e = (search_plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy"))
+    return {"time": cross_checked(t, e), "energy": cross_checked(e, t)}
 
 
 def _adopt(other: Plan, cost: str, own: Plan, why: str | None = None) -> Plan:
-    from dataclasses import replace as _replace
-    note = why or f"better on {cost} than the {cost} search's own plan"
-    return _replace(other, cost=cost, found_by=f"{other.cost} search ({note})",
-                    planning_time_s=own.planning_time_s + other.planning_time_s)
+    mine = (f"{own.energy_J:.1f} J" if cost == "energy" else f"{own.travel_time_s:.2f} s") if own.found else ""
+    note = why or f"better on {cost} than the {cost} search's own plan, {mine} at the controller rate"
+    return replace(other, cost=cost, found_by=f"{other.cost} search ({note})",
+                   planning_time_s=own.planning_time_s + other.planning_time_s, rival=None)

@@ -62,7 +62,9 @@ class PlannerSettings:
     one-line note and the CPU); polish_time, polish_energy: after the search, polish
     the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on
     by default for energy, whose plans the sampled speeds and the seed otherwise move
-    by several per cent).
+    by several per cent); energy_vs_time: an energy plan is checked against the time
+    plan (the time search runs too) and the one that uses less energy at the controller
+    rate is kept (:func:`sbmpc.plan.plan`).
     """
 
     branching: int = 16
@@ -86,6 +88,7 @@ class PlannerSettings:
     device: str = "cpu"
     polish_time: bool = False
     polish_energy: bool = True
+    energy_vs_time: bool = True
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -352,7 +355,7 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
             probs.add("planner.device", "'cpu' or 'cuda'", spec["device"])
         else:
             kw["device"] = spec["device"]
-    for key in ("hold", "polish_time", "polish_energy"):
+    for key in ("hold", "polish_time", "polish_energy", "energy_vs_time"):
         if key in spec:
             if not isinstance(spec[key], bool):
                 probs.add(f"planner.{key}", "true or false", spec[key])

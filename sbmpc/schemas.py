@@ -38,7 +38,7 @@ def scenario() -> dict:
     planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
                     "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]},
                     "hold": {"type": "boolean"},
-                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}})
+                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"}})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}
     return {
@@ -97,6 +97,10 @@ def plan() -> dict:
             "found_by": {"type": "string"}, "controller_rate_check": {"oneOf": [check, {"type": "null"}]},
             "repairs": {"type": "integer"},
             "polish": {"type": ["object", "null"]},
+            "rival": {"oneOf": [_obj({"cost": {"const": "time"}, "status": {"enum": ["found", "no_path"]},
+                                      "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL,
+                                      "planning_time_s": NUM}, ("cost", "status", "energy_J")),
+                                {"type": "null"}]},
         }, ("schema", "scenario", "cost", "status", "reason", "travel_time_s", "energy_J", "planning_time_s",
             "nodes_expanded", "edges_simulated", "controls", "trajectory"))}
 

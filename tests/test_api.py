@@ -123,20 +123,63 @@ def test_compare_takes_the_other_plan_when_one_search_finds_nothing():
     from sbmpc import plan as PL, scenario as SC, world as WO
     from sbmpc.plan import Plan, plan_both
     world = WO.resolve(SC.load(FLAT))
-    real = PL.plan
+    real = PL.search_plan
 
-    def energy_fails(w, cost=None, **kw):
+    def energy_fails(w, cost=None, *a, **kw):
         if cost == "energy":
             return Plan(w.scenario.name, "energy", "no_path", "node budget of 3 expansions used up")
-        return real(w, cost, **kw)
-    PL.plan = energy_fails
+        return real(w, cost, *a, **kw)
+    PL.search_plan = energy_fails
     try:
         plans = plan_both(world)
+        alone = PL.plan(world, "energy")
     finally:
-        PL.plan = real
-    t, e = plans["time"], plans["energy"]
-    assert t.found and e.found and e.cost == "energy" and e.controls == t.controls
-    assert "time search" in e.found_by and "node budget of 3" in e.found_by
+        PL.search_plan = real
+    for e in (plans["energy"], alone):     # sbmpc compare, and sbmpc plan --cost energy
+        t = plans["time"]
+        assert t.found and e.found and e.cost == "energy" and e.controls == t.controls
+        assert "time search" in e.found_by and "node budget of 3" in e.found_by
+
+
+def test_an_energy_plan_is_never_dearer_than_the_time_plan(monkeypatch):
+    """``plan(world, "energy")`` runs the time search too and keeps whichever plan uses
+    less energy at the controller rate (planner.energy_vs_time). The energy search's own
+    plan is made dearer here (its energy channel raised 10 %, as a search that merged
+    away the cheap way would return): the time plan is reported, and says so; where the
+    own plan is cheaper it stands, with the time plan's figures beside it; with the
+    setting off, the own plan stands whatever it costs."""
+    from dataclasses import replace
+    from sbmpc import plan as PL, scenario as SC, world as WO
+    world = WO.resolve(SC.load(FLAT))
+    real = PL.search_plan
+    calls = []
+
+    def dearer(w, cost=None, *a, **kw):
+        calls.append(cost)
+        p = real(w, cost, *a, **kw)
+        if cost == "energy":
+            traj = dict(p.trajectory, energy_J=1.1 * p.trajectory["energy_J"])
+            p = replace(p, trajectory=traj)
+        return p
+    time_plan = real(world, "time")
+    own = real(world, "energy")
+    assert own.energy_J < time_plan.energy_J            # on flat the energy search wins ...
+    kept = PL.plan(world, "energy")
+    assert kept.found_by == "" and kept.energy_J == pytest.approx(own.energy_J)
+    assert kept.rival["cost"] == "time" and kept.rival["energy_J"] == pytest.approx(time_plan.energy_J)
+    assert kept.planning_time_s >= kept.rival["planning_time_s"]        # both searches counted
+    monkeypatch.setattr(PL, "search_plan", dearer)
+    worse = PL.plan(world, "energy")                    # ... made dearer, it loses
+    assert calls == ["time", "energy"]
+    assert worse.found and worse.cost == "energy" and worse.controls == time_plan.controls
+    assert worse.energy_J == pytest.approx(time_plan.energy_J) and worse.energy_J < 1.1 * own.energy_J
+    assert worse.found_by.startswith("time search (better on energy") and f"{1.1 * own.energy_J:.1f} J" in worse.found_by
+    scn = world.scenario
+    off = WO.resolve(replace(scn, planner=replace(scn.planner, energy_vs_time=False)))
+    calls.clear()
+    alone = PL.plan(off, "energy")
+    assert calls == ["energy"] and alone.rival is None
+    assert alone.energy_J == pytest.approx(1.1 * own.energy_J)
 
 
 def test_what_the_vehicle_cannot_do_is_said_before_searching(tmp_path, capsys):

@@ -70,6 +70,14 @@ def test_the_validator_runs_the_schema(monkeypatch, tmp_path, capsys):
 def test_outputs_validate(tmp_path, capsys):
     assert main(["plan", str(SCEN / "flat.yaml"), "--json", str(tmp_path / "p.json"), "--quiet"]) == 0
     valid("plan", json.loads((tmp_path / "p.json").read_text()))
+    # an energy plan names the time plan it was checked against, and says so
+    capsys.readouterr()
+    assert main(["plan", str(SCEN / "flat.yaml"), "--cost", "energy", "--json", str(tmp_path / "e.json"), "--quiet"]) == 0
+    e = json.loads((tmp_path / "e.json").read_text())
+    valid("plan", e)
+    assert e["rival"]["cost"] == "time" and e["rival"]["energy_J"] >= e["energy_J"] > 0
+    assert e["planning_time_s"] >= e["rival"]["planning_time_s"]
+    assert f"checked against the time plan: {e['rival']['energy_J']:.1f} J" in capsys.readouterr().out
     assert main(["plan", str(SCEN / "unreachable.yaml"), "--json", str(tmp_path / "u.json"), "--quiet"]) == 1
     valid("plan", json.loads((tmp_path / "u.json").read_text()))
     assert main(["compare", str(SCEN / "runup_ramp.yaml"), "--out", str(tmp_path / "c"), "--quiet"]) == 0

@@ -173,7 +173,7 @@ def summary(plan) -> str:
     return (f"{plan.scenario} [{plan.cost}]: found\n"
             f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
             f"{len(plan.controls)} controls\n"
-            + _check_line(plan) +
+            + _check_line(plan) + _rival_line(plan) +
             f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
             f"{plan.edges_simulated} edges simulated")
 
@@ -191,6 +191,19 @@ def _check_line(plan) -> str:
     return line + "\n"
 
 
+def _rival_line(plan) -> str:
+    """How an energy plan fared against the time plan it was checked against."""
+    r = plan.rival
+    if r is None:
+        return ""
+    if plan.found_by:
+        return f"  this is the {plan.found_by}\n"
+    if r["status"] != "found":
+        return "  checked against the time plan: the time search found no path\n"
+    return (f"  checked against the time plan: {r['energy_J']:.1f} J in {r['travel_time_s']:.2f} s "
+            f"(planned in {r['planning_time_s']:.2f} s, counted in the planning time)\n")
+
+
 def run_plan(args) -> int:
     from .. import plan as PL
     from .. import recording
@@ -200,7 +213,8 @@ def run_plan(args) -> int:
     world = _world(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
-    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost))
+    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost),
+                   time_progress=Progress("time search (the energy plan is checked against it)", args.quiet, cost="time"))
     print(summary(plan))
     if args.json:
         write_text(args.json, json.dumps(plan.to_json(), indent=1))
