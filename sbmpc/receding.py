@@ -255,13 +255,18 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
             target = world if first else aim
-            p = PL.plan(target, cost, progress=progress(label) if progress else None,
+            # the first plan is sbmpc plan's (an energy plan checked against the time plan);
+            # a re-plan is the search's alone (it must come quickly, and holds the rest of
+            # the checked plan as its incumbent when warm)
+            planner = PL.plan if first else PL.search_plan
+            p = planner(target, cost, progress=progress(label) if progress else None,
                         start=X, incumbent=tail, time_budget_s=budget if first else 0.5 * budget)
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]
-                p = PL.plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
-                            start=X, incumbent=tail, time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
+                p = PL.search_plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
+                                   start=X, incumbent=tail,
+                                   time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
                 p.planning_time_s += inner.planning_time_s      # both searches count
                 p.nodes_expanded += inner.nodes_expanded
                 p.edges_simulated += inner.edges_simulated

@@ -178,7 +178,7 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     js = res.to_json()["plans"]
     assert js[0]["goal_radius_m"] == g["radius"] and all(r["goal_radius_m"] == inner for r in js[1:])
     # the inner disc out of reach: each re-plan falls back to the disc
-    real = R.PL.plan
+    real = R.PL.search_plan
     calls, budgets = [], []
 
     def no_inner(world, *a, **k):
@@ -190,7 +190,7 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
                            planning_time_s=5.0)
         return p
 
-    monkeypatch.setattr(R.PL, "plan", no_inner)
+    monkeypatch.setattr(R.PL, "search_plan", no_inner)
     res2 = R.run(flat, "time", truth)
     assert res2.status == "reached" and res2.replans >= 2
     assert calls[0] == g["radius"] and calls[1:3] == [inner, g["radius"]]
