@@ -199,13 +199,21 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     finds nothing, the time plan is the energy plan (``found_by`` says so). The search
     for the cheapest energy merges states on its grid and samples its own wheel speeds,
     so it can lose a way the time search kept; a user who asks for the least energy
-    never gets a plan dearer than the fastest one. ``planning_time_s`` counts both
-    searches; ``rival`` holds the time plan's figures."""
+    never gets a plan dearer than the fastest one. The two share the time budget (the
+    energy search gets what the time search left); ``planning_time_s`` counts both;
+    ``rival`` holds the time plan's figures."""
     cost = cost or world.scenario.cost
-    if cost != "energy" or incumbent is not None or not world.scenario.planner.energy_vs_time:
+    ps = world.scenario.planner
+    if cost != "energy" or incumbent is not None or not ps.energy_vs_time:
         return search_plan(world, cost, progress, start, incumbent, time_budget_s)
-    fast = search_plan(world, "time", time_progress, start, None, time_budget_s)
-    own = search_plan(world, "energy", progress, start, None, time_budget_s)
+    budget = ps.time_budget_s if time_budget_s is None else time_budget_s
+    fast = search_plan(world, "time", time_progress, start, None, budget)
+    left = max(budget - fast.planning_time_s, 0.0)
+    own = search_plan(world, "energy", progress, start, None, left)
+    if not own.found and own.reason and own.planning_time_s >= left:
+        own = replace(own, reason=f"{own.reason}; the time search, run first to check the energy plan against "
+                                  f"(planner.energy_vs_time), took {fast.planning_time_s:.2f} s of the "
+                                  f"{budget:g} s time budget")
     out = cross_checked(own, fast)
     return replace(out, planning_time_s=own.planning_time_s + fast.planning_time_s, rival=_rival(fast))
 

@@ -201,3 +201,24 @@ def test_what_the_vehicle_cannot_do_is_said_before_searching(tmp_path, capsys):
     assert rc == 1
     assert err.startswith("note: the warthog cannot hold a steady turn") and "drives saturate" in err
     assert "to try: raise the node budget" in err
+
+
+def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
+    """The time search runs first; the energy search gets what it left of the budget, and
+    an energy search that then runs out says where the time went."""
+    from sbmpc import plan as PL, scenario as SC, world as WO
+    from sbmpc.plan import Plan
+    world = WO.resolve(SC.load(FLAT))
+    budgets = {}
+
+    def fake(w, cost=None, progress=None, start=None, incumbent=None, time_budget_s=None):
+        budgets[cost] = time_budget_s
+        spent = 2.0 if cost == "time" else time_budget_s
+        return Plan(w.scenario.name, cost, "no_path", f"time budget of {time_budget_s:g} s used up",
+                    planning_time_s=spent)
+    monkeypatch.setattr(PL, "search_plan", fake)
+    p = PL.plan(world, "energy", time_budget_s=5.0)
+    assert budgets == {"time": 5.0, "energy": 3.0}
+    assert not p.found and p.planning_time_s == pytest.approx(5.0)
+    assert p.reason.startswith("time budget of 3 s used up; the time search, run first")
+    assert "took 2.00 s of the 5 s time budget" in p.reason
