@@ -210,12 +210,28 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     fast = search_plan(world, "time", time_progress, start, None, budget)
     left = max(budget - fast.planning_time_s, 0.0)
     own = search_plan(world, "energy", progress, start, None, left)
-    if not own.found and own.reason and own.planning_time_s >= left:
-        own = replace(own, reason=f"{own.reason}; the time search, run first to check the energy plan against "
-                                  f"(planner.energy_vs_time), took {fast.planning_time_s:.2f} s of the "
-                                  f"{budget:g} s time budget")
+    if not own.found:
+        own = replace(own, reason=_shared_budget_reason(own.reason or "", fast, budget, left))
     out = cross_checked(own, fast)
-    return replace(out, planning_time_s=own.planning_time_s + fast.planning_time_s, rival=_rival(fast))
+    return replace(out, planning_time_s=own.planning_time_s + fast.planning_time_s, rival=_rival(fast),
+                   nodes_expanded=own.nodes_expanded + fast.nodes_expanded,
+                   edges_simulated=own.edges_simulated + fast.edges_simulated)
+
+
+def _shared_budget_reason(reason: str, fast: Plan, budget: float, left: float) -> str:
+    """The energy search's failure ``reason`` where the time search it is checked against
+    ran first: a time budget used up is the whole one, shared (:func:`plan`); where the
+    time search found nothing either, say so, and how to give the energy search all of
+    the budget."""
+    head = f"time budget of {left:.3g} s used up"
+    if reason.startswith(head):
+        reason = (f"time budget of {budget:.3g} s used up ({fast.planning_time_s:.2f} s of it by the time search "
+                  f"the energy plan is checked against, planner.energy_vs_time; {left:.2f} s by the energy search)"
+                  + reason[len(head):])
+    if not fast.found:
+        reason += ("; the time search found no path either; planner.energy_vs_time: false leaves the whole "
+                   "budget to the energy search")
+    return reason
 
 
 def _rival(p: Plan) -> dict:
@@ -234,7 +250,7 @@ def cross_checked(own: Plan, other: Plan) -> Plan:
                   else other.travel_time_s < own.travel_time_s)
         return _adopt(other, cost, own) if better else own
     if other.found and not own.found:
-        return _adopt(other, cost, own, why=f"its own search found no path: {own.reason}")
+        return _adopt(other, cost, own, why=f"the {cost} search found no path: {own.reason}")
     return own
 
 
@@ -473,5 +489,7 @@ def plan_both(world: World, progress=None) -> dict:
 def _adopt(other: Plan, cost: str, own: Plan, why: str | None = None) -> Plan:
     mine = (f"{own.energy_J:.1f} J" if cost == "energy" else f"{own.travel_time_s:.2f} s") if own.found else ""
     note = why or f"better on {cost} than the {cost} search's own plan, {mine} at the controller rate"
-    return replace(other, cost=cost, found_by=f"{other.cost} search ({note})",
-                   planning_time_s=own.planning_time_s + other.planning_time_s, rival=None)
+    return replace(other, cost=cost, found_by=f"{other.cost} search ({note})", rival=None,
+                   planning_time_s=own.planning_time_s + other.planning_time_s,
+                   nodes_expanded=own.nodes_expanded + other.nodes_expanded,
+                   edges_simulated=own.edges_simulated + other.edges_simulated)

@@ -205,7 +205,8 @@ def test_what_the_vehicle_cannot_do_is_said_before_searching(tmp_path, capsys):
 
 def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     """The time search runs first; the energy search gets what it left of the budget, and
-    an energy search that then runs out says where the time went."""
+    an energy search that then runs out says where the time went (and, the time search
+    having found nothing either, how to leave it all to the energy search)."""
     from sbmpc import plan as PL, scenario as SC, world as WO
     from sbmpc.plan import Plan
     world = WO.resolve(SC.load(FLAT))
@@ -214,11 +215,13 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     def fake(w, cost=None, progress=None, start=None, incumbent=None, time_budget_s=None):
         budgets[cost] = time_budget_s
         spent = 2.0 if cost == "time" else time_budget_s
-        return Plan(w.scenario.name, cost, "no_path", f"time budget of {time_budget_s:g} s used up",
-                    planning_time_s=spent)
+        return Plan(w.scenario.name, cost, "no_path", f"time budget of {time_budget_s:.3g} s used up; to try: x",
+                    planning_time_s=spent, nodes_expanded=10 if cost == "time" else 7)
     monkeypatch.setattr(PL, "search_plan", fake)
     p = PL.plan(world, "energy", time_budget_s=5.0)
     assert budgets == {"time": 5.0, "energy": 3.0}
-    assert not p.found and p.planning_time_s == pytest.approx(5.0)
-    assert p.reason.startswith("time budget of 3 s used up; the time search, run first")
-    assert "took 2.00 s of the 5 s time budget" in p.reason
+    assert not p.found and p.planning_time_s == pytest.approx(5.0) and p.nodes_expanded == 17
+    assert p.reason == ("time budget of 5 s used up (2.00 s of it by the time search the energy plan is checked "
+                        "against, planner.energy_vs_time; 3.00 s by the energy search); to try: x; the time search "
+                        "found no path either; planner.energy_vs_time: false leaves the whole budget to the energy "
+                        "search")

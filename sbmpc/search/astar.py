@@ -402,7 +402,7 @@ class Search:
         elif st == ITERATIONS:
             why = f"node budget of {max_iterations} expansions used up"
         else:
-            why = f"time budget of {time_budget_s:g} s used up"
+            why = f"time budget of {time_budget_s:.3g} s used up"
         if invalid:
             why += "; edges rejected: " + ", ".join(f"{v} {k}" for k, v in sorted(invalid.items(), key=lambda kv: -kv[1]))
         if cnt[C_DEPTHCUT]:
