@@ -90,8 +90,8 @@ def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
     the spread over seeds stays a few per cent: docs/planner.md.)"""
     on, off = [], []
     for seed in range(4):
-        p = PL.plan(_world(seed), "energy")
-        q = PL.plan(_world(seed, polish_energy=False), "energy")
+        p = PL.search_plan(_world(seed), "energy")
+        q = PL.search_plan(_world(seed, polish_energy=False), "energy")
         assert p.found and q.found and p.check.reached and p.check.miss_m == 0.0
         assert p.polish is not None and q.polish is None
         assert p.energy_J < q.energy_J
@@ -144,14 +144,14 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     replay) for less than the unpolished plan. A 'polish' that spins on the spot on the
     way and misses too is repaired as well, but dearer: the searched plan stands."""
     w = _world(0, hold=False)         # the searched plan of this case (before held controls)
-    p = PL.plan(w, "energy")
-    q = PL.plan(_world(0, polish_energy=False, hold=False), "energy")
+    p = PL.search_plan(w, "energy")
+    q = PL.search_plan(_world(0, polish_energy=False, hold=False), "energy")
     X0 = PL._start(w, None)
     short = [tuple(c) for c in p.controls[:-2]]
     assert not CK.controller_rate(w, "energy", short, X0)[0].reached
     fake = PO.Polished(short, 0.0, None, 0, 0.0)
     monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake, None)))
-    r = PL.plan(w, "energy")
+    r = PL.search_plan(w, "energy")
     assert r.found and r.polish is fake and r.repairs >= 1
     n = len(short) - PL.APPROACH_CONTROLS
     assert r.controls[:n] == short[:n]
@@ -163,7 +163,7 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     assert not CK.controller_rate(w, "energy", spin, X0)[0].reached
     fake2 = PO.Polished(spin, 0.0, None, 0, 0.0)
     monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake2, None)))
-    r2 = PL.plan(w, "energy")
+    r2 = PL.search_plan(w, "energy")
     assert r2.found and r2.polish is None and r2.controls == q.controls and r2.energy_J == q.energy_J
 
 
@@ -182,7 +182,7 @@ def test_the_polish_runs_on_the_planners_threads(monkeypatch):
     monkeypatch.setattr(PL, "polish", spy)
     before = numba.get_num_threads()
     for threads in (1, 0):
-        p = PL.plan(_world(threads=threads), "energy")
+        p = PL.search_plan(_world(threads=threads), "energy")
         assert p.found and p.polish is not None
         assert numba.get_num_threads() == before
     assert seen[0] == 1 and seen[-1] == numba.config.NUMBA_NUM_THREADS
