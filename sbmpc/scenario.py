@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from dynamics.params import did_you_mean, read_yaml_text
 
@@ -191,8 +192,22 @@ class Verbatim(str):
 
 
 def shown(value, limit: int = 60) -> str:
-    """repr of a value for an error message, cut to ``limit`` characters."""
-    r = repr(value) if not isinstance(value, int) or abs(value) < 10 ** 30 else f"an integer of {len(str(abs(value)))} digits"
+    """A value read from a YAML file as the file spells it, for an error message: null,
+    true and false, lists and mappings in YAML's flow style, text quoted; cut to
+    ``limit`` characters."""
+    if value is None:
+        r = "null (the key has no value)"
+    elif isinstance(value, bool):
+        r = "true" if value else "false"
+    elif isinstance(value, int) and abs(value) >= 10 ** 30:
+        r = f"an integer of {len(str(abs(value)))} digits"
+    elif isinstance(value, (list, dict)):
+        try:
+            r = yaml.safe_dump(value, default_flow_style=True, width=10 ** 6).strip()
+        except yaml.YAMLError:
+            r = repr(value)
+    else:
+        r = repr(value)
     return r if len(r) <= limit else r[:limit] + " ..."
 
 
@@ -323,8 +338,8 @@ def _numeric_settings(spec: dict, ranges: dict, where: str, probs: _Problems) ->
         ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and -1e300 < v < 1e300 and lo <= v <= hi
               and (typ is float or float(v).is_integer()))
         if not ok:
-            kind = "an integer" if typ is int else "a number"
-            probs.add(f"{where}.{key}", f"{kind} in [{lo:g}, {hi:g}]", v)
+            kind, b = ("an integer", "d") if typ is int else ("a number", "g")
+            probs.add(f"{where}.{key}", f"{kind} in [{int(lo) if typ is int else lo:{b}}, {int(hi) if typ is int else hi:{b}}]", v)
         else:
             kw[key] = typ(v)
     return kw

@@ -83,7 +83,7 @@ def test_cli_bad_scenarios_exit_2_with_one_message(tmp_path, capsys, change, wor
 
 
 def test_a_missing_key_is_said_to_be_missing(tmp_path):
-    """Not "found None": the file lacks the key (a key written with no value is None)."""
+    """Not "found null": the file lacks the key (a key written with no value is null)."""
     doc = {k: v for k, v in GOOD.items() if k != "goal"}
     with pytest.raises(InputError) as e:
         SC.load(write(tmp_path, dict(doc, start={"y": 2.0})))
@@ -91,7 +91,7 @@ def test_a_missing_key_is_said_to_be_missing(tmp_path):
     assert "start.x: expected a number, found nothing (the key is missing)" in str(e.value)
     with pytest.raises(InputError) as e:
         SC.load(write(tmp_path, dict(GOOD, goal=None)))
-    assert "goal: expected a mapping {x:, y:, radius:}, found None" in str(e.value)
+    assert "goal: expected a mapping {x:, y:, radius:}, found null (the key has no value)" in str(e.value)
     with pytest.raises(InputError) as e:
         SC.load(write(tmp_path, {k: v for k, v in GOOD.items() if k != "map"}))
     assert "map: expected a mapping with 'file' or 'generate', found nothing (the key is missing)" in str(e.value)
