@@ -68,7 +68,7 @@ class Replan:
                 "planning_time_s": p.planning_time_s, "nodes_expanded": p.nodes_expanded,
                 "predicted_travel_time_s": p.travel_time_s, "predicted_energy_J": p.energy_J,
                 "controls": len(p.controls), "warm_start": self.warm, "goal_radius_m": self.goal_radius,
-                "found_by": p.found_by or ("search" if p.found else None)}
+                "found_by": p.found_by or ("search" if p.found else None), "rival": p.rival}
 
 
 @dataclass

@@ -52,6 +52,12 @@ def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost
     if not short:
         assert res.travel_time_s == pytest.approx(first.travel_time_s, abs=1e-9)
         assert res.energy_J == pytest.approx(first.energy_J, abs=1e-6)
+    # an energy run's first plan is checked against the time plan (sbmpc plan's), re-plans not
+    rows = res.to_json()["plans"]
+    if cost == "energy":
+        assert rows[0]["rival"]["cost"] == "time" and rows[0]["rival"]["energy_J"] >= first.energy_J
+    assert rows[0]["rival"] is None or cost == "energy"
+    assert all(r["rival"] is None for r in rows[1:])
 
 
 def test_replanning_every_period_with_a_perfect_model_never_does_worse_than_predicted(flat):
