@@ -73,7 +73,7 @@ def main(argv=None) -> int:
         row["energy_by_seed_J"] = seeds
         row["time_plan_by_seed_s"] = times
         row["repairs_by_seed"] = repairs           # [time plan, energy plan]: re-plans after the 1 kHz check
-        row["planning_s_by_seed"] = seconds        # [time search, energy search], every core
+        row["planning_s_by_seed"] = seconds        # [time search, energy plan (both searches where it is the time plan)], every core
         row["seeds_whose_energy_plan_is_the_time_plan"] = adopted
         if found:
             row["seed_spread_pct"] = round(100 * (max(found) - min(found)) / min(found), 2)

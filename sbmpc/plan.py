@@ -22,6 +22,7 @@ from .polish import Polished, polish
 from .problem import batch_size, problem, search_threads
 from .problems import skidsteer as SS
 from .search.astar import Problem, Search, SearchResult, numba_threads
+from .search.counters import budget_text
 from .trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
 from .world import World, _start, capability, wheel_speed_range
 
@@ -220,14 +221,15 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
 
 def _shared_budget_reason(reason: str, fast: Plan, budget: float, left: float) -> str:
     """The energy search's failure ``reason`` where the time search it is checked against
-    ran first: a time budget used up is the whole one, shared (:func:`plan`); where the
-    time search found nothing either, say so, and how to give the energy search all of
-    the budget."""
-    head = f"time budget of {left:.3g} s used up"
-    if reason.startswith(head):
-        reason = (f"time budget of {budget:.3g} s used up ({fast.planning_time_s:.2f} s of it by the time search "
-                  f"the energy plan is checked against, planner.energy_vs_time; {left:.2f} s by the energy search)"
-                  + reason[len(head):])
+    ran first: a time budget used up is the whole one, shared (:func:`plan`), and where
+    the time search found nothing either, say so, and how to give the energy search all
+    of the budget. Any other reason (a node budget, no path at all) stands as it is."""
+    head = f"time budget of {budget_text(left)} s used up"
+    if not reason.startswith(head):
+        return reason
+    reason = (f"time budget of {budget_text(budget)} s used up ({fast.planning_time_s:.2f} s of it by the time "
+              f"search the energy plan is checked against, planner.energy_vs_time; {left:.2f} s left to the energy "
+              f"search)" + reason[len(head):])
     if not fast.found:
         reason += ("; the time search found no path either; planner.energy_vs_time: false leaves the whole "
                    "budget to the energy search")

@@ -192,11 +192,11 @@ class Verbatim(str):
 
 
 def shown(value, limit: int = 60) -> str:
-    """A value read from a YAML file as the file spells it, for an error message: null,
-    true and false, lists and mappings in YAML's flow style, text quoted; cut to
-    ``limit`` characters."""
+    """A value read from a YAML file, for an error message, in YAML's spelling: null,
+    true and false, lists and mappings in YAML's flow style (keys sorted), text quoted
+    at the top level; cut to ``limit`` characters."""
     if value is None:
-        r = "null (the key has no value)"
+        r = "null"
     elif isinstance(value, bool):
         r = "true" if value else "false"
     elif isinstance(value, int) and abs(value) >= 10 ** 30:

@@ -222,6 +222,6 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     assert budgets == {"time": 5.0, "energy": 3.0}
     assert not p.found and p.planning_time_s == pytest.approx(5.0) and p.nodes_expanded == 17
     assert p.reason == ("time budget of 5 s used up (2.00 s of it by the time search the energy plan is checked "
-                        "against, planner.energy_vs_time; 3.00 s by the energy search); to try: x; the time search "
+                        "against, planner.energy_vs_time; 3.00 s left to the energy search); to try: x; the time search "
                         "found no path either; planner.energy_vs_time: false leaves the whole budget to the energy "
                         "search")

@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError, NoResult
+from ..search.counters import budget_text
 from .files import Outputs, atomic, scenario_inputs, write_text
 
 
@@ -148,12 +149,12 @@ class Progress:
     def line(self, iterations, nodes, elapsed, best=None) -> str:
         """The progress line (without the leading indent)."""
         part = f"{iterations:,} expansions"
-        left = [self.time_budget - elapsed] if self.time_budget else []
+        left = [self.time_budget - elapsed] if self.time_budget is not None else []
         if self.budget:
             part += f" of {self.budget:,} ({100.0 * iterations / self.budget:.0f} %)"
             if iterations > 0:
                 left.append(elapsed * (self.budget - iterations) / iterations)
-        t = f"{elapsed:.1f} s" + (f" of {self.time_budget:g} s" if self.time_budget else "")
+        t = f"{elapsed:.1f} s" + (f" of {budget_text(self.time_budget)} s" if self.time_budget is not None else "")
         b = "no plan yet" if best is None else f"best plan so far {best:.1f}{' ' + self.unit if self.unit else ''}"
         eta = f", at most ~{max(0.0, min(left)):.0f} s left" if left else ""
         return f"{self.label}: {part}, {nodes:,} nodes, {t}, {b}{eta}"

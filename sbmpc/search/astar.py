@@ -54,6 +54,7 @@ from numba import types
 from numba.core.ccallback import CFunc
 
 from .cells import rehash
+from .counters import budget_text
 from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SIMULATED,
                        EXHAUSTED,
                        FOUND, GROW, ITERATIONS, MAX_CODE, NC, RUNNING)
@@ -402,7 +403,7 @@ class Search:
         elif st == ITERATIONS:
             why = f"node budget of {max_iterations} expansions used up"
         else:
-            why = f"time budget of {time_budget_s:.3g} s used up"
+            why = f"time budget of {budget_text(time_budget_s)} s used up"
         if invalid:
             why += "; edges rejected: " + ", ".join(f"{v} {k}" for k, v in sorted(invalid.items(), key=lambda kv: -kv[1]))
         if cnt[C_DEPTHCUT]:

@@ -11,3 +11,9 @@ C_NODES, C_HEAP, C_ITERS, C_EDGES, C_SEQ, C_GOAL, C_DEPTHCUT, C_FIRST, C_SIMULAT
 C_INVALID = 10         # C_INVALID + k counts edges rejected with code -k (k = 1..MAX_CODE)
 MAX_CODE = 8
 NC = C_INVALID + MAX_CODE + 1
+
+
+def budget_text(seconds: float) -> str:
+    """A time budget [s] as the search's messages write it: three significant digits
+    below 100 s (0.0175, 2.5, 57.8), whole seconds above (120, 86400)."""
+    return f"{seconds:.3g}" if seconds < 100 else f"{seconds:.0f}"
