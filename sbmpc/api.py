@@ -71,13 +71,16 @@ def plan_scenario(scenario, cost: str | None = None, heights=None, resolution=No
     """Plan a scenario for ``cost`` ('time' or 'energy'; default the scenario's): a
     :class:`sbmpc.plan.Plan` (``found``, ``controls`` [(wl, wr, duration_s)],
     ``trajectory`` {name: array}, ``travel_time_s``, ``energy_J``, ``reason`` when no
-    path was found). ``progress(expansions, nodes, elapsed_s)`` is called while it
-    searches (a callback with a fourth parameter also gets the best plan's cost so
-    far, or None)."""
+    path was found). An energy plan is checked against the time plan (the time search
+    runs first, in the same time budget; ``planner.energy_vs_time``, :func:`sbmpc.plan.plan`).
+    ``progress(expansions, nodes, elapsed_s)`` is called while it searches, during both
+    searches of an energy plan (a callback with a fourth parameter also gets the best
+    plan's cost so far, or None)."""
     from .plan import plan
     if cost not in (None, "time", "energy"):
         raise InputError(f"cost: expected 'time' or 'energy', found {cost!r}")
-    return plan(load_world(scenario, heights, resolution, origin, **planner), cost, progress=progress)
+    return plan(load_world(scenario, heights, resolution, origin, **planner), cost, progress=progress,
+                time_progress=progress)
 
 
 def compare_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner) -> dict:

@@ -258,9 +258,13 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # the first plan is sbmpc plan's (an energy plan checked against the time plan);
             # a re-plan is the search's alone (it must come quickly, and holds the rest of
             # the checked plan as its incumbent when warm)
-            planner = PL.plan if first else PL.search_plan
-            p = planner(target, cost, progress=progress(label) if progress else None,
-                        start=X, incumbent=tail, time_budget_s=budget if first else 0.5 * budget)
+            common = dict(progress=progress(label) if progress else None, start=X, incumbent=tail)
+            if first:
+                p = PL.plan(target, cost, time_budget_s=budget, **common,
+                            time_progress=progress(f"{label}, time search (the energy plan is checked against it)")
+                            if progress and cost == "energy" else None)
+            else:
+                p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]
