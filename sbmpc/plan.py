@@ -213,10 +213,23 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     own = search_plan(world, "energy", progress, start, None, left)
     if not own.found:
         own = replace(own, reason=_shared_budget_reason(own.reason or "", fast, budget, left))
+    return checked_against_time(own, fast)
+
+
+def checked_against_time(own: Plan, fast: Plan) -> Plan:
+    """The energy plan :func:`plan` reports from the energy search's own plan and the
+    time plan ``fast``: :func:`cross_checked`, both searches' work counted, and
+    ``rival`` the time plan's figures."""
     out = cross_checked(own, fast)
-    return replace(out, planning_time_s=own.planning_time_s + fast.planning_time_s, rival=_rival(fast),
-                   nodes_expanded=own.nodes_expanded + fast.nodes_expanded,
-                   edges_simulated=own.edges_simulated + fast.edges_simulated)
+    return replace(out if out is not own else counting(own, fast), rival=_rival(fast))
+
+
+def counting(p: Plan, other: Plan) -> Plan:
+    """``p`` with the planning time, nodes expanded and edges simulated of ``other``'s
+    search added: every search that went into a reported plan counts."""
+    return replace(p, planning_time_s=p.planning_time_s + other.planning_time_s,
+                   nodes_expanded=p.nodes_expanded + other.nodes_expanded,
+                   edges_simulated=p.edges_simulated + other.edges_simulated)
 
 
 def _shared_budget_reason(reason: str, fast: Plan, budget: float, left: float) -> str:
@@ -491,7 +504,4 @@ def plan_both(world: World, progress=None) -> dict:
 def _adopt(other: Plan, cost: str, own: Plan, why: str | None = None) -> Plan:
     mine = (f"{own.energy_J:.1f} J" if cost == "energy" else f"{own.travel_time_s:.2f} s") if own.found else ""
     note = why or f"better on {cost} than the {cost} search's own plan, {mine} at the controller rate"
-    return replace(other, cost=cost, found_by=f"{other.cost} search ({note})", rival=None,
-                   planning_time_s=own.planning_time_s + other.planning_time_s,
-                   nodes_expanded=own.nodes_expanded + other.nodes_expanded,
-                   edges_simulated=own.edges_simulated + other.edges_simulated)
+    return counting(replace(other, cost=cost, found_by=f"{other.cost} search ({note})", rival=None), own)

@@ -268,12 +268,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]
-                p = PL.search_plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
-                                   start=X, incumbent=tail,
-                                   time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
-                p.planning_time_s += inner.planning_time_s      # both searches count
-                p.nodes_expanded += inner.nodes_expanded
-                p.edges_simulated += inner.edges_simulated
+                again = PL.search_plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
+                                       start=X, incumbent=tail,
+                                       time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
+                p = PL.counting(again, inner)      # both searches count
             out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, bool(tail), aimed))
             if p.found:
                 if first:

@@ -338,8 +338,8 @@ def _numeric_settings(spec: dict, ranges: dict, where: str, probs: _Problems) ->
         ok = (not isinstance(v, bool) and isinstance(v, (int, float)) and -1e300 < v < 1e300 and lo <= v <= hi
               and (typ is float or float(v).is_integer()))
         if not ok:
-            kind, b = ("an integer", "d") if typ is int else ("a number", "g")
-            probs.add(f"{where}.{key}", f"{kind} in [{int(lo) if typ is int else lo:{b}}, {int(hi) if typ is int else hi:{b}}]", v)
+            kind, show = ("an integer", lambda x: str(int(x))) if typ is int else ("a number", lambda x: f"{x:g}")
+            probs.add(f"{where}.{key}", f"{kind} in [{show(lo)}, {show(hi)}]", v)
         else:
             kw[key] = typ(v)
     return kw

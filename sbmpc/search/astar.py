@@ -54,10 +54,9 @@ from numba import types
 from numba.core.ccallback import CFunc
 
 from .cells import rehash
-from .counters import budget_text
 from .counters import (C_DEPTHCUT, C_EDGES, C_FIRST, C_GOAL, C_HEAP, C_INVALID, C_ITERS, C_NODES, C_SIMULATED,
                        EXHAUSTED,
-                       FOUND, GROW, ITERATIONS, MAX_CODE, NC, RUNNING)
+                       FOUND, GROW, ITERATIONS, MAX_CODE, NC, RUNNING, budget_text)
 from .loop import _BATCH_SIG, _RUN_SIG, EXPAND, GOAL, HEURISTIC, _full, expand_nodes, run_batch, run_search
 
 @functools.lru_cache(maxsize=None)
