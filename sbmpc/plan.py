@@ -35,6 +35,17 @@ APPROACH_SLACK = 0.05   # re-planned from this many controls before its end (or 
                         # 1 kHz for at most 5 % more cost
 
 
+FAILURES = {
+    "unreachable": ("no path can exist, found from the map and the vehicle before any search: slopes beyond "
+                    "the tip-over limit cut the goal off, the start stands on one, or the vehicle cannot hold a "
+                    "speed on the map's terrain"),
+    "exhausted": "the search explored every state it could reach",
+    "node_budget": "the search used up its node budget (planner.max_expansions)",
+    "time_budget": "the search used up its time budget (planner.time_budget_s)",
+    "controller_rate": "the path the search found does not hold at the controller rate",
+}   # Plan.failure: kind -> what it means (docs/formats.md)
+
+
 @dataclass
 class Plan:
     """The result of planning one scenario for one cost (docs/formats.md plan JSON). The
@@ -57,6 +68,7 @@ class Plan:
     repairs: int = 0              # re-plans from where the controller-rate replay parted from the search
     polish: "Polished | None" = None   # the local search over the found controls (sbmpc.polish)
     rival: dict | None = None     # the time plan an energy plan was checked against (plan())
+    failure: str | None = None    # for no_path, the kind of failure: one of FAILURES
 
     @property
     def found(self) -> bool:
@@ -96,6 +108,7 @@ class Plan:
             "repairs": self.repairs,
             "polish": self.polish.to_json() if self.polish else None,
             "rival": self.rival,
+            "failure": self.failure,
         }
 
 
@@ -139,9 +152,9 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None, start: np.n
     the vehicle's turning limit."""
     ps = world.scenario.planner
     out = []
-    if "node budget" in (res.reason or ""):
+    if res.ended == "node_budget":
         out.append(f"raise the node budget (planner.max_expansions or --max-expansions {2 * ps.max_expansions})")
-    elif "time budget" in (res.reason or ""):
+    elif res.ended == "time_budget":
         out.append(f"raise the time budget (planner.time_budget_s or --time-budget {2 * ps.time_budget_s:g})")
     from dynamics.limits import steepest_grade
     held = max(steepest_grade(world.vehicle, t) for t in world.terrains)
@@ -154,7 +167,7 @@ def _remedy(world: World, res: SearchResult, limit_note: str | None, start: np.n
             out.append(f"the start faces a grade of {math.degrees(pitch):.1f} deg along its heading (the ground "
                        f"there slopes {math.degrees(slope):.1f} deg), steeper than the {world.vehicle.name} holds "
                        f"({math.degrees(here):.1f} deg): a start heading across the slope is gentler")
-    if "budget" in (res.reason or ""):
+    if res.ended in ("node_budget", "time_budget"):
         need = steepest_climb_needed(world, xy)
         if need is not None and need > held:
             out.append(f"every way to the goal climbs {math.degrees(need):.1f} deg or more somewhere, steeper than "
@@ -212,7 +225,7 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     left = max(budget - fast.planning_time_s, 0.0)
     own = search_plan(world, "energy", progress, start, None, left)
     if not own.found:
-        own = replace(own, reason=_shared_budget_reason(own.reason or "", fast, budget, left))
+        own = _shared_budget(own, fast, budget, left)
     return checked_against_time(own, fast)
 
 
@@ -232,21 +245,22 @@ def counting(p: Plan, other: Plan) -> Plan:
                    edges_simulated=p.edges_simulated + other.edges_simulated)
 
 
-def _shared_budget_reason(reason: str, fast: Plan, budget: float, left: float) -> str:
-    """The energy search's failure ``reason`` where the time search it is checked against
+def _shared_budget(own: Plan, fast: Plan, budget: float, left: float) -> Plan:
+    """The energy search's failed plan ``own`` where the time search it is checked against
     ran first: a time budget used up is the whole one, shared (:func:`plan`), and where
     the time search found nothing either, say so, and how to give the energy search all
-    of the budget. Any other reason (a node budget, no path at all) stands as it is."""
+    of the budget. Any other failure (a node budget, no path at all) stands as it is."""
+    if own.failure != "time_budget":
+        return own
     head = f"time budget of {budget_text(left)} s used up"
-    if not reason.startswith(head):
-        return reason
+    rest = own.reason[len(head):] if (own.reason or "").startswith(head) else "; " + (own.reason or "")
     reason = (f"time budget of {budget_text(budget)} s used up ({fast.planning_time_s:.2f} s of it by the time "
               f"search the energy plan is checked against, planner.energy_vs_time; {left:.2f} s left to the energy "
-              f"search)" + reason[len(head):])
+              f"search)" + rest)
     if not fast.found:
         reason += ("; the time search found no path either; planner.energy_vs_time: false leaves the whole "
                    "budget to the energy search")
-    return reason
+    return replace(own, reason=reason)
 
 
 def _rival(p: Plan) -> dict:
@@ -291,7 +305,8 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     fatal, limit_note = capability(world)
     why = why or fatal
     if why is not None:
-        return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0)
+        return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0,
+                    failure="unreachable")
     inc = _incumbent(world, cost, X0, incumbent) if incumbent else None
     prob = problem(world, cost, X0)
     search = Search(prob)
@@ -313,7 +328,7 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
         return Plan(world.scenario.name, cost, "no_path",
                     res.reason + _closest(world, search, res)
                     + _remedy(world, res, limit_note, X0),
-                    planning_time_s=time.perf_counter() - t0, **common)
+                    planning_time_s=time.perf_counter() - t0, failure=res.ended, **common)
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
@@ -352,7 +367,7 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
                     f"controller rate ({world.vehicle.controller_rate:g} Hz)"
                     + (f", also after {repairs} re-plans from where it parted" if repairs else "")
                     + f": {chk.reason}",
-                    planning_time_s=time.perf_counter() - t0, check=chk, **common)
+                    planning_time_s=time.perf_counter() - t0, check=chk, failure="controller_rate", **common)
     every = max(1, round(RECORD_EVERY * world.vehicle.controller_rate))
     rows = len(fine["t"])
     idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])

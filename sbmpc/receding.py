@@ -64,7 +64,7 @@ class Replan:
 
     def to_json(self) -> dict:
         p = self.plan
-        return {"t": self.t, "x": self.x, "y": self.y, "why": self.why, "status": p.status, "reason": p.reason,
+        return {"t": self.t, "x": self.x, "y": self.y, "why": self.why, "status": p.status, "reason": p.reason, "failure": p.failure,
                 "planning_time_s": p.planning_time_s, "nodes_expanded": p.nodes_expanded,
                 "predicted_travel_time_s": p.travel_time_s, "predicted_energy_J": p.energy_J,
                 "controls": len(p.controls), "warm_start": self.warm, "goal_radius_m": self.goal_radius,

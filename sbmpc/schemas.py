@@ -80,6 +80,7 @@ def _trajectory() -> dict:
 
 
 def plan() -> dict:
+    from .plan import FAILURES
     check = _obj({"dt": NUM, "reached": {"type": "boolean"}, "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL,
                   "reason": STR_OR_NULL, "miss_m": NUM_OR_NULL, "drift_allowance_m": NUM_OR_NULL},
                  ("dt", "reached"))
@@ -101,6 +102,7 @@ def plan() -> dict:
                                       "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL,
                                       "planning_time_s": NUM}, ("cost", "status", "energy_J")),
                                 {"type": "null"}]},
+            "failure": {"enum": [*FAILURES, None]},
         }, ("schema", "scenario", "cost", "status", "reason", "travel_time_s", "energy_J", "planning_time_s",
             "nodes_expanded", "edges_simulated", "controls", "trajectory"))}
 

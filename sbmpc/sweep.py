@@ -47,7 +47,7 @@ import numpy as np
 from .errors import InputError
 
 COLUMNS = ("task_id", "scenario", "family_seed", "cost", "seed", "settings", "variant", "status", "reason",
-           "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",
+           "failure", "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",
            "robust_samples", "p_stall", "p_miss", "energy_mean_J", "energy_std_J", "task_time_s")
 KNOWN = {"scenarios", "families", "costs", "seeds", "planner", "variants", "robustness"}
 
@@ -179,6 +179,7 @@ def run_task(task: dict) -> dict:
     from . import plan as PL
     from . import scenario as SC
     from . import world as WO
+    from .problems import skidsteer as SS
     t0 = time.perf_counter()
     row = {k: None for k in COLUMNS}
     row.update(task_id=task["task_id"], scenario=Path(task["scenario"]).stem, family_seed=task["family_seed"],
@@ -201,13 +202,13 @@ def run_task(task: dict) -> dict:
         row["cost"] = cost
         world = _variant_world(WO.resolve(scn), task["variant"])
         plan = PL.plan(world, cost)
-        row.update(status=plan.status, reason=plan.reason, travel_time_s=plan.travel_time_s, energy_J=plan.energy_J,
+        row.update(status=plan.status, reason=plan.reason, failure=plan.failure, travel_time_s=plan.travel_time_s, energy_J=plan.energy_J,
                    length_m=plan.length_m, planning_time_s=plan.planning_time_s, expansions=plan.nodes_expanded,
                    reached_at_rate=bool(plan.check.reached) if plan.check is not None else None)
         rob = task["robustness"]
         if rob and plan.found:
             checks = [CK.check(w, cost, plan.controls) for w in _drawn_worlds(world, rob, task["task_id"])]
-            stall = [c.reason is not None and "stall" in c.reason for c in checks]
+            stall = [c.end == -SS.STALL for c in checks]
             miss = [not c.reached for c in checks]
             e = np.array([c.energy_J for c in checks if c.reached], float)
             row.update(robust_samples=len(checks), p_stall=float(np.mean(stall)), p_miss=float(np.mean(miss)),

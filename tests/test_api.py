@@ -216,7 +216,8 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
         budgets[cost] = time_budget_s
         spent = 2.0 if cost == "time" else time_budget_s
         return Plan(w.scenario.name, cost, "no_path", f"time budget of {time_budget_s:.3g} s used up; to try: x",
-                    planning_time_s=spent, nodes_expanded=10 if cost == "time" else 7)
+                    planning_time_s=spent, nodes_expanded=10 if cost == "time" else 7, failure=kind)
+    kind = "time_budget"
     monkeypatch.setattr(PL, "search_plan", fake)
     p = PL.plan(world, "energy", time_budget_s=5.0)
     assert budgets == {"time": 5.0, "energy": 3.0}
@@ -225,3 +226,7 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
                         "against, planner.energy_vs_time; 3.00 s left to the energy search); to try: x; the time search "
                         "found no path either; planner.energy_vs_time: false leaves the whole budget to the energy "
                         "search")
+    assert p.failure == "time_budget"
+    kind = "node_budget"                  # told by its kind, not its words: another failure stands as it is
+    p = PL.plan(world, "energy", time_budget_s=5.0)
+    assert p.reason == "time budget of 3 s used up; to try: x" and p.failure == "node_budget"

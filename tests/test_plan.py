@@ -88,7 +88,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
         q = PL.search_plan(world, "energy")
     finally:
         mod.MAX_REPAIRS = saved
-    assert not q.found and "controller rate" in q.reason
+    assert not q.found and "controller rate" in q.reason and q.failure == "controller_rate"
     assert any(w in q.reason for w in ("stalled", "tipped over", "outside the goal disc"))
 
 
@@ -198,7 +198,7 @@ def test_hills_field_is_at_least_50_m_square(plans):
 def test_unreachable_says_why(plans):
     _, ps = plans["unreachable"]
     for plan in ps.values():
-        assert plan.status == "no_path" and "tip-over" in plan.reason
+        assert plan.status == "no_path" and "tip-over" in plan.reason and plan.failure == "unreachable"
 
 
 def test_same_seed_same_plan(plans):
@@ -238,7 +238,7 @@ def test_cli_plan_unreachable_exits_1_with_reason(tmp_path, capsys):
     captured = capsys.readouterr()
     assert "no_path" in captured.out and "tip-over" in captured.err
     doc = json.loads(js.read_text())
-    assert doc["status"] == "no_path" and doc["reason"]
+    assert doc["status"] == "no_path" and doc["reason"] and doc["failure"] == "unreachable"
 
 
 def test_cli_compare_writes_table_figure_and_recording(tmp_path, capsys):

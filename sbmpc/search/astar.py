@@ -171,7 +171,8 @@ class SearchResult:
     the goal node's g; ``exhausted``: no path because every reachable state was
     explored (not because a budget ran out); ``edges``: the edges of the expanded
     nodes, ``edges_simulated``: the edges simulated (a batched search also simulates
-    the edges of open nodes it then does not expand)."""
+    the edges of open nodes it then does not expand); ``ended``: how it ended, one
+    of ENDINGS (its ``reason`` says the same in words)."""
 
     status: str
     reason: str | None
@@ -187,6 +188,10 @@ class SearchResult:
     first_solution_iterations: int = -1
     exhausted: bool = False
     edges_simulated: int = 0
+    ended: str = "found"
+
+
+ENDINGS = ("found", "exhausted", "node_budget", "time_budget")   # SearchResult.ended
 
 
 CACHE_ROUNDS = 16      # the batched search's edge cache holds this many batches' nodes simulated ahead ...
@@ -398,18 +403,18 @@ class Search:
             return SearchResult("found", None, float(self.G[path[-1]]), path, self.X[path].copy(),
                                 self.CTL[path[1:]].copy(), **common)
         if st == EXHAUSTED:
-            why = "every reachable state was explored without reaching the goal"
+            why, ended = "every reachable state was explored without reaching the goal", "exhausted"
         elif st == ITERATIONS:
-            why = f"node budget of {max_iterations} expansions used up"
+            why, ended = f"node budget of {max_iterations} expansions used up", "node_budget"
         else:
-            why = f"time budget of {budget_text(time_budget_s)} s used up"
+            why, ended = f"time budget of {budget_text(time_budget_s)} s used up", "time_budget"
         if invalid:
             why += "; edges rejected: " + ", ".join(f"{v} {k}" for k, v in sorted(invalid.items(), key=lambda kv: -kv[1]))
         if cnt[C_DEPTHCUT]:
             why += f"; {int(cnt[C_DEPTHCUT])} nodes at the depth limit {p.max_depth}"
         empty = np.zeros(0, np.int64)
         return SearchResult("no_path", why, math.inf, empty, np.zeros((0, p.start.shape[0])), empty,
-                            exhausted=bool(st == EXHAUSTED), **common)
+                            exhausted=bool(st == EXHAUSTED), ended=ended, **common)
 
 
 def set_threads(threads) -> None:
