@@ -433,7 +433,7 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     else:
         _unknown(g, {"x", "y", "radius"}, "goal", probs)
         goal = {"x": _num(g, "x", "goal", probs), "y": _num(g, "y", "goal", probs),
-                "radius": _num(g, "radius", "goal", probs, default=0.5, lo=0.01, hi=1e4, what="a positive radius in metres")}
+                "radius": _num(g, "radius", "goal", probs, default=0.5, lo=0.01, hi=1e4, what="a radius in [0.01, 10000] m")}
     cost = data.get("cost", "time")
     if cost not in COSTS:
         probs.add("cost", "time or energy", cost)

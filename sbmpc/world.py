@@ -107,6 +107,10 @@ def resolve(scn: Scenario) -> World:
         if not emap.contains(p["x"], p["y"], m):
             problems.append(f"{key}: expected (x, y) at least {m:.2f} m inside the map "
                             f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
+    s, g = scn.start, scn.goal
+    if not problems and math.hypot(s["x"] - g["x"], s["y"] - g["y"]) <= g["radius"]:
+        problems.append(f"start: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
+                        f"{g['radius']:g} m), found ({s['x']:g}, {s['y']:g}) inside it: nothing to plan")
     if scn.cost == "energy" and vehicle.regen:
         problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
     if problems:

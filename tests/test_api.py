@@ -68,6 +68,12 @@ def test_command_line_overrides_start_goal_and_budgets(tmp_path, capsys):
     capsys.readouterr()
     assert main(["plan", str(FLAT), "--start", "3,x"]) == 2
     assert "--start: expected X,Y" in capsys.readouterr().err
+    # a start in the goal disc (a large radius: any start) is nothing to plan, for every command
+    for argv in (["plan", str(FLAT), "--goal", "10,8,5000"], ["compare", str(FLAT), "--start", "10,8", "--goal", "10,8"],
+                 ["run", str(FLAT), "--start", "16,9"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "inside it: nothing to plan" in err and "Traceback" not in err
     assert main(["plan", str(FLAT), "--max-expansions", "1", "--quiet"]) == 1
     assert "node budget of 1 expansions" in capsys.readouterr().err
 

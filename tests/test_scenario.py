@@ -71,6 +71,9 @@ def test_yaml_syntax_error_names_the_line(tmp_path):
     ({"terrain": "lava"}, "terrain"),
     ({"vehicle": "tank"}, "vehicle"),
     ({"start": {"x": 50, "y": 2}}, "start: expected (x, y)"),
+    ({"start": {"x": 7.8, "y": 8.3}}, "start: expected a start outside the goal disc (centre (8, 8), radius 0.5 m), "
+                                      "found (7.8, 8.3) inside it: nothing to plan"),
+    ({"goal": {"x": 8, "y": 8, "radius": 20000}}, "goal.radius: expected a radius in [0.01, 10000] m, found 20000"),
     ({"map": {"file": "nothing.npy", "resolution": 0.2}}, "map.file"),
 ])
 def test_cli_bad_scenarios_exit_2_with_one_message(tmp_path, capsys, change, words):

@@ -93,8 +93,8 @@ def _world(args):
         scn = replace(scn, start=dict(scn.start, x=v[0], y=v[1], **({"yaw_deg": v[2]} if len(v) > 2 else {})))
     if getattr(args, "goal", None):
         v = _numbers(args.goal, "--goal", 2, 3, "X,Y or X,Y,RADIUS in metres")
-        if len(v) > 2 and not 0.01 <= v[2] <= 1000:
-            raise InputError(f"--goal: expected a radius in [0.01, 1000] m, found {v[2]:g}")
+        if len(v) > 2 and not 0.01 <= v[2] <= 1e4:
+            raise InputError(f"--goal: expected a radius in [0.01, 10000] m, found {v[2]:g}")
         scn = replace(scn, goal=dict(scn.goal, x=v[0], y=v[1], **({"radius": v[2]} if len(v) > 2 else {})))
     from ..problem import device_note
     note = device_note(scn.planner)
