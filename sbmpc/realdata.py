@@ -40,13 +40,27 @@ def _columns(path: Path, dataset: str, kind: str, need: tuple) -> np.ndarray:
     return d
 
 
+def _finite(path: Path, d: np.ndarray, columns: tuple) -> None:
+    """A RunError naming the first row (its line in the file) and column of ``d``, the
+    file's rows as read by :func:`_columns`, whose cell is empty, not a number or infinite."""
+    for col in columns:
+        bad = np.flatnonzero(~np.isfinite(np.asarray(d[col], float)))
+        if bad.size:
+            with open(path, encoding="utf-8-sig", errors="replace") as f:     # the lines genfromtxt reads
+                rows = [k for k, line in enumerate(f, 1) if line.strip() and not line.lstrip().startswith("#")]
+            line = rows[int(bad[0]) + 1] if int(bad[0]) + 1 < len(rows) else int(bad[0]) + 2
+            raise RunError(f"{path}, line {line}, column {col}: expected a finite number, found an empty, "
+                           f"non-numeric or infinite cell ({bad.size} such row{'s' if bad.size > 1 else ''} in the column)")
+
+
 def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     """A DRIVE windows CSV as a run: t, wl_cmd, wr_cmd, wl, wr, x/y/yaw (the ICP pose,
     given relative to each window's start, chained into one pose: see
     :func:`_chain_windows`), segment."""
     path = Path(path)
-    d = _columns(path, "DRIVE", "a DRIVE windows CSV",
-                 ("window", "t", "cmd_left", "cmd_right", "left_wheel_vel", "right_wheel_vel"))
+    need = ("window", "t", "cmd_left", "cmd_right", "left_wheel_vel", "right_wheel_vel", "icp_x", "icp_y", "icp_yaw")
+    d = _columns(path, "DRIVE", "a DRIVE windows CSV", need)
+    _finite(path, d, need)
     win = d["window"].astype(int)
     t = win * DRIVE_WINDOW_S + d["t"]
     order = np.argsort(t, kind="stable")
@@ -93,7 +107,9 @@ def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) ->
     """One BorealTC ``pro_XX.csv`` as arrays: t [s], wl, wr [rad/s] (the logged wheel
     linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
     path = Path(path)
-    d = _columns(path, "BorealTC", "a BorealTC CSV", ("time", "curL", "curR", "velL", "velR"))
+    need = ("time", "curL", "curR", "velL", "velR")
+    d = _columns(path, "BorealTC", "a BorealTC CSV", need)
+    _finite(path, d, need)
     return {"t": d["time"], "wl": d["velL"] / wheel_radius, "wr": d["velR"] / wheel_radius,
             "i_l": d["curL"], "i_r": d["curR"]}
 
@@ -113,11 +129,6 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     with the wrong sign; the runs are on level ground)."""
     rec = read_borealtc(path)
     t = rec["t"]
-    for col, key in (("time", "t"), ("velL", "wl"), ("velR", "wr"), ("curL", "i_l"), ("curR", "i_r")):
-        bad = int(np.sum(~np.isfinite(rec[key])))
-        if bad:
-            raise RunError(f"{path}, column {col}: expected finite numbers in every row, found {bad} "
-                           "empty, non-numeric or infinite")
     if t.size < 2 or np.any(np.diff(t) <= 0):
         raise RunError(f"{path}, column time: expected strictly increasing times, found "
                        + ("fewer than 2 rows" if t.size < 2 else "times that do not increase"))

@@ -102,3 +102,26 @@ def test_import_borealtc_names_what_is_wrong(tmp_path, capsys):
         assert main(["import", "borealtc", str(f), "--out", str(tmp_path / f"{name}_run.csv")]) == 2, name
         err = capsys.readouterr().err
         assert says in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, (name, err)
+
+
+def test_import_drive_names_what_is_wrong(tmp_path, capsys):
+    """A bad cell is named by its line and column (it was written as an empty time, and
+    diagnose refused the file); a terrain that is neither DRIVE's nor a shipped one, and
+    a folder given as the source, are refused before anything is written."""
+    src = _drive_like(tmp_path / "drive_warthog_sand_windows.csv")
+    lines = src.read_text().splitlines()
+    cells = lines[7].split(",")
+    cells[4] = "x"                                   # the t of the 7th sample: line 8 of the file
+    bad = tmp_path / "drive_warthog_asphalt_windows.csv"
+    bad.write_text("\n".join(lines[:7] + [",".join(cells)] + lines[8:]) + "\n")
+    out = tmp_path / "run.csv"
+    for argv, says in [([str(bad)], f"{bad}, line 8, column t: expected a finite number"),
+                       ([str(src), "--terrain", "lava"], "--terrain: expected a DRIVE terrain (asphalt, gravel, sand), "
+                                                         "or a shipped terrain name or terrain file, found 'lava'"),
+                       ([str(tmp_path)], f"{tmp_path}: expected a DRIVE windows CSV file, found a folder")]:
+        assert main(["import", "drive", *argv, "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+        assert not out.exists()
+    assert main(["import", "drive", str(src), "--terrain", "vinyl", "--out", str(out)]) == 0   # a shipped name
+    assert read_run(out).meta["terrain"] == "vinyl"

@@ -249,6 +249,8 @@ def _set(col, f):
     ("nan_wl", dict(edit_rows=_set("wl", lambda k: "nan")), "column wl: expected numbers"),
     ("slope_nan", dict(meta_extra=["# slope_deg: nan"]), "slope_deg"),
     ("slope_90", dict(meta_extra=["# slope_deg: 90"]), "slope_deg"),
+    ("vehicle", dict(meta_extra=["# vehicle: nosuch"]), "vehicle.csv: its '# vehicle:' line: vehicle 'nosuch'"),
+    ("terrain", dict(meta_extra=["# terrain: lava"]), "terrain.csv: its '# terrain:' line: terrain 'lava'"),
     ("seg_each_row", dict(edit_rows=lambda c, r: [x + [str(k)] for k, x in enumerate(r)], header_extra=",segment"),
      "segment of at least 20 samples"),
 ])
@@ -258,6 +260,18 @@ def test_hostile_runs_end_in_one_line_before_any_work(work, capsys, name, kw, sa
     rc = main(["diagnose", str(path)])
     assert says in one_line_error(capsys, 2, rc)
     assert path.read_bytes() == before
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["diagnose", "{w}/r.csv", "--vehicle", "nosuch"], "--vehicle: vehicle 'nosuch'"),
+    (["diagnose", "{w}/r.csv", "--terrain", "lava"], "--terrain: terrain 'lava'"),
+    (["synth", "--effect", "none", "--out", "{w}/s.csv", "--seed", "-3"], "--seed: expected an integer in [0, 2147483647]"),
+    (["synth", "--effect", "none", "--out", "{w}/s.csv", "--vehicle", "nosuch"], "--vehicle: vehicle 'nosuch'"),
+])
+def test_bad_diagnose_and_synth_options_are_named(work, capsys, argv, says):
+    rc = main([a.format(w=work) for a in argv])
+    assert says in one_line_error(capsys, 2, rc)
+    assert not (work / "s.csv").exists()
 
 
 def test_awkward_but_valid_runs_are_diagnosed(work, capsys):

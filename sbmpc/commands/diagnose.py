@@ -39,14 +39,22 @@ def add_parsers(sub):
     s.set_defaults(func=run_synth)
 
 
-def _load_models(vehicle, terrain, run=None):
+def _load_models(vehicle, terrain, run=None, path=None):
+    """The vehicle and terrain: the options' (``--vehicle``, ``--terrain``), else the run's
+    header lines (``# vehicle:``, ``# terrain:`` of the CSV at ``path``), else p3at and
+    vinyl; a bad one is named with where it came from."""
     from dynamics import ParameterError, load_terrain, load_vehicle
-    v = vehicle or (run.meta.get("vehicle") if run is not None else None) or "p3at"
-    t = terrain or (run.meta.get("terrain") if run is not None else None) or "vinyl"
-    try:
-        return load_vehicle(v), load_terrain(t)
-    except ParameterError as exc:
-        raise InputError(str(exc)) from None
+    out = []
+    for opt, key, default, load in (("--vehicle", "vehicle", "p3at", load_vehicle),
+                                    ("--terrain", "terrain", "vinyl", load_terrain)):
+        given = vehicle if key == "vehicle" else terrain
+        header = run.meta.get(key) if run is not None else None
+        try:
+            out.append(load(given or header or default))
+        except ParameterError as exc:
+            where = opt if given else f"{path}: its '# {key}:' line" if header else opt
+            raise InputError(f"{where}: {exc}") from None
+    return tuple(out)
 
 
 def run_synth(args) -> int:
@@ -54,6 +62,8 @@ def run_synth(args) -> int:
     from dynamics.synth import synth_run
     if not 1.0 <= args.duration <= 3600.0:
         raise InputError(f"--duration: expected seconds in [1, 3600], found {args.duration}")
+    if not 0 <= args.seed <= 2 ** 31 - 1:
+        raise InputError(f"--seed: expected an integer in [0, 2147483647], found {args.seed}")
     Outputs([args.vehicle, args.terrain]).file(args.out, "--out")
     vehicle, terrain = _load_models(args.vehicle, args.terrain)
     run, params = synth_run(args.effect, args.seed, vehicle, terrain, duration=args.duration)
@@ -87,7 +97,7 @@ def run_diagnose(args) -> int:
     if longest < 20:
         raise InputError(f"{args.run}: expected a segment of at least 20 samples to replay, found {len(segs)} "
                          f"segment(s) of at most {longest} (a 'segment' value per row, or gaps in t?)")
-    vehicle, terrain = _load_models(args.vehicle, args.terrain, run)
+    vehicle, terrain = _load_models(args.vehicle, args.terrain, run, args.run)
     pitch = 0.0
     if "slope_deg" in run.meta:
         try:

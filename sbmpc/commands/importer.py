@@ -52,7 +52,8 @@ def run_import(args) -> int:
     label, kind, known, named, key_of, read = _datasets()[args.dataset]
     Outputs([args.source]).file(args.out, "--out")
     if not args.source.is_file():
-        raise InputError(f"{args.source}: expected {kind} file, found no such file")
+        found = "a folder" if args.source.is_dir() else "no such file"
+        raise InputError(f"{args.source}: expected {kind} file, found {found}")
     name = args.terrain
     if name is None:
         name, namer = named(args.source)
@@ -61,6 +62,13 @@ def run_import(args) -> int:
                              "found nothing")
     key = key_of(name)
     shipped = known.get(key, name)
+    if key not in known:
+        from dynamics import ParameterError, load_terrain
+        try:
+            load_terrain(name)
+        except ParameterError:
+            raise InputError(f"--terrain: expected a {label} terrain ({', '.join(known)}), or a shipped terrain name "
+                             f"or terrain file, found {name!r}") from None
     try:
         run = read(args.source, shipped)
     except RunError as exc:
