@@ -239,6 +239,25 @@ class NoAliasLoader(yaml.SafeLoader):
                                               self.peek_event().start_mark)
         return super().compose_node(parent, index)
 
+    def construct_mapping(self, node, deep=False):
+        """A mapping whose keys are all different: YAML forbids a repeated key, and
+        PyYAML would keep the last one silently (a second ``planner:`` section dropping
+        the first)."""
+        if isinstance(node, yaml.MappingNode):
+            seen = {}
+            for key_node, _ in node.value:
+                if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
+                    key = self.construct_object(key_node)
+                    try:
+                        first = seen.setdefault(key, key_node.start_mark)
+                    except TypeError:          # an unhashable key: the constructor says so
+                        continue
+                    if first is not key_node.start_mark:
+                        raise yaml.constructor.ConstructorError(
+                            None, None, f"the key {key_node.value!r} appears twice in one mapping (first on line "
+                            f"{first.line + 1}); a YAML key may appear once", key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
 
 def read_yaml_text(path: Path) -> Any:
     """Parse a YAML file with :class:`NoAliasLoader`. Raises ValueError with the reason

@@ -111,6 +111,8 @@ FLAT = (SCEN / "flat.yaml").read_text()
     (FLAT.replace("terrain: vinyl", "terrain: " + "v" * 5000), "expected a shipped name"),
     (FLAT.replace("resolution: 0.25", "resolution: 1e300"), "found '1e300' (text: YAML reads an exponent"),
     (FLAT.replace("x: 2.0, y: 2.0", "x: 2e0, y: 2.0"), "start.x: expected a number, found '2e0' (text:"),
+    (FLAT + "planner: {max_expansions: 1}\n", "the key 'planner' appears twice in one mapping (first on line 14)"),
+    (FLAT.replace("x: 2.0, y: 2.0", "x: 2.0, y: 2.0, x: 3.0"), "the key 'x' appears twice"),
 ])
 def test_hostile_scenarios_end_in_one_line(tmp_path, capsys, text, says):
     s = tmp_path / "s.yaml"
