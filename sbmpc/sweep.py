@@ -82,7 +82,7 @@ def load_spec(path: Path) -> dict:
         elif p.is_file():
             files.append(p)
         else:
-            probs.append(f"scenarios: expected scenario files or folders, found no '{shown(s)}'")
+            probs.append(f"scenarios: expected scenario files or folders, found no {shown(str(s))}")
     families = []
     for i, f in enumerate(spec.get("families", []) or []):
         if not (isinstance(f, dict) and isinstance(f.get("scenario"), str) and isinstance(f.get("seeds"), list)
@@ -101,21 +101,124 @@ def load_spec(path: Path) -> dict:
     if not (isinstance(grid, dict) and all(isinstance(v, list) and v for v in grid.values())):
         probs.append(f"planner: expected {{setting: [values]}}, found {shown(grid)}")
         grid = {}
+    probs += _setting_problems(grid)
     variants = spec.get("variants") or [{"name": "nominal"}]
     if not (isinstance(variants, list) and all(isinstance(v, dict) and isinstance(v.get("name"), str)
                                                for v in variants)):
         probs.append(f"variants: expected a list of {{name:, vehicle:, terrain:}}, found {shown(variants)}")
         variants = [{"name": "nominal"}]
+    else:
+        for i, v in enumerate(variants):
+            probs += _variant_problems(f"variants[{i}]", v, base)
     rob = spec.get("robustness")
     if rob is not None and not (isinstance(rob, dict) and isinstance(rob.get("samples"), int) and rob["samples"] > 0
-                                and isinstance(rob.get("vary", {}), dict)):
+                                and isinstance(rob.get("vary", {}) or {}, dict)):
         probs.append(f"robustness: expected {{samples: N, seed: S, vary: {{parameter: relative std}}}}, found {shown(rob)}")
+    elif rob is not None:
+        probs += _robustness_problems(rob)
     if not files and not families and not probs:
         probs.append("scenarios: expected at least one scenario (scenarios: or families:), found none")
+    from . import scenario as SC
+    for f in dict.fromkeys(files + [p for p, _ in families]):     # each scenario file checked once, up front
+        try:
+            SC.load(f)
+        except InputError as exc:
+            probs.append(str(exc).replace("\n", " "))
     if probs:
         raise InputError(f"{path}: " + (probs[0] if len(probs) == 1 else f"{len(probs)} problems:\n  " + "\n  ".join(probs)))
     return {"scenarios": files, "families": families, "costs": costs, "seeds": seeds, "planner": grid,
             "variants": variants, "robustness": rob, "base": base}
+
+
+def _numeric_fields() -> tuple:
+    """(the vehicle's, the terrain's) numeric parameters, which variants change and
+    robustness draws."""
+    from dataclasses import fields
+    from dynamics.params import Terrain, Vehicle
+
+    def numeric(cls):
+        return sorted(f.name for f in fields(cls) if isinstance(f.default, (int, float)) and not isinstance(f.default, bool))
+    return numeric(Vehicle), numeric(Terrain)
+
+
+def _change_ok(c) -> bool:
+    """A variant's change: a number, or a string '+N%' / '-N%'."""
+    import math
+    import re
+    if isinstance(c, (int, float)) and not isinstance(c, bool):
+        return math.isfinite(c)
+    return (isinstance(c, str) and re.fullmatch(r"\s*[+-]?\d+(\.\d*)?%\s*", c) is not None
+            and float(c.strip()[:-1]) > -100.0)
+
+
+def _variant_problems(where: str, v: dict, base: Path) -> list:
+    """What is wrong with one variant, before any task runs (a task would turn it into
+    an error row with Python's words)."""
+    from dynamics import ParameterError, load_vehicle
+    from dynamics.params import did_you_mean
+    from .scenario import shown
+    out = []
+    for k in v:
+        if k not in ("name", "vehicle", "terrain"):
+            out.append(f"{where}.{k}: expected one of the keys name, terrain, vehicle, found an unknown key"
+                       f"{did_you_mean(k, ('name', 'vehicle', 'terrain'))}")
+    veh, ter = _numeric_fields()
+    for key, names in (("vehicle", veh), ("terrain", ter)):
+        spec = v.get(key)
+        if spec is None:
+            continue
+        if key == "vehicle" and isinstance(spec, str):
+            try:
+                load_vehicle(spec, base)
+            except ParameterError as exc:
+                out.append(f"{where}.vehicle: {exc}")
+            continue
+        if not isinstance(spec, dict):
+            kinds = "a vehicle name or file, or " if key == "vehicle" else ""
+            out.append(f"{where}.{key}: expected {kinds}{{parameter: change}}, found {shown(spec)}")
+            continue
+        for name, c in spec.items():
+            if name not in names:
+                out.append(f"{where}.{key}.{name}: expected a numeric {key} parameter ({', '.join(names)}), "
+                           f"found an unknown one{did_you_mean(name, names)}")
+            elif not _change_ok(c):
+                out.append(f"{where}.{key}.{name}: expected a change such as '+10%' or '-5%' (above -100%), or "
+                           f"a number, found {shown(c)}")
+    return out
+
+
+def _robustness_problems(rob: dict) -> list:
+    from dynamics.params import did_you_mean
+    from .scenario import shown
+    out = []
+    for k in rob:
+        if k not in ("samples", "seed", "vary"):
+            out.append(f"robustness.{k}: expected one of the keys samples, seed, vary, found an unknown key"
+                       f"{did_you_mean(k, ('samples', 'seed', 'vary'))}")
+    seed = rob.get("seed", 0)
+    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2 ** 31):
+        out.append(f"robustness.seed: expected an integer in [0, 2^31), found {shown(seed)}")
+    veh, ter = _numeric_fields()
+    names = sorted(set(veh) | set(ter))
+    for name, s in (rob.get("vary") or {}).items():
+        if name not in names:
+            out.append(f"robustness.vary.{name}: expected a numeric vehicle or terrain parameter, found an unknown "
+                       f"one{did_you_mean(name, names)}")
+        elif isinstance(s, bool) or not isinstance(s, (int, float)) or not 0.0 <= s <= 1.0:
+            out.append(f"robustness.vary.{name}: expected a relative standard deviation in [0, 1], found {shown(s)}")
+    return out
+
+
+def _setting_problems(grid: dict) -> list:
+    """Each value of the planner grid checked as a scenario's planner section checks it."""
+    from . import scenario as SC
+    out = []
+    for k, values in grid.items():
+        for val in values:
+            probs = SC._Problems("")
+            SC._planner({k: val}, probs)
+            out += [line for line in probs.items if line not in out]
+    return out
 
 
 def tasks(spec: dict) -> list:
@@ -143,18 +246,22 @@ def _scaled(value: float, change) -> float:
 
 
 def _variant_world(world, variant: dict):
-    """The world with the variant's vehicle (a name, a file, or changes) and terrain changes."""
-    from dynamics import load_vehicle
-    v = world.vehicle
-    spec = variant.get("vehicle")
-    if isinstance(spec, str):
-        v = load_vehicle(spec, world.scenario.base)
-    elif isinstance(spec, dict):
-        v = v.replace(**{k: _scaled(getattr(v, k), c) for k, c in spec.items()})
-    terrains = world.terrains
-    tspec = variant.get("terrain")
-    if isinstance(tspec, dict):
-        terrains = tuple(t.replace(**{k: _scaled(getattr(t, k), c) for k, c in tspec.items()}) for t in terrains)
+    """The world with the variant's vehicle (a name, a file, or changes) and terrain changes
+    (an InputError naming the variant where a changed value leaves its parameter's range)."""
+    from dynamics import ParameterError, load_vehicle
+    try:
+        v = world.vehicle
+        spec = variant.get("vehicle")
+        if isinstance(spec, str):
+            v = load_vehicle(spec, world.scenario.base)
+        elif isinstance(spec, dict):
+            v = v.replace(**{k: _scaled(getattr(v, k), c) for k, c in spec.items()})
+        terrains = world.terrains
+        tspec = variant.get("terrain")
+        if isinstance(tspec, dict):
+            terrains = tuple(t.replace(**{k: _scaled(getattr(t, k), c) for k, c in tspec.items()}) for t in terrains)
+    except ParameterError as exc:
+        raise InputError(f"variant {variant['name']!r}: {str(exc).replace('<replace>: ', '')}") from None
     return replace(world, vehicle=v, terrains=terrains)
 
 

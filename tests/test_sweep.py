@@ -21,7 +21,7 @@ seeds: [0]
 variants:
   - {{name: nominal}}
   - {{name: heavy, vehicle: {{mass: "+10%"}}}}
-  - {{name: broken, vehicle: nosuchbot}}
+  - {{name: broken, vehicle: {{mass: 1.0e+9}}}}
 robustness: {{samples: 3, seed: 0, vary: {{mass: 0.1, mu_sa: 0.2}}}}
 """
 
@@ -57,14 +57,15 @@ def test_a_sweep_on_ray_gives_the_serial_rows_and_records_a_crash(spec, tmp_path
         s = by_id[r["task_id"]]
         assert r["status"] == s["status"] and r["energy_J"] == s["energy_J"]
         if r["variant"] == "broken":
-            assert r["status"] == "error" and "nosuchbot" in r["reason"]
+            assert r["status"] == "error" and r["reason"] == ("variant 'broken': key 'mass': expected a number "
+                                                              "> 0 and <= 100000, found 1000000000.0")
         else:
             assert r["status"] == "found" and r["robust_samples"] == 3
             assert 0.0 <= r["p_miss"] <= 1.0 and 0.0 <= r["p_stall"] <= r["p_miss"] + 1e-12
     heavy = [r for r in rows if r["variant"] == "heavy" and r["scenario"] == "runup_ramp"][0]
     nominal = [r for r in rows if r["variant"] == "nominal" and r["scenario"] == "runup_ramp"][0]
     assert heavy["energy_J"] > nominal["energy_J"]                      # 10 % more mass up the ramp
-    assert "error: " in out.err and "nosuchbot" in out.err
+    assert "error: " in out.err and "variant 'broken'" in out.err
 
 
 def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path):
@@ -98,3 +99,29 @@ def test_a_bad_spec_lists_its_problems(tmp_path, capsys):
     assert main(["sweep", str(p), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "3 problems" in err and "did you mean 'seeds'" in err and "costs: expected" in err
+    assert "found no 'nosuch.yaml'" in err                          # (not ''nosuch.yaml'')
+
+
+def test_variants_robustness_settings_and_scenarios_are_checked_before_any_task(tmp_path, capsys):
+    """Every task of a bad variant or setting would be an error row in Python's words and
+    the sweep would exit 0; they are named up front instead, with the spec's path to them."""
+    bad_scn = tmp_path / "bad_scn.yaml"
+    bad_scn.write_text((ROOT / "scenarios" / "flat.yaml").read_text().replace("cost: time", "cost: fast"))
+    p = tmp_path / "bad.yaml"
+    p.write_text(f"scenarios: [{ROOT / 'scenarios' / 'flat.yaml'}, {bad_scn}]\n"
+                 "planner: {branching: [16, 0], bogus: [1]}\n"
+                 "variants: [{name: a, vehicle: {masss: '+10%'}}, {name: b, vehicle: {mass: '+abc%'}},\n"
+                 "           {name: c, vehicle: {mass: '-200%'}, terrain: {mu_sa: 2.0}}, {name: d, vehicle: nosuch},\n"
+                 "           {name: e, vehicel: {mass: '+1%'}}]\n"
+                 "robustness: {samples: 2, seed: -1, vary: {nosuch: 0.1, mass: 3}}\n")
+    assert main(["sweep", str(p), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    for says in ["planner.branching: expected an integer in [4, 256], found 0", "planner.bogus: expected one of the keys",
+                 "variants[0].vehicle.masss: expected a numeric vehicle parameter", "(did you mean 'mass'?)",
+                 "variants[1].vehicle.mass: expected a change such as '+10%'", "found '+abc%'", "found '-200%'",
+                 "variants[3].vehicle: vehicle 'nosuch'", "variants[4].vehicel: expected one of the keys",
+                 "robustness.seed: expected an integer", "robustness.vary.nosuch:",
+                 "robustness.vary.mass: expected a relative standard deviation in [0, 1], found 3",
+                 "bad_scn.yaml: cost: expected time or energy, found 'fast'"]:
+        assert says in err, says
+    assert "Traceback" not in err and "AttributeError" not in err and not (tmp_path / "o").exists()
