@@ -23,6 +23,16 @@ import numpy as np
 
 from .grid import ElevationMap
 
+
+def unknown_key(where: str, key, known, note: str = "") -> str:
+    """The message for an unknown key of a mapping at ``where``, in the scenario's form:
+    what was expected (the known keys), what was found, the closest known key."""
+    import difflib
+    close = difflib.get_close_matches(str(key), sorted(map(str, known)), n=1, cutoff=0.6)
+    mean = f" (did you mean '{close[0]}'?)" if close else ""
+    return (f"{where}.{key}: expected one of the keys {', '.join(sorted(map(str, known)))}{note}, "
+            f"found an unknown key{mean}")
+
 FEATURE_KEYS = {
     "hill": {"x", "y", "height", "radius"},
     "plateau": {"x", "y", "height", "radius", "edge"},
@@ -109,7 +119,7 @@ def generate(desc: dict, path: str = "map.generate") -> ElevationMap:
         kind = f["type"]
         extra = set(f) - FEATURE_KEYS[kind] - {"type"}
         if extra:
-            raise GeneratorError(f"{fp}: unknown key '{sorted(extra)[0]}' for a {kind}: expected {', '.join(sorted(FEATURE_KEYS[kind]))}")
+            raise GeneratorError(unknown_key(fp, sorted(extra)[0], FEATURE_KEYS[kind] | {"type"}, f" (a {kind})"))
         if kind == "hill":
             r = _num(f, "radius", fp, True)
             H += _num(f, "height", fp) * np.exp(-((X - _num(f, "x", fp)) ** 2 + (Y - _num(f, "y", fp)) ** 2) / (2 * r * r))

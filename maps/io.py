@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .generate import GeneratorError, generate
+from .generate import GeneratorError, generate, unknown_key
 from .grid import ElevationMap
 
 
@@ -97,7 +97,9 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
     if "generate" in spec:
         extra = set(spec) - {"generate"}
         if extra:
-            raise MapError(f"{where}: unknown key '{sorted(extra)[0]}' beside 'generate'")
+            k = sorted(extra)[0]
+            raise MapError(f"{where}.{k}: expected no key beside 'generate' (a map is generated, or read from 'file' "
+                           f"or 'heights'), found '{k}'")
         try:
             return generate(spec["generate"], f"{where}.generate")
         except GeneratorError as exc:
@@ -105,7 +107,7 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
     if "heights" in spec:
         extra = set(spec) - {"heights", "resolution", "origin"}
         if extra:
-            raise MapError(f"{where}: unknown key '{sorted(extra)[0]}' beside 'heights': expected resolution, origin")
+            raise MapError(unknown_key(where, sorted(extra)[0], {"heights", "resolution", "origin"}))
         try:
             H = np.asarray(spec["heights"], dtype=float)
         except (TypeError, ValueError):
@@ -116,7 +118,7 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
     known = {"file", "resolution", "origin", "height_range", "nodata"}
     extra = set(spec) - known
     if extra:
-        raise MapError(f"{where}: unknown key '{sorted(extra)[0]}': expected {', '.join(sorted(known | {'generate'}))}")
+        raise MapError(unknown_key(where, sorted(extra)[0], known | {"generate"}))
     if not isinstance(spec.get("file"), str):
         raise MapError(f"{where}.file: expected a path to a .npy or .png file, found {spec.get('file')!r}")
     path = base / spec["file"]

@@ -511,8 +511,12 @@ def load(path: Path | str) -> Scenario:
         msg = str(exc)
         head, _, rest = msg.partition(": ")
         items = rest.split("\n  ")[1:] if " problems:\n  " in rest else [rest]
+        # the schema's line for a key the file's own problem names more closely goes
+        named = {m.split(":")[0].split(".")[0] for m in more}
+        items = [i for i in items if not (i.endswith("(schema)") and i.split(":")[0].split(".")[0] in named)]
         items += more
-        raise InputError(f"{head}: {len(items)} problems:\n  " + "\n  ".join(items)) from None
+        raise InputError(f"{head}: " + (items[0] if len(items) == 1 else
+                                        f"{len(items)} problems:\n  " + "\n  ".join(items))) from None
 
 
 def _file_problems(data, path: Path) -> list:
