@@ -335,7 +335,8 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else predicted(world, cost, controls, X0)
     pol, drive, missed = None, None, None
     if res.status == "found" and ps.polishes(cost):
-        pol, drive, missed = _polished(world, cost, prob, X0, controls, t0 + budget)
+        pol, drive, missed = _polished(world, cost, prob, X0, controls, t0 + budget,
+                                       1 if res.threads_chosen == "serial" else None)
         if pol is not None:
             controls = pol.controls
             pred = predicted(world, cost, controls, X0)
@@ -392,7 +393,8 @@ def _better(new: Check, old: Check, cost: str) -> bool:
     return new.miss_m <= old.miss_m and c_new < c_old
 
 
-def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float):
+def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float,
+              threads: int | None = None):
     """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.polish`)
     and the controller-rate drive (:func:`sbmpc.check.controller_rate`'s result, for
     :func:`_checked`) of the controls that stand: the polish's, or, where the polish is
@@ -408,7 +410,9 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     at 1 kHz, they are polished again from the searched ones with the tip-over limit
     lowered by POLISH_TIP_MARGIN_DEG: the polish presses a path against the limit (the
     flanks of narrow_pass's pass), where the 1 kHz drive, a few centimetres off the
-    20 ms line, tips (four of narrow_pass's eight seeds did)."""
+    20 ms line, tips (four of narrow_pass's eight seeds did). ``threads``: numba's
+    threads for the polish's trials (None: planner.threads; search_plan passes 1 where
+    the search's threads "auto" measured one thread faster: cores busy elsewhere)."""
     lo, hi = wheel_speed_range(world)
     r = world.scenario.goal["radius"]
     missed = None
@@ -417,7 +421,8 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
         params[SS.Q_TIP] -= tip_margin
         for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
             params[SS.Q_GR] = r - margin
-            with numba_threads(world.scenario.planner.threads or None):   # the polish's trials: planner.threads
+            # the polish's trials: on planner.threads, or one where the search found one faster (threads auto)
+            with numba_threads(threads or world.scenario.planner.threads or None):
                 pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
             if pol is not None:
                 break

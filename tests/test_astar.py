@@ -345,8 +345,9 @@ def test_open_set_pops_by_f_then_push_order(fs, renumber_at):
 
 def test_auto_threads_keep_the_faster_expander_and_measure_again():
     """threads "auto": the first rounds alternate parallel and serial expansion and keep
-    the faster per edge; every RECHECK rounds it measures again (a core taken by other
-    work makes the parallel expander the slower one)."""
+    the faster per edge, early where one is CLEAR times slower; every RECHECK rounds it
+    measures again (a core taken by other work makes the parallel expander the slower
+    one)."""
     import time as _time
     from sbmpc.search.astar import _Chooser
     calls = []
@@ -362,39 +363,44 @@ def test_auto_threads_keep_the_faster_expander_and_measure_again():
     c = _Chooser(parallel, serial)
     for _ in range(2 * c.TRIES + 10):
         c(16)
-    assert c.choices == ["serial"] and calls[-10:] == ["s"] * 10
-    assert calls[:2 * c.TRIES] == ["p", "s"] * c.TRIES
+    pairs = 1 + c.CLEAR_AFTER                     # a warm-up pair, then the measured ones
+    assert c.choices == ["serial"] and calls[:2 * pairs] == ["p", "s"] * pairs
+    assert calls[2 * pairs:] == ["s"] * (len(calls) - 2 * pairs)      # clear early: no more parallel rounds
     slow.update(parallel=0.0, serial=0.002)
-    for _ in range(c.RECHECK - (2 * c.TRIES + 10) + 2 * c.TRIES + 5):
+    while len(c.choices) < 2:
+        c(16)
+    for _ in range(5):
         c(16)
     assert c.choices == ["serial", "parallel"] and calls[-5:] == ["p"] * 5
 
 
-def test_auto_threads_choose_on_full_batches_only():
-    """While the batch still grows (rounds of fewer nodes than the batch), before the
-    first choice, the rounds run parallel and are not measured: the choice is made on
-    full batches, where it matters (rounds of one node spread over the cores say little
-    about rounds of 16)."""
+def test_auto_threads_measure_from_the_first_round_and_again_on_full_batches():
+    """A short search on busy cores (a few hundred expansions, all in the growing batch)
+    is not left parallel: the rounds are measured from the first. When the batch is
+    full the choice is measured again, where it matters most (parallel rounds gain with
+    the batch: here the parallel expander is slow on small rounds only). While serial is
+    the choice, rounds hold one node (nothing simulated ahead for nothing)."""
     import time as _time
     from sbmpc.search.astar import _Chooser
     calls = []
 
     def parallel(k):
         calls.append(("p", k))
+        _time.sleep(0.002 if k < 16 else 0.0)
 
     def serial(k):
         calls.append(("s", k))
-        _time.sleep(0.001 if k < 16 else 0.0)          # serial slower on small rounds only
+        _time.sleep(0.0 if k < 16 else 0.002)
     c = _Chooser(parallel, serial, 16)
-    for k in range(1, 16):
-        c(k)
-    assert calls == [("p", k) for k in range(1, 16)] and c.calls == 0 and not c.choices
-    for _ in range(2 * c.TRIES + 3):
-        _time.sleep(0.0)
-        c(16)
-    assert c.choices and calls[15:17] == [("p", 16), ("s", 16)]
-    c(3)                                               # after the first choice: the chosen mode
-    assert calls[-1][0] == ("p" if c.best == 0 else "s")
+    for k in range(1, 16):                       # the batch the search would use grows
+        for _ in range(4):
+            c(c.request(k))
+    assert c.choices == ["serial"] and calls[-20:] == [("s", 1)] * 20       # serial, one node a round
+    while len(c.choices) < 2:
+        c(c.request(16))
+    assert c.choices == ["serial", "parallel"] and calls[60:62] == [("p", 16), ("s", 16)]
+    c(c.request(16))
+    assert calls[-1] == ("p", 16)
 
 
 @pytest.mark.parametrize("kw", [dict(threads=1), dict(threads=2), dict(batch=4, threads=2), dict(threads="auto")])

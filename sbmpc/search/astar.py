@@ -189,6 +189,7 @@ class SearchResult:
     exhausted: bool = False
     edges_simulated: int = 0
     ended: str = "found"
+    threads_chosen: str | None = None   # threads "auto": "parallel" or "serial", what the search measured last
 
 
 ENDINGS = ("found", "exhausted", "node_budget", "time_budget")   # SearchResult.ended
@@ -345,7 +346,21 @@ class Search:
 
             def batched(k):
                 p.expand_batch(p.params, p.data, BP[:k], BO[:k * nb], BU[:k * nb], CH[:k * nb], CO[:k * nb])
-            expand = _Chooser(batched, serial, size if ramp > 0 else 1) if threads == "auto" else batched
+            if threads == "auto":
+                import numba
+                every = numba.get_num_threads()
+
+                def one_thread(k):
+                    # a problem's expander may loop in parallel itself (skidsteer.expand):
+                    # the serial mode runs it on one thread, or it is parallel too
+                    numba.set_num_threads(1)
+                    try:
+                        serial(k)
+                    finally:
+                        numba.set_num_threads(every)
+                expand = self._chooser = _Chooser(batched, one_thread, size if ramp > 0 else 1)
+            else:
+                expand = batched
         else:
             expand = serial
         run = _batch_entry()
@@ -359,8 +374,10 @@ class Search:
         t0 = time.perf_counter()
         pending = 0
         shown = 0
+        chooser = expand if isinstance(expand, _Chooser) else None
         while True:
-            st, k = call(pending, chunk, size if ramp <= 0 else min(size, 1 + int(self.cnt[C_ITERS]) // ramp))
+            nominal = size if ramp <= 0 else min(size, 1 + int(self.cnt[C_ITERS]) // ramp)
+            st, k = call(pending, chunk, nominal if chooser is None else chooser.request(nominal))
             pending = 0
             if st == GROW:
                 self._grow(nb)
@@ -393,6 +410,8 @@ class Search:
                 invalid[name] = int(cnt[C_INVALID + k])
         common = dict(first_solution_iterations=int(cnt[C_FIRST]), iterations=int(cnt[C_ITERS]), nodes=int(cnt[C_NODES]), edges=int(cnt[C_EDGES]),
                       planning_time_s=elapsed, invalid=invalid, edges_simulated=int(cnt[C_SIMULATED]))
+        ch = getattr(self, "_chooser", None)          # what threads "auto" chose last
+        common["threads_chosen"] = ch.choices[-1] if ch is not None and ch.choices else None
         if st == FOUND:
             path = []
             n = int(cnt[C_GOAL])
@@ -464,15 +483,24 @@ class _Chooser:
     whichever is faster here and now. Both give the same children bit for bit (one
     edge function), so the choice changes the time, never the plan. The first
     2 x TRIES rounds alternate the two and keep the one with the smaller median time per
-    edge (the first round of each is a warm-up and not counted); the choice is measured
+    edge (the first round of each is a warm-up and not counted; after CLEAR_AFTER
+    measured pairs, a mode CLEAR times slower than the other at the median is not
+    measured further: parallel rounds on busy cores cost 16 ms, serial ones 0.2 ms, and
+    the measuring itself took most of a short search); the choice is measured
     again every RECHECK rounds (other work may have taken or freed cores: with both
-    cores busy elsewhere, parallel rounds ran many times slower than serial ones). While
-    the batch still grows (rounds of fewer than ``full`` nodes, the first few hundred
-    expansions) before the first choice, rounds run parallel and are not measured: the
-    choice is made on full batches."""
+    cores busy elsewhere, parallel rounds ran many times slower than serial ones), and
+    once more at the first round of a full batch (``full`` nodes: the batch grows over
+    the first few hundred expansions, and parallel rounds gain with its size). Rounds
+    are measured from the first: a search of a few hundred expansions, all of them in
+    the growing batch, ran parallel throughout on a busy machine, 2-10x slower than
+    serial. While the serial expander is the choice, the search asks for rounds of one
+    node (:meth:`request`): the open nodes simulated ahead are a parallel batch's price,
+    and serial rounds would only pay it."""
 
     TRIES = 12
     RECHECK = 2048
+    CLEAR_AFTER = 3
+    CLEAR = 3.0
 
     def __init__(self, parallel, serial, full: int = 1):
         self.modes = (parallel, serial)
@@ -481,11 +509,24 @@ class _Chooser:
         self.times = ([], [])
         self.best = 0
         self.choices = []
+        self.at_full = False
+
+    def _choose(self):
+        self.best = 0 if np.median(self.times[0]) <= np.median(self.times[1]) else 1
+        self.choices.append("parallel" if self.best == 0 else "serial")
+        self.times = ([], [])
+
+    def request(self, size: int) -> int:
+        """The nodes the next round should hold, the batch being ``size`` now: ``size``
+        while measuring or while parallel is the choice, else one."""
+        if size >= self.full > 1 and not self.at_full:
+            self.at_full = True
+            self.calls = 0                    # measure again on full batches
+            self.times = ([], [])
+        measuring = self.calls % self.RECHECK < 2 * self.TRIES
+        return size if measuring or self.best == 0 else 1
 
     def __call__(self, k):
-        if k < self.full and not self.choices:
-            self.modes[0](k)
-            return
         phase = self.calls % self.RECHECK
         self.calls += 1
         if phase < 2 * self.TRIES:
@@ -495,9 +536,12 @@ class _Chooser:
             if phase >= 2:
                 self.times[m].append((time.perf_counter() - t0) / max(k, 1))
             if phase == 2 * self.TRIES - 1:
-                self.best = 0 if np.median(self.times[0]) <= np.median(self.times[1]) else 1
-                self.choices.append("parallel" if self.best == 0 else "serial")
-                self.times = ([], [])
+                self._choose()
+            elif m == 1 and len(self.times[1]) >= self.CLEAR_AFTER:
+                a, b = np.median(self.times[0]), np.median(self.times[1])
+                if max(a, b) > self.CLEAR * min(a, b):
+                    self._choose()
+                    self.calls = 2 * self.TRIES     # (the measuring is over until the next recheck)
             return
         self.modes[self.best](k)
 
