@@ -246,16 +246,19 @@ class NoAliasLoader(yaml.SafeLoader):
         if isinstance(node, yaml.MappingNode):
             seen = {}
             for key_node, _ in node.value:
-                if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
-                    key = self.construct_object(key_node)
-                    try:
-                        first = seen.setdefault(key, key_node.start_mark)
-                    except TypeError:          # an unhashable key: the constructor says so
-                        continue
-                    if first is not key_node.start_mark:
-                        raise yaml.constructor.ConstructorError(
-                            None, None, f"the key {key_node.value!r} appears twice in one mapping (first on line "
-                            f"{first.line + 1}); a YAML key may appear once", key_node.start_mark)
+                if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                    continue                   # (merged keys may be overridden; others: the constructor judges)
+                # a plain '=' is YAML 1.1's value key, a string once the mapping is built
+                key = "=" if key_node.tag == "tag:yaml.org,2002:value" else self.construct_object(key_node)
+                try:
+                    first = seen.setdefault(key, key_node)
+                except TypeError:              # an unhashable key: the constructor says so
+                    continue
+                if first is not key_node:
+                    also = f"as {first.value!r} " if first.value != key_node.value else ""
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"the key {key_node.value!r} appears twice in one mapping (first {also}on line "
+                        f"{first.start_mark.line + 1}); a YAML key may appear once", key_node.start_mark)
         return super().construct_mapping(node, deep)
 
 

@@ -46,9 +46,10 @@ def _finite(path: Path, d: np.ndarray, columns: tuple) -> None:
     for col in columns:
         bad = np.flatnonzero(~np.isfinite(np.asarray(d[col], float)))
         if bad.size:
-            with open(path, encoding="utf-8-sig", errors="replace") as f:     # the lines genfromtxt reads
-                rows = [k for k, line in enumerate(f, 1) if line.strip() and not line.lstrip().startswith("#")]
-            line = rows[int(bad[0]) + 1] if int(bad[0]) + 1 < len(rows) else int(bad[0]) + 2
+            with open(path, encoding="utf-8-sig", errors="replace") as f:     # the lines genfromtxt reads:
+                lines = [(k, t.lstrip()) for k, t in enumerate(f, 1) if t.strip()]   # the first is the header,
+            rows = [k for k, t in lines[1:] if not t.startswith("#")]            # even behind a '#'
+            line = rows[int(bad[0])] if int(bad[0]) < len(rows) else int(bad[0]) + 2
             raise RunError(f"{path}, line {line}, column {col}: expected a finite number, found an empty, "
                            f"non-numeric or infinite cell ({bad.size} such row{'s' if bad.size > 1 else ''} in the column)")
 

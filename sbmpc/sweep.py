@@ -118,6 +118,9 @@ def load_spec(path: Path) -> dict:
         probs += _robustness_problems(rob)
     if not files and not families and not probs:
         probs.append("scenarios: expected at least one scenario (scenarios: or families:), found none")
+    # a variant's vehicle file is the spec's, like its scenarios: resolved here, once
+    variants = [dict(v, vehicle=str((base / v["vehicle"]).resolve()))
+                if isinstance(v.get("vehicle"), str) and (base / v["vehicle"]).is_file() else v for v in variants]
     from . import scenario as SC
     for f in dict.fromkeys(files + [p for p, _ in families]):     # each scenario file checked once, up front
         try:
@@ -142,13 +145,18 @@ def _numeric_fields() -> tuple:
 
 
 def _change_ok(c) -> bool:
-    """A variant's change: a number, or a string '+N%' / '-N%'."""
+    """A variant's change as :func:`_scaled` applies it: a number (or a string of one),
+    or a string '+N%' / '-N%' above -100 %."""
     import math
-    import re
-    if isinstance(c, (int, float)) and not isinstance(c, bool):
-        return math.isfinite(c)
-    return (isinstance(c, str) and re.fullmatch(r"\s*[+-]?\d+(\.\d*)?%\s*", c) is not None
-            and float(c.strip()[:-1]) > -100.0)
+    if isinstance(c, bool) or not isinstance(c, (int, float, str)):
+        return False
+    text = str(c).strip()
+    pct = text.endswith("%")
+    try:
+        x = float(text[:-1] if pct else text)
+    except ValueError:
+        return False
+    return math.isfinite(x) and (not pct or x > -100.0)
 
 
 def _variant_problems(where: str, v: dict, base: Path) -> list:

@@ -125,3 +125,14 @@ def test_import_drive_names_what_is_wrong(tmp_path, capsys):
         assert not out.exists()
     assert main(["import", "drive", str(src), "--terrain", "vinyl", "--out", str(out)]) == 0   # a shipped name
     assert read_run(out).meta["terrain"] == "vinyl"
+
+
+def test_a_bad_cell_is_named_by_its_line_behind_blank_comment_and_hash_header_lines(tmp_path, capsys):
+    lines = _drive_like(tmp_path / "src.csv").read_text().splitlines()
+    cells = lines[3].split(",")
+    cells[5] = ""                                    # cmd_left of the 3rd sample
+    text = "\n".join(["", "#" + lines[0], "# a comment", lines[1], "", lines[2], ",".join(cells)] + lines[4:]) + "\n"
+    bad = tmp_path / "drive_warthog_asphalt_windows.csv"
+    bad.write_text(text)                             # the bad cell is on line 7
+    assert main(["import", "drive", str(bad), "--out", str(tmp_path / "r.csv")]) == 2
+    assert f"{bad}, line 7, column cmd_left: expected a finite number" in capsys.readouterr().err

@@ -1,4 +1,5 @@
 import math
+import re
 
 import pytest
 
@@ -67,3 +68,17 @@ def test_missing_file_and_unknown_name(tmp_path):
     with pytest.raises(ParameterError, match="alpha"):
         load_terrain({"alpha": 0.5})
     assert math.isfinite(load_terrain({"alpha": 1.0}).alpha)
+
+
+def test_yaml_keys_appear_once_but_merge_and_value_keys_still_load():
+    """A repeated key is refused (PyYAML kept the last silently); a merged key may be
+    overridden, and YAML 1.1's plain '=' key is a string as before."""
+    import yaml
+    from dynamics.params import NoAliasLoader
+    assert yaml.load("=: 1\nb: {=: 2}\n", Loader=NoAliasLoader) == {"=": 1, "b": {"=": 2}}
+    assert yaml.load("<<: {a: 1, c: 3}\na: 2\n", Loader=NoAliasLoader) == {"a": 2, "c": 3}
+    for text, says in [("a: 1\nb: 2\na: 3\n", "the key 'a' appears twice in one mapping (first on line 1)"),
+                       ("m: {k: 1, k: 2}\n", "the key 'k' appears twice"),
+                       ("1: x\n1.0: y\n", "first as '1' on line 1")]:
+        with pytest.raises(yaml.YAMLError, match=re.escape(says)):
+            yaml.load(text, Loader=NoAliasLoader)

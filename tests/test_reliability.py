@@ -113,6 +113,8 @@ FLAT = (SCEN / "flat.yaml").read_text()
     (FLAT.replace("x: 2.0, y: 2.0", "x: 2e0, y: 2.0"), "start.x: expected a number, found '2e0' (text:"),
     (FLAT + "planner: {max_expansions: 1}\n", "the key 'planner' appears twice in one mapping (first on line 14)"),
     (FLAT.replace("x: 2.0, y: 2.0", "x: 2.0, y: 2.0, x: 3.0"), "the key 'x' appears twice"),
+    (FLAT.replace("x: 2.0, y: 2.0", "x: 2.0, y: 2.0, 1: 3, 1.0: 4"), "the key '1.0' appears twice in one mapping "
+                                                                   "(first as '1' on line"),
 ])
 def test_hostile_scenarios_end_in_one_line(tmp_path, capsys, text, says):
     s = tmp_path / "s.yaml"

@@ -125,3 +125,22 @@ def test_variants_robustness_settings_and_scenarios_are_checked_before_any_task(
                  "bad_scn.yaml: cost: expected time or energy, found 'fast'"]:
         assert says in err, says
     assert "Traceback" not in err and "AttributeError" not in err and not (tmp_path / "o").exists()
+
+
+def test_a_variants_vehicle_file_is_the_specs_and_changes_parse_as_they_apply(tmp_path):
+    """A variant's vehicle file lies beside the spec (as its scenarios do), wherever the
+    scenario is; a change is any number or 'N%' above -100 % that the task applies."""
+    spec_dir, scn_dir = tmp_path / "spec", tmp_path / "scn"
+    spec_dir.mkdir()
+    scn_dir.mkdir()
+    (scn_dir / "flat.yaml").write_text((ROOT / "scenarios" / "flat.yaml").read_text())
+    (spec_dir / "big.yaml").write_text("base: p3at\nname: big\nmass: 40.0\n")
+    p = spec_dir / "spec.yaml"
+    p.write_text("scenarios: [../scn/flat.yaml]\n"
+                 "variants: [{name: big, vehicle: big.yaml}, {name: s, vehicle: {mass: '.5%', inertia: '1.5'}}]\n")
+    spec = SW.load_spec(p)
+    from sbmpc import scenario as SC, world as WO
+    world = WO.resolve(SC.load(scn_dir / "flat.yaml"))
+    assert SW._variant_world(world, spec["variants"][0]).vehicle.mass == 40.0
+    w2 = SW._variant_world(world, spec["variants"][1])
+    assert w2.vehicle.mass == pytest.approx(world.vehicle.mass * 1.005) and w2.vehicle.inertia == 1.5

@@ -504,7 +504,7 @@ class _Chooser:
 
     def __init__(self, parallel, serial, full: int = 1):
         self.modes = (parallel, serial)
-        self.full = full          # rounds of fewer nodes (a batch still growing) run parallel, unmeasured
+        self.full = full          # the full batch: measured again when the growing batch reaches it
         self.calls = 0
         self.times = ([], [])
         self.best = 0
