@@ -28,11 +28,15 @@ def required_torque(vehicle: Vehicle, terrain: Terrain, grade: float, omega: flo
 
 def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> float:
     """Steepest grade [rad] on which ``speed`` [m/s] can be held straight uphill (at speed 0:
-    the steepest grade climbable at any constant speed). Negative if none."""
+    the steepest grade climbable at any constant speed). Negative if none; pi/2 when the
+    drive holds it even straight up a wall (a light or strong vehicle: the grade then does
+    not limit it, tipping over and wheel grip do)."""
     omega = speed / vehicle.wheel_radius
     tau = available_torque(vehicle, omega)
     if tau <= required_torque(vehicle, terrain, 0.0, omega):
         return -1.0
+    if tau >= required_torque(vehicle, terrain, 0.5 * math.pi, omega):
+        return 0.5 * math.pi
     return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, math.pi / 2)
 
 
@@ -45,11 +49,14 @@ def steepest_braked_grade(vehicle: Vehicle, terrain: Terrain, omega: float) -> f
 
 
 def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
-    """Highest constant straight speed [m/s] on a grade [rad]; 0 if the grade cannot be held."""
+    """Highest constant straight speed [m/s] on a grade [rad]; 0 if the grade cannot be held,
+    the no-load speed's when gravity down a slope pulls harder than the drive's losses."""
     f = lambda w: available_torque(vehicle, w) - required_torque(vehicle, terrain, grade, w)
     w_hi = vehicle.no_load_speed
     if f(0.0) <= 0.0:
         return 0.0
+    if f(w_hi) >= 0.0:
+        return w_hi * vehicle.wheel_radius
     return brentq(f, 0.0, w_hi) * vehicle.wheel_radius
 
 

@@ -7,13 +7,21 @@ from __future__ import annotations
 import numpy as np
 
 from .kinematics import wheel_speeds
-from .simulate import Model, simulate
+from .params import ParameterError
+from .simulate import Model, check_step, simulate
+
+
+def _steps(model: Model, duration: float, dt: float | None) -> tuple[float, int]:
+    """(dt [s], number of steps) of a manoeuvre ``duration`` [s] long, both checked."""
+    dt = model.step_s if dt is None else check_step(dt)
+    if isinstance(duration, bool) or not isinstance(duration, (int, float, np.number)) or not 0.0 <= duration <= 1e6:
+        raise ParameterError(f"duration: expected a number of seconds in [0, 1e6], found {duration!r:.40}")
+    return dt, int(round(duration / dt))
 
 
 def straight(model: Model, v: float, duration: float, dt: float | None = None):
     """Straight line at desired speed v [m/s]."""
-    dt = model.step_s if dt is None else dt
-    n = int(round(duration / dt))
+    dt, n = _steps(model, duration, dt)
     w = v / model.vehicle.wheel_radius
     return np.full(n, w), np.full(n, w)
 
@@ -21,9 +29,12 @@ def straight(model: Model, v: float, duration: float, dt: float | None = None):
 def circle(model: Model, v: float, radius: float, duration: float, dt: float | None = None):
     """Circle of *commanded* radius [m] (paper Section V: the radius the wheel speeds give
     through the no-slip kinematic model, eq. 1 with alpha = 1) at desired speed v [m/s].
-    Positive radius turns left (counter-clockwise)."""
-    dt = model.step_s if dt is None else dt
-    n = int(round(duration / dt))
+    Positive radius turns left (counter-clockwise); an infinite one drives straight."""
+    dt, n = _steps(model, duration, dt)
+    if not (isinstance(radius, (int, float, np.number)) and not isinstance(radius, bool) and radius != 0.0
+            and radius == radius):
+        raise ParameterError(f"radius: expected a non-zero radius in metres (positive turns left, inf drives "
+                             f"straight), found {radius!r:.40}")
     veh = model.vehicle
     wl, wr = wheel_speeds(float(v), 1.0 / float(radius), veh.wheel_radius, veh.width, 1.0)
     return np.full(n, wl), np.full(n, wr)

@@ -95,7 +95,18 @@ class Vehicle:
 
     def replace(self, **changes: Any) -> "Vehicle":
         """A copy with some fields changed, validated."""
-        return _validated(dataclasses.replace(self, **changes), "<replace>")
+        return _replaced(self, changes)
+
+
+def _replaced(obj, changes: dict):
+    """``dataclasses.replace`` of a Vehicle or Terrain, validated; an unknown field is a
+    ParameterError naming it (was a bare TypeError)."""
+    names = [f.name for f in dataclasses.fields(obj)]
+    for key in changes:
+        if key not in names:
+            raise ParameterError(f"<replace>: unknown {type(obj).__name__.lower()} parameter '{key}'"
+                                 f"{did_you_mean(key, names)}: expected one of {', '.join(names)}")
+    return _validated(dataclasses.replace(obj, **changes), "<replace>")
 
 
 @dataclass(frozen=True)
@@ -112,7 +123,7 @@ class Terrain:
 
     def replace(self, **changes: Any) -> "Terrain":
         """A copy with some fields changed, validated."""
-        return _validated(dataclasses.replace(self, **changes), "<replace>")
+        return _replaced(self, changes)
 
 
 # Bounds: (low, high, low inclusive). Values outside are rejected with a clear message.
@@ -312,7 +323,8 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
     if isinstance(spec, cls):
         return spec
     if isinstance(spec, dict):
-        return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>", kind=kind, base_dir=base, depth=depth)
+        # as a file: every parameter or a 'base' (a partial mapping took the rest from the P3-AT or vinyl)
+        return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>", True, kind, base, depth)
     spec_s = str(spec)
     shipped = _shipped(kind)
     if spec_s in shipped:
@@ -332,12 +344,14 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
 
 
 def load_vehicle(spec: "str | Path | dict | Vehicle" = "p3at", base: Path | None = None) -> Vehicle:
-    """A vehicle by shipped name (``p3at``), path to a YAML file, or mapping."""
+    """A vehicle by shipped name (``p3at``), path to a YAML file, or mapping (as a file:
+    every parameter, or ``base`` and the ones that differ)."""
     return _load(Vehicle, "vehicles", spec, base)
 
 
 def load_terrain(spec: "str | Path | dict | Terrain" = "vinyl", base: Path | None = None) -> Terrain:
-    """A terrain by shipped name (``vinyl``, ``asphalt``, ...), path to a YAML file, or mapping."""
+    """A terrain by shipped name (``vinyl``, ``asphalt``, ...), path to a YAML file, or mapping
+    (as a file: every parameter, or ``base`` and the ones that differ)."""
     return _load(Terrain, "terrains", spec, base)
 
 

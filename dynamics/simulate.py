@@ -18,6 +18,16 @@ from .body import gravity_torque
 from .params import G
 
 
+def check_step(dt, what: str = "dt") -> float:
+    """``dt`` [s] as a float when it is an integration step the model can take: positive,
+    finite, at most 1 s; else a ParameterError naming ``what``."""
+    from .params import ParameterError
+    ok = not isinstance(dt, bool) and isinstance(dt, (int, float, np.floating, np.integer)) and 0.0 < dt <= 1.0
+    if not ok:
+        raise ParameterError(f"{what}: expected an integration step in (0, 1] s, found {dt!r:.40}")
+    return float(dt)
+
+
 @dataclass(frozen=True)
 class Model:
     """A vehicle on a terrain: the closed-loop model of the paper, ready to simulate.
@@ -29,6 +39,15 @@ class Model:
     vehicle: Vehicle = field(default_factory=Vehicle)
     terrain: Terrain = field(default_factory=Terrain)
     dt: float | None = None
+
+    def __post_init__(self):
+        from .params import ParameterError
+        for name, cls in (("vehicle", Vehicle), ("terrain", Terrain)):
+            if not isinstance(getattr(self, name), cls):
+                raise ParameterError(f"Model.{name}: expected a {cls.__name__} (dynamics.load_{name}), "
+                                     f"found {type(getattr(self, name)).__name__}")
+        if self.dt is not None:
+            check_step(self.dt, "Model.dt")
 
     @classmethod
     def load(cls, vehicle="p3at", terrain="vinyl", dt=None) -> "Model":
@@ -119,7 +138,7 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
     every ``profile_step`` m of signed path distance from ``profile_start`` (flat outside).
     The vehicle's ``delay`` extension shifts the commands by round(delay / dt) steps.
     """
-    dt = model.step_s if dt is None else dt
+    dt = model.step_s if dt is None else check_step(dt)
     cmd_l = np.ascontiguousarray(cmd_l, dtype=float)
     cmd_r = np.ascontiguousarray(cmd_r, dtype=float)
     if cmd_l.shape != cmd_r.shape or cmd_l.ndim != 1:

@@ -69,8 +69,9 @@ def _number(spec, key, where, positive=False):
 
 def _origin(spec, where):
     o = spec.get("origin", [0.0, 0.0])
-    if not (isinstance(o, (list, tuple)) and len(o) == 2 and all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in o)):
-        raise MapError(f"{where}.origin: expected [x, y] in metres, found {o!r}")
+    if not (isinstance(o, (list, tuple)) and len(o) == 2
+            and all(isinstance(a, (int, float)) and not isinstance(a, bool) and -1e300 < a < 1e300 for a in o)):
+        raise MapError(f"{where}.origin: expected [x, y], two finite numbers in metres, found {o!r:.60}")
     return float(o[0]), float(o[1])
 
 
@@ -109,10 +110,13 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
         if extra:
             raise MapError(unknown_key(where, sorted(extra)[0], {"heights", "resolution", "origin"}))
         try:
-            H = np.asarray(spec["heights"], dtype=float)
+            raw = np.asarray(spec["heights"])
+            if raw.dtype == bool or np.iscomplexobj(raw):     # (a cast to float takes them as 0/1, drops j)
+                raise TypeError
+            H = raw.astype(float)
         except (TypeError, ValueError):
-            raise MapError(f"{where}.heights: expected a 2-D array of heights in metres, "
-                           f"found {type(spec['heights']).__name__}") from None
+            found = f"an array of {raw.dtype}" if isinstance(spec["heights"], np.ndarray) else type(spec["heights"]).__name__
+            raise MapError(f"{where}.heights: expected a 2-D array of real heights in metres, found {found}") from None
         return _checked(H, _number(spec, "resolution", where, positive=True), _origin(spec, where),
                         f"{where}.heights", "heights")
     known = {"file", "resolution", "origin", "height_range", "nodata"}

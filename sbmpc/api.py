@@ -23,25 +23,57 @@ from pathlib import Path
 from .errors import InputError
 
 
+def _plain(x, key=None):
+    """Python data as a scenario file would hold it: NumPy scalars as Python numbers,
+    arrays and tuples as lists (a map's ``heights`` array is kept: the map reader checks
+    it), so that a value computed with NumPy passes the same checks as a typed one."""
+    import numpy as np
+    if key == "heights":
+        return x
+    if isinstance(x, dict):
+        return {k: _plain(v, k) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_plain(v) for v in x.tolist()]
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def _cost(cost):
+    if cost not in (None, "time", "energy"):
+        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r:.60}")
+    return cost
+
+
 def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner):
-    """A validated :class:`sbmpc.scenario.Scenario` from a path, a dict or a Scenario,
-    with an optional heights array for its map and planner overrides."""
+    """A validated :class:`sbmpc.scenario.Scenario` from a path, a dict or a Scenario (a
+    Scenario built or changed in code is checked as its file would be), with an optional
+    heights array for its map (``origin`` None: (0, 0)) and planner overrides."""
     from . import scenario as SC
     if isinstance(scenario, SC.Scenario):
-        scn = scenario
+        data = SC.to_data(scenario)
+        src, path = str(scenario.path or f"<scenario {scenario.name!r:.40}>"), scenario.path
     elif isinstance(scenario, dict):
-        data = dict(scenario)
-        if heights is not None:      # (a stand-in for validation; the array replaces it below)
-            data["map"] = {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0}
-        scn = SC.parse(data, "<scenario dict>")
+        data, src, path = dict(scenario), "<scenario dict>", None
     elif isinstance(scenario, (str, Path)):
-        scn = SC.load(scenario)
+        data = None
     else:
         raise InputError(f"scenario: expected a path, a dict or a Scenario, found {type(scenario).__name__}")
+    if data is None:
+        scn = SC.load(scenario)
+    else:
+        data = _plain(data)
+        if heights is not None:      # (a stand-in for validation; the array replaces it below)
+            data["map"] = {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0}
+        scn = SC.parse(data, src, path)
     if heights is not None:
         if resolution is None:
             raise InputError("resolution: expected the cell size in metres of the heights array, found None")
-        scn = replace(scn, map_spec={"heights": heights, "resolution": resolution, "origin": list(origin)})
+        origin = (0.0, 0.0) if origin is None else _plain(origin)
+        scn = replace(scn, map_spec={"heights": heights, "resolution": _plain(resolution),
+                                     "origin": origin})
     if planner:
         known = {f.name for f in fields(SC.PlannerSettings)}
         unknown = sorted(set(planner) - known)
@@ -50,7 +82,7 @@ def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **
                              "found an unknown key")
         # validated as a scenario file's planner section would be
         merged = {f.name: getattr(scn.planner, f.name) for f in fields(SC.PlannerSettings)}
-        merged.update(planner)
+        merged.update(_plain(planner))
         spec = {k: (list(v) if isinstance(v, tuple) else v) for k, v in merged.items() if v is not None}
         probs = SC._Problems(str(scn.path or scn.name))
         settings = SC._planner(spec, probs)
@@ -77,8 +109,9 @@ def plan_scenario(scenario, cost: str | None = None, heights=None, resolution=No
     searches of an energy plan (a callback with a fourth parameter also gets the best
     plan's cost so far, or None)."""
     from .plan import plan
-    if cost not in (None, "time", "energy"):
-        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r}")
+    _cost(cost)
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress: expected a function (expansions, nodes, elapsed_s), found {type(progress).__name__}")
     return plan(load_world(scenario, heights, resolution, origin, **planner), cost, progress=progress,
                 time_progress=progress)
 
@@ -99,6 +132,7 @@ def run_scenario(scenario, cost: str | None = None, truth=None, heights=None, re
     :class:`sbmpc.receding.RunResult`."""
     from dynamics import ParameterError, Vehicle, load_vehicle
     from . import receding
+    _cost(cost)
     world = load_world(scenario, heights, resolution, origin, **planner)
     if truth is not None and not isinstance(truth, Vehicle):
         try:

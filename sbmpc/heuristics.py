@@ -181,7 +181,8 @@ def climb_limit(world: World) -> float:
     grade the vehicle holds at any speed on the best of the map's terrains
     (``dynamics.limits``) plus RUNUP_DEG for what momentum carries over a short ramp."""
     from dynamics.limits import steepest_grade
-    return max(steepest_grade(world.vehicle, t) for t in world.terrains) + math.radians(RUNUP_DEG)
+    grade = max(steepest_grade(world.vehicle, t) for t in world.terrains) + math.radians(RUNUP_DEG)
+    return min(grade, math.radians(89.0))      # a vehicle whose drive holds any grade: tan stays finite
 
 
 @functools.lru_cache(maxsize=8)
@@ -507,7 +508,7 @@ def unreachable_reason(world: World, xy: tuple | None = None) -> str | None:
         if tip[here] != 0 and np.any(tip[in_goal] == tip[here]):
             return (f"the only ways from the start to the goal between slopes beyond the tip-over limit of "
                     f"{scn.planner.tip_over_deg:g} deg run along the map's edge, closer to it than the vehicle's "
-                    f"half-diagonal ({world.margin:.2f} m): no path can exist")
+                    f"half-diagonal ({world.margin:.3f} m): no path can exist")
         return (f"the goal is cut off from the start by slopes beyond the tip-over limit of "
                 f"{scn.planner.tip_over_deg:g} deg (no heading crosses them); no path can exist")
     return None

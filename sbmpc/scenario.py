@@ -16,6 +16,7 @@ The minimum is docs/formats.md's; additions (all optional)::
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -437,6 +438,9 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     cost = data.get("cost", "time")
     if cost not in COSTS:
         probs.add("cost", "time or energy", cost)
+    for key, what in (("planner", "planner settings"), ("run", "run settings")):
+        if key in data and data[key] is None:       # 'planner:' with nothing under it
+            probs.add(key, f"a mapping of {what} (or no '{key}' key for the defaults)", None)
     planner = _planner(data.get("planner"), probs)
     run = _run(data.get("run"), probs)
     probs.raise_if_any()
@@ -444,6 +448,30 @@ def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
         probs.add_line(line)
     probs.raise_if_any()
     return Scenario(name, map_spec, terrain, vehicle, start, goal, cost, planner, desc, path, run)
+
+
+def to_data(scn: Scenario) -> dict:
+    """The scenario-file mapping of a :class:`Scenario` (what :func:`parse` reads back to
+    an equal value): a Scenario built or changed in code is validated by parsing this."""
+    terrain = scn.terrain
+    if isinstance(terrain, dict):
+        regions = []
+        for r in terrain.get("regions", []):
+            if isinstance(r, Region):
+                coords = [list(p) for p in r.coords] if r.kind == "polygon" else list(r.coords)
+                r = {"terrain": r.terrain, r.kind: coords}
+            regions.append(r)
+        terrain = {**terrain, "regions": regions}
+    planner = scn.planner
+    if dataclasses.is_dataclass(planner) and not isinstance(planner, type):
+        planner = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(planner).items()
+                   if v is not None}
+    run = scn.run
+    if dataclasses.is_dataclass(run) and not isinstance(run, type):
+        run = dataclasses.asdict(run)
+    return {"name": scn.name, "description": scn.description, "map": scn.map_spec, "terrain": terrain,
+            "vehicle": scn.vehicle, "start": scn.start, "goal": scn.goal, "cost": scn.cost,
+            "planner": planner, "run": run}
 
 
 def _as_json(x, key=None):

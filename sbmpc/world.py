@@ -105,7 +105,7 @@ def resolve(scn: Scenario) -> World:
     m = world.margin
     for key, p in (("start", scn.start), ("goal", scn.goal)):
         if not emap.contains(p["x"], p["y"], m):
-            problems.append(f"{key}: expected (x, y) at least {m:.2f} m inside the map "
+            problems.append(f"{key}: expected (x, y) at least {math.ceil(m * 1000) / 1000:.3f} m inside the map "
                             f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
     s, g = scn.start, scn.goal
     if not problems and math.hypot(s["x"] - g["x"], s["y"] - g["y"]) <= g["radius"]:

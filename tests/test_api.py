@@ -56,6 +56,65 @@ def test_the_api_validates_a_heights_map_as_the_command_line_does():
         sbmpc.plan_scenario(scn, heights=np.zeros((41, 41)))
 
 
+def test_a_scenario_object_is_checked_as_its_file_would_be():
+    """A Scenario built or changed in code went to the planner unchecked (a negative
+    goal radius, a start at 50 m/s, a branching of 2 ended in deep errors); it is parsed
+    as its file would be: every shipped scenario reads back equal, a bad value is one
+    InputError naming the key."""
+    from sbmpc import scenario as SC
+    for path in sorted((ROOT / "scenarios").glob("*.yaml")):
+        scn = SC.load(path)
+        assert sbmpc.load_scenario(scn) == scn, path.name
+    scn = SC.load(FLAT)
+    for bad, says in [(replace(scn, goal={**scn.goal, "radius": -1.0}), "goal.radius: expected a radius in"),
+                      (replace(scn, start={**scn.start, "v": 50.0}), "start.v: expected a speed in"),
+                      (replace(scn, start={**scn.start, "x": "a"}), "start.x: expected a number, found 'a'"),
+                      (replace(scn, planner=replace(scn.planner, branching=2)), "planner.branching: expected an integer"),
+                      (replace(scn, planner=replace(scn.planner, max_expansions=-5)), "planner.max_expansions"),
+                      (replace(scn, planner=None), "planner: expected a mapping of planner settings")]:
+        with pytest.raises(InputError, match=says):
+            sbmpc.load_scenario(bad)
+    assert sbmpc.load_scenario(replace(scn, start={"x": 2.0, "y": 2.0})).start == {"x": 2.0, "y": 2.0, "yaw_deg": 0.0, "v": 0.0}
+
+
+def test_numpy_numbers_are_numbers_and_bad_python_arguments_are_named():
+    """Values computed with NumPy (np.float32, np.int64, an array of two wheel speeds) pass
+    as the same Python numbers would; a bad origin, a boolean or complex heights array, a
+    progress that is no function and a run's unknown cost are each one InputError."""
+    H = np.zeros((21, 21))
+    scn = {"name": "np", "terrain": "vinyl", "start": {"x": np.float32(2.0), "y": np.int64(2)},
+           "goal": {"x": np.float64(8.0), "y": 8.0, "radius": np.float32(0.5)}}
+    s = sbmpc.load_scenario(scn, heights=H, resolution=np.float64(0.5), wheel_speeds=np.array([-3.0, 3.0]),
+                            max_expansions=np.int64(100))
+    assert s.planner.wheel_speeds == (-3.0, 3.0) and s.planner.max_expansions == 100 and s.start["y"] == 2.0
+    assert sbmpc.load_world(scn, heights=H, resolution=0.5, origin=None).emap.extent[0] == 0.0
+    for kw, says in [(dict(origin=(np.nan, 0.0)), r"map.origin: expected \[x, y\], two finite numbers"),
+                     (dict(origin="ab"), "map.origin"),
+                     (dict(heights=H.astype(bool)), "map.heights: expected a 2-D array of real heights in metres, "
+                                                    "found an array of bool"),
+                     (dict(heights=H.astype(complex)), "found an array of complex128")]:
+        with pytest.raises(InputError, match=says):
+            sbmpc.load_world(scn, **{"heights": H, "resolution": 0.5, **kw})
+    with pytest.raises(InputError, match="progress: expected a function"):
+        sbmpc.plan_scenario(FLAT, progress=3)
+    with pytest.raises(InputError, match="cost: expected 'time' or 'energy', found 'speed'"):
+        sbmpc.run_scenario(FLAT, cost="speed")
+
+
+def test_the_edge_margin_named_in_a_refusal_is_one_that_passes():
+    """A start too close to the map's edge is refused with the distance it needs; that
+    distance, as printed, is accepted (it was rounded down: 0.27 m for 0.2732 m, and a
+    start at 0.27 m was refused again)."""
+    import re
+    scn = {"name": "edge", "terrain": "vinyl", "start": {"x": 0.2, "y": 2.0}, "goal": {"x": 8.0, "y": 8.0, "radius": 0.5}}
+    H = np.zeros((41, 41))
+    with pytest.raises(InputError, match="start: expected") as err:
+        sbmpc.load_world(scn, heights=H, resolution=0.25)
+    need = float(re.search(r"at least ([0-9.]+) m inside", str(err.value)).group(1))
+    world = sbmpc.load_world(dict(scn, start={"x": need, "y": 2.0}), heights=H, resolution=0.25)
+    assert 0.0 <= need - world.margin < 1e-3
+
+
 def test_command_line_overrides_start_goal_and_budgets(tmp_path, capsys):
     out = tmp_path / "p.json"
     assert main(["plan", str(FLAT), "--start", "3,3,45", "--goal", "10,8,0.4", "--max-expansions", "5000",

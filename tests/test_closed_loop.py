@@ -126,6 +126,25 @@ def test_steepest_grade_per_terrain_is_reported_and_ordered():
     assert grades["vinyl"] > grades["asphalt"] > grades["packed_dirt"] > grades["grass"]
 
 
+def test_a_vehicle_whose_drive_holds_any_grade_is_limited_by_none():
+    """A light P3-AT (4 kg: r m g / 2, what one side holds straight up a wall, is less than
+    its continuous torque of 5 N m): the drive holds every grade up to vertical at rest,
+    so the steepest grade is 90 deg (it was a root-finder error, exit 3 in plan); its
+    top speed down a steep slope, where gravity outpulls the losses, is the no-load
+    speed's; a grade just under the root is still found for the real vehicle."""
+    m = Model.load("p3at", "asphalt")
+    light = m.vehicle.replace(mass=4.0)
+    assert light.wheel_radius * light.mass * 9.81 / 2 < light.continuous_torque    # holds it straight up
+    assert steepest_grade(light, m.terrain) == pytest.approx(math.pi / 2)
+    still = light.replace(viscous=0.0)
+    assert top_speed(still, m.terrain, -1.2) == pytest.approx(still.no_load_speed * still.wheel_radius)
+    heavy = m.vehicle.replace(mass=12.0)
+    beta = steepest_grade(heavy, m.terrain)
+    assert 0.5 < beta < math.pi / 2
+    from dynamics.limits import available_torque, required_torque
+    assert required_torque(heavy, m.terrain, beta, 0.0) == pytest.approx(available_torque(heavy, 0.0), rel=1e-9)
+
+
 def test_integral_does_not_wind_up_while_saturated(vinyl):
     """Held against an unreachable command for 5 s, the drive recovers from the new,
     reachable command without the overshoot that a wound-up integral would cause."""

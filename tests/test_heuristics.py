@@ -296,7 +296,7 @@ def test_the_band_along_the_edge_is_off_limits_to_the_grid_and_the_reachability_
     band = HE.off_limits(world) & ~HE.blocked_cells(world)
     assert band[:, 0].all() and band[:, 1].all() and not band[20, 2]
     why = HE.unreachable_reason(world)
-    assert why is not None and "along the map's edge" in why and f"{world.margin:.2f} m" in why
+    assert why is not None and "along the map's edge" in why and f"{world.margin:.3f} m" in why
     assert HE.steepest_climb_needed(world) is None
     p = PL.plan(world, "time")
     assert p.status == "no_path" and p.nodes_expanded == 0 and "along the map's edge" in p.reason

@@ -66,8 +66,15 @@ def test_missing_file_and_unknown_name(tmp_path):
     with pytest.raises(ParameterError, match="shipped name"):
         load_terrain("lava")
     with pytest.raises(ParameterError, match="alpha"):
-        load_terrain({"alpha": 0.5})
-    assert math.isfinite(load_terrain({"alpha": 1.0}).alpha)
+        load_terrain({"base": "vinyl", "alpha": 0.5})
+    assert load_terrain({"base": "grass", "alpha": 1.0}).mu_roll == load_terrain("grass").mu_roll
+    # a mapping is read as a file is: a partial one without 'base' is refused (it took the rest from vinyl)
+    with pytest.raises(ParameterError, match=r"<terrain mapping>: expected every parameter or a 'base'"):
+        load_terrain({"alpha": 1.0})
+    with pytest.raises(ParameterError, match=r"<vehicle mapping>: expected every parameter or a 'base'"):
+        load_vehicle({"mass": 3.0})
+    full = {f: getattr(load_vehicle("p3at"), f) for f in ("name", "mass")}
+    assert load_vehicle({"base": "p3at", **full, "mass": 40.0}).mass == 40.0
 
 
 def test_yaml_keys_appear_once_but_merge_and_value_keys_still_load():
@@ -82,3 +89,32 @@ def test_yaml_keys_appear_once_but_merge_and_value_keys_still_load():
                        ("1: x\n1.0: y\n", "first as '1' on line 1")]:
         with pytest.raises(yaml.YAMLError, match=re.escape(says)):
             yaml.load(text, Loader=NoAliasLoader)
+
+
+def test_models_manoeuvres_and_replace_name_what_is_wrong():
+    """Wrong arguments in Python are one ParameterError naming the argument (were deep
+    TypeErrors or a ZeroDivisionError): a Model of something other than a Vehicle and a
+    Terrain or with a step outside (0, 1] s, a circle of radius 0, a negative duration,
+    a replaced field that does not exist (with the likely one)."""
+    import numpy as np
+    from dynamics import Model
+    from dynamics.manoeuvres import circle, straight
+    p3at, vinyl = load_vehicle("p3at"), load_terrain("vinyl")
+    for kw, says in [(dict(vehicle="p3at"), "Model.vehicle: expected a Vehicle"),
+                     (dict(terrain={"alpha": 1.0}), "Model.terrain: expected a Terrain"),
+                     (dict(dt=0.0), r"Model.dt: expected an integration step in \(0, 1\] s, found 0.0"),
+                     (dict(dt=float("nan")), "Model.dt"), (dict(dt="1ms"), "Model.dt")]:
+        with pytest.raises(ParameterError, match=says):
+            Model(**{"vehicle": p3at, "terrain": vinyl, **kw})
+    m = Model(p3at, vinyl, np.float64(0.002))
+    assert m.step_s == 0.002
+    with pytest.raises(ParameterError, match="radius: expected a non-zero radius"):
+        circle(m, 0.5, 0.0, 1.0)
+    with pytest.raises(ParameterError, match=r"duration: expected a number of seconds in \[0, 1e6\], found -1"):
+        straight(m, 0.5, -1.0)
+    cl, cr = circle(m, 0.5, float("inf"), 1.0)
+    assert len(cl) == 500 and np.allclose(cl, cr)                     # an infinite radius drives straight
+    with pytest.raises(ParameterError, match=r"unknown vehicle parameter 'mas' \(did you mean 'mass'\?\)"):
+        p3at.replace(mas=30.0)
+    with pytest.raises(ParameterError, match="unknown terrain parameter 'foo'"):
+        vinyl.replace(foo=1)

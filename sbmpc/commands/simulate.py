@@ -19,7 +19,8 @@ def add_parser(sub):
     p.add_argument("--vehicle", default="p3at", help="shipped vehicle name or YAML path (default p3at)")
     p.add_argument("--terrain", default="vinyl", help="shipped terrain name or YAML path (default vinyl)")
     p.add_argument("--v", type=float, help="desired speed [m/s]")
-    p.add_argument("--radius", type=float, help="commanded turning radius [m], positive turns left")
+    p.add_argument("--radius", type=float, help="commanded turning radius [m], positive turns left (a negative "
+                   "one with an exponent takes '=': --radius=-1e3)")
     p.add_argument("--slope-deg", type=float, help="ramp grade [deg]")
     p.add_argument("--v0", type=float, help="speed entering the ramp [m/s]")
     p.add_argument("--length", type=float, help="ramp length along the slope [m]")
@@ -53,12 +54,12 @@ def run(args) -> int:
     outs = Outputs([args.vehicle, args.terrain])
     outs.file(args.json, "--json")
     outs.file(args.plot, "--plot")
+    if args.dt is not None and not (1e-5 <= args.dt <= 0.05):
+        raise InputError(f"--dt: expected a step between 1e-05 and 0.05 s, found {args.dt}")
     try:
         model = Model.load(args.vehicle, args.terrain, args.dt)
     except ParameterError as exc:
         raise InputError(str(exc)) from None
-    if args.dt is not None and not (1e-5 <= args.dt <= 0.05):
-        raise InputError(f"--dt: expected a step between 1e-05 and 0.05 s, found {args.dt}")
     ramp = any(x is not None for x in (args.slope_deg, args.v0, args.length))
     if sum([ramp, args.radius is not None, args.lemniscate]) > 1:
         raise InputError("expected one manoeuvre (--radius, the ramp options, or --lemniscate), found several")
@@ -83,7 +84,7 @@ def run(args) -> int:
         v0 = _need(args.v0, "--v0", "an entry speed in m/s")
         length = _need(args.length, "--length", "a ramp length in metres")
         if not -60 < slope < 60:
-            raise InputError(f"--slope-deg: expected a grade between -60 and 60 degrees, found {slope}")
+            raise InputError(f"--slope-deg: expected a grade strictly between -60 and 60 degrees, found {slope}")
         if length <= 0:
             raise InputError(f"--length: expected a positive length in metres, found {length}")
         if abs(v0) > 20:
