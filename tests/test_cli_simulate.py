@@ -23,6 +23,18 @@ def test_circle_json_and_plot(tmp_path, capsys):
     assert "circle on vinyl" in capsys.readouterr().out
 
 
+def test_a_command_beyond_the_drive_is_noted(capsys):
+    """A 2 m circle at 1 m/s on vinyl (the outer wheel needs 10 rad/s, the drive gives
+    8.3): the vehicle drives nearly straight, and the summary says the drive ended short
+    of the command (it printed stalled False and nothing else); at 0.6 m/s it turns as
+    commanded, with no note."""
+    assert main(["simulate", "--v", "1.0", "--radius", "2", "--duration", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "note: the drive ends short of the commanded wheel speeds" in out and "right 8.2" in out
+    assert main(["simulate", "--v", "0.6", "--radius", "2", "--duration", "5"]) == 0
+    assert "note:" not in capsys.readouterr().out
+
+
 def test_ramp_reports_crossing_and_stall(tmp_path):
     out = tmp_path / "r.json"
     assert main(["simulate", "--terrain", "vinyl", "--v", "1.2", "--slope-deg", "17", "--v0", "0.3", "--length", "1",

@@ -166,12 +166,16 @@ def run_diagnose(args) -> int:
     doc = d.to_json(str(out_vehicle) if out_vehicle else None)
     doc["run"] = str(args.run)
     doc["diagnosis_time_s"] = elapsed
+    wrote = [out_vehicle] if out_vehicle is not None else []
     if args.json:
         write_text(args.json, json.dumps(doc, indent=1))
+        wrote.append(args.json)
     if args.report:
         args.report.mkdir(parents=True, exist_ok=True)
         write_report(args.report, run, vehicle, terrain, pitch, d, doc, replay)
-        print(f"wrote {args.report / 'report.md'}")
+        wrote += [args.report / name for name in ("report.md", "replay.png", "residuals.png")]
+    if wrote:
+        print("wrote " + ", ".join(map(str, wrote)))
     return 0
 
 

@@ -120,7 +120,7 @@ def compile_note(quiet: bool = False) -> None:
     except Exception:          # numba's cache internals moved: say nothing
         return
     if cold:
-        print("compiling the planner (first run only, about 1-2 minutes; planning times include it) ...",
+        print("compiling the planner (first run only, about 1-2 minutes, mostly before the search: the planning time printed shows part of it) ...",
               file=sys.stderr, flush=True)
 
 

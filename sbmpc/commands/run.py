@@ -55,8 +55,9 @@ def summary(res) -> str:
                  + (f", re-plans {sum(rt) / len(rt):.2f} s on average)" if rt else ")"))
     for k, p in enumerate(d["plans"][1:], 1):
         lines.append(f"  re-plan {k} at t = {p['t']:.1f} s: {p['why']}"
-                     + ("" if p["status"] == "found" else f" -> {p['reason']}")
-                     + (" (kept the previous plan)" if (p["found_by"] or "").startswith("previous") else "")
+                     + ("" if p["status"] == "found" else f" -> {p['reason']} (drove on with the previous plan)")
+                     + (" (the rest of the previous plan: the search found nothing cheaper)"
+                        if (p["found_by"] or "").startswith("previous") else "")
                      + (" (aimed at the goal disc itself: no way found into the inner disc re-plans aim at)"
                         if p["goal_radius_m"] == d["plans"][0]["goal_radius_m"] else ""))
     return "\n".join(lines)

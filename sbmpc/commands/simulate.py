@@ -113,7 +113,7 @@ def run(args) -> int:
             info["open_loop_input"] = "closed-loop current profile"
         traj = simulate(model, cl, cr, open_loop=args.open_loop, record_dt=max(dt, 0.01))
     elif args.open_loop:
-        raise InputError("--open-loop: expected a straight or circle manoeuvre, found a ramp")
+        raise InputError("--open-loop: expected a straight, circle or lemniscate manoeuvre, found a ramp")
     summary = {
         "final_speed_mps": float(traj.v[-1]), "mean_speed_mps": float(np.mean(traj.v)),
         "final_yaw_rate": float(traj.yaw_rate[-1]), "final_tau_l": float(traj.tau_l[-1]),
@@ -124,6 +124,10 @@ def run(args) -> int:
           f"{' (open loop)' if args.open_loop else ''}: {traj.t[-1]:.2f} s simulated")
     for key, value in {**info, **summary}.items():
         print(f"  {key:22s} {value:.4g}" if isinstance(value, float) else f"  {key:22s} {value}")
+    if manoeuvre in ("straight", "circle") and not args.open_loop:
+        short = _short_of_command(traj, cl[-1], cr[-1])
+        if short:
+            print(f"note: {short}")
     if args.json:
         doc = {"schema": "sbmpc.simulate/1", "manoeuvre": manoeuvre, "vehicle": model.vehicle.name,
                "terrain": model.terrain.name, "open_loop": bool(args.open_loop), "dt_s": dt,
@@ -134,3 +138,18 @@ def run(args) -> int:
         with atomic(args.plot) as tmp:
             plot_trajectory(traj, tmp, f"{manoeuvre} on {model.terrain.name}")
     return 0
+
+
+def _short_of_command(traj, cmd_l: float, cmd_r: float) -> str:
+    """A note when the drive ends short of the commanded wheel speeds [rad/s] (by more
+    than 5 % of the larger command and 0.05 rad/s): the command is beyond what the
+    motors deliver there (the voltage or current limit, eqs. 26, 27), so the vehicle
+    drives another path than the commanded one (a circle at 1 m/s on vinyl runs
+    nearly straight); '' when it reaches them."""
+    wl, wr = float(traj.wl[-1]), float(traj.wr[-1])
+    tol = max(0.05 * max(abs(cmd_l), abs(cmd_r)), 0.05)
+    if abs(wl - cmd_l) <= tol and abs(wr - cmd_r) <= tol:
+        return ""
+    return (f"the drive ends short of the commanded wheel speeds (left {wl:.2f} of {cmd_l:.2f} rad/s, right "
+            f"{wr:.2f} of {cmd_r:.2f} rad/s): the command is beyond what the motors deliver here (voltage or "
+            "current limit), so the path driven is not the commanded one; a lower --v reaches it")
