@@ -66,6 +66,27 @@ def test_npy_and_png_loading(tmp_path):
     ({"generate": {"size": [10, 10], "resolution": 1, "features": [{"type": "volcano"}]}}, ["features[0].type"]),
     ({"generate": {"size": [10, 10], "resolution": 1, "features": [{"type": "hill", "x": 1, "y": 1, "height": 1}]}},
      ["features[0].radius"]),
+    # a typo beside the features planned a flat map; degenerate values ended in exit 3
+    ({"generate": {"size": [10, 10], "resolution": 1, "featurs": []}}, ["map.generate.featurs", "did you mean 'features'"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "seeds": 3}}, ["map.generate.seeds", "did you mean 'seed'"]),
+    ({"generate": {"size": [float("inf"), 10], "resolution": 1}}, ["map.generate.size", "(0, 1e+06]", "inf"]),
+    ({"generate": {"size": [1e300, 10], "resolution": 1}}, ["map.generate.size", "1e+300"]),
+    ({"generate": {"size": [10, 10], "resolution": 1e-300}}, ["at most 25 million cells, found far more (10 m x 10 m at 1e-300 m)"]),
+    ({"generate": {"size": [10, 10], "resolution": 50}}, ["map.generate.resolution", "at least 2 x 2 cells"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "origin": [1]}}, ["map.generate.origin"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "origin": ["a", "b"]}}, ["map.generate.origin"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "base": "x"}}, ["map.generate.base: expected a number"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "seed": -1}}, ["map.generate.seed", "[0, 2^63)"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [
+        {"type": "hill", "x": 5, "y": 5, "height": 1, "radius": 1e-300}]}}, ["expected finite heights"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [
+        {"type": "hill", "x": 5, "y": 5, "height": 1e300, "radius": 1}]}}, ["height: expected a number in [-10000, 10000]"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [
+        {"type": "random_hills", "count": 3, "height": [1, float("nan")], "radius": [1, 2]}]}}, ["features[0].height"]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [
+        {"type": "random_hills", "count": 3, "height": [1, 2], "radius": [-2, -1]}]}}, ["features[0].radius", "(0, "]),
+    ({"generate": {"size": [10, 10], "resolution": 1, "features": [
+        {"type": "random_hills", "count": 10 ** 5, "height": [1, 2], "radius": [1, 2]}]}}, ["count", "[0, 10000]"]),
 ])
 def test_bad_map_specs_name_key_expected_found(tmp_path, spec, words):
     np.save(tmp_path / "m.npy", np.zeros((3, 3)))
