@@ -44,8 +44,12 @@ def one_line_error(capsys, code, rc):
     (["diagnose", "{w}/r.csv", "--vehicle-out", "{w}/r.csv"], "--vehicle-out"),
     (["diagnose", "{w}/r.csv", "--vehicle", "{w}/extended_vehicle.yaml", "--json", "{w}/d.json"], "--json"),
     (["simulate", "--vehicle", "{w}/t.yaml", "--v", "0.5", "--json", "{w}/t.yaml"], "--json"),
+    # a file reached through 'base:' is an input too (it was replaced)
+    (["simulate", "--vehicle", "{w}/t2.yaml", "--v", "0.5", "--json", "{w}/t.yaml"], "--json"),
+    (["run", "{w}/s.yaml", "--truth", "{w}/t2.yaml", "--json", "{w}/t.yaml"], "--json"),
 ])
 def test_an_output_that_is_an_input_is_refused_before_any_work(work, capsys, argv, flag):
+    (work / "t2.yaml").write_text("base: t.yaml\nname: heavier\nmass: 45.0\n")
     (work / "sub").mkdir()
     shutil.copy(work / "t.yaml", work / "extended_vehicle.yaml")
     before = digest(work)
@@ -70,6 +74,62 @@ def test_bad_output_paths_end_in_one_line_before_the_work(work, capsys, argv, sa
     rc = main([a.format(w=work, s=work / "s.yaml", root=ROOT) for a in argv])
     assert says in one_line_error(capsys, 2, rc)
     assert digest(ROOT) == before and not (ROOT / "extended_vehicle.yaml").exists()
+
+
+def test_two_outputs_on_one_path_and_an_empty_path_are_refused(work, capsys):
+    """--json and --rrd on the same path (the recording replaced the JSON, exit 0), and an
+    empty path (`--out ""` wrote into the current folder) end before any work."""
+    rc = main(["plan", str(work / "s.yaml"), "--json", str(work / "x.json"), "--rrd", str(work / "x.json")])
+    assert "--rrd: '" in one_line_error(capsys, 2, rc) and not (work / "x.json").exists()
+    with pytest.raises(SystemExit) as exc:
+        main(["compare", str(work / "s.yaml"), "--out", ""])
+    assert exc.value.code == 2 and "--out: expected a path, found an empty string" in capsys.readouterr().err
+    rc = main(["plan", str(work / "s.yaml"), "--goal="])
+    assert "--goal: expected X,Y" in one_line_error(capsys, 2, rc)
+
+
+def test_a_pipe_is_written_into_and_a_reader_that_leaves_changes_nothing(work):
+    """An output that is a FIFO (or /dev/null) is written into, not replaced by a file
+    (the atomic rename replaced /dev/null when run as root); a reader of stdout that
+    goes away (`| true`) leaves the exit code and the files as they would be: an
+    unreachable goal is exit 1 with its JSON (it was exit 0 and no file)."""
+    import os
+    import stat
+    import subprocess
+    import sys
+    import threading
+    fifo = work / "f.json"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()))
+    reader.start()
+    assert main(["simulate", "--v", "0.5", "--duration", "1", "--json", str(fifo)]) == 0
+    reader.join(30)
+    assert stat.S_ISFIFO(fifo.stat().st_mode) and '"schema": "sbmpc.simulate/1"' in got[0]
+    out = work / "u.json"
+    p = subprocess.Popen([sys.executable, "-m", "sbmpc", "plan", str(SCEN / "unreachable.yaml"), "--json", str(out)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 1, err
+    assert out.exists() and '"status": "no_path"' in out.read_text()
+
+
+def test_every_json_output_is_strict_json(work, capsys):
+    """A one-second run leaves a candidate's standard error undefined: the diagnosis JSON
+    held a bare NaN, which strict JSON readers refuse; every number that is not finite is
+    written as null."""
+    import json
+    from sbmpc.commands.files import _finite
+    assert _finite({"a": [1.0, float("nan"), {"b": float("-inf")}], "c": "x"}) == {"a": [1.0, None, {"b": None}], "c": "x"}
+    assert main(["synth", "--effect", "none", "--duration", "1", "--out", str(work / "short.csv")]) == 0
+    assert main(["diagnose", str(work / "short.csv"), "--json", str(work / "d.json")]) == 0
+
+    def refuse(c):
+        raise ValueError(c)
+    doc = json.loads((work / "d.json").read_text(), parse_constant=refuse)
+    assert doc["cause"] == "none"
+    assert "wrote " in capsys.readouterr().out
 
 
 def test_an_unwritable_output_folder_is_refused(work, capsys):

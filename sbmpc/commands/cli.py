@@ -20,6 +20,41 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+class _ReaderMayLeave:
+    """stdout for one command: when its reader goes away (``| head``, ``| true``) the
+    rest of what it prints is dropped and the command carries on, so it still writes
+    its files and returns its own exit code (a failed plan was exit 0 with no JSON)."""
+
+    def __init__(self, stream):
+        self._stream, self.gone = stream, False
+
+    def _left(self):
+        import os
+        self.gone = True
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+        except (OSError, ValueError, AttributeError):   # a stream without a descriptor (tests)
+            pass
+
+    def write(self, text):
+        if not self.gone:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._left()
+        return len(text)
+
+    def flush(self):
+        if not self.gone:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._left()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sbmpc", description="Motion planning for skid-steered robots with the "
                 "closed-loop dynamic model of Yu et al. (2010).",
@@ -78,7 +113,12 @@ def main(argv=None) -> int:
             from maps import MapWarning
             warnings.simplefilter("always", MapWarning)      # the user's own input: one line each
             warnings.showwarning = one_line
-            return int(args.func(args) or 0)
+            out, sys.stdout = sys.stdout, _ReaderMayLeave(sys.stdout)
+            try:
+                return int(args.func(args) or 0)
+            finally:
+                sys.stdout.flush()
+                sys.stdout = out
     except InputError as exc:
         print(f"sbmpc {args.command}: error: {exc}", file=sys.stderr)
         return 2

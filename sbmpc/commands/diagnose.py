@@ -2,14 +2,13 @@
 ``sbmpc synth`` (a measured-looking run with one hidden effect)."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
 from pathlib import Path
 
 from ..errors import InputError
-from .files import Outputs, atomic, write_text
+from .files import Outputs, atomic, path_arg, write_json, write_text
 
 
 def add_parsers(sub):
@@ -17,12 +16,12 @@ def add_parsers(sub):
                        description="Replay the logged commands of a measured run (CSV of docs/formats.md) through the "
                        "closed-loop model, fit every candidate model extension on the first 70 % of the run, score "
                        "it on the last 30 %, and name the cause (or 'none').")
-    p.add_argument("run", type=Path, help="measured run CSV")
+    p.add_argument("run", type=path_arg, help="measured run CSV")
     p.add_argument("--vehicle", help="vehicle name or YAML (default: the run's '# vehicle:' or p3at)")
     p.add_argument("--terrain", help="terrain name or YAML (default: the run's '# terrain:' or vinyl)")
-    p.add_argument("--json", type=Path, help="write the diagnosis JSON here")
-    p.add_argument("--report", type=Path, help="write a markdown report with figures into this folder")
-    p.add_argument("--vehicle-out", type=Path,
+    p.add_argument("--json", type=path_arg, help="write the diagnosis JSON here")
+    p.add_argument("--report", type=path_arg, help="write a markdown report with figures into this folder")
+    p.add_argument("--vehicle-out", type=path_arg,
                    help="write the extended vehicle YAML here (default: extended_vehicle.yaml beside --json or in --report)")
     p.set_defaults(func=run_diagnose)
 
@@ -32,7 +31,7 @@ def add_parsers(sub):
     from dynamics.synth import STRENGTHS
     s.add_argument("--effect", required=True, choices=tuple(STRENGTHS), help="the hidden effect")
     s.add_argument("--seed", type=int, default=0, help="draws the strength and the commands (default 0)")
-    s.add_argument("--out", type=Path, required=True, help="run CSV to write")
+    s.add_argument("--out", type=path_arg, required=True, help="run CSV to write")
     s.add_argument("--duration", type=float, default=90.0, help="seconds (default 90)")
     s.add_argument("--vehicle", default="p3at")
     s.add_argument("--terrain", default="vinyl")
@@ -168,7 +167,7 @@ def run_diagnose(args) -> int:
     doc["diagnosis_time_s"] = elapsed
     wrote = [out_vehicle] if out_vehicle is not None else []
     if args.json:
-        write_text(args.json, json.dumps(doc, indent=1))
+        write_json(args.json, doc)
         wrote.append(args.json)
     if args.report:
         args.report.mkdir(parents=True, exist_ok=True)

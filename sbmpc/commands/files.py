@@ -20,6 +20,15 @@ from pathlib import Path
 from ..errors import InputError
 
 
+def path_arg(text: str) -> Path:
+    """argparse type of a path option: an empty path (``--out ""``, which Path reads as
+    the current folder) is a usage error, exit 2."""
+    import argparse
+    if not text:
+        raise argparse.ArgumentTypeError("expected a path, found an empty string")
+    return Path(text)
+
+
 def _is_file(p) -> bool:
     """Whether ``p`` (a path, a string such as a vehicle name, or None) names an existing
     file; a name too long for a path is not one."""
@@ -53,6 +62,7 @@ class Outputs:
         for p in paths:
             if _is_file(p):
                 self.inputs.append(Path(p))
+                self.inputs += _bases(Path(p))
         for path, flag in self.declared:
             self._not_an_input(path, flag)
 
@@ -79,8 +89,14 @@ class Outputs:
         if path.exists() and not os.access(path, os.W_OK):
             raise InputError(f"{flag}: cannot replace '{path}' (permission denied)")
         self._not_an_input(path, flag)
+        self._not_declared(path, flag)
         self.declared.append((path, flag))
         return path
+
+    def _not_declared(self, path: Path, flag: str) -> None:
+        for other, other_flag in self.declared:
+            if _same(path, other) or path.resolve() == other.resolve():
+                raise InputError(f"{flag}: '{path}' is also the output of {other_flag}; give each output its own path")
 
     def folder(self, path: Path, flag: str, names=()) -> Path:
         """Check an output folder (created later if missing, with its parents) and the
@@ -100,8 +116,30 @@ class Outputs:
             if f.is_dir():
                 raise InputError(f"{flag}: would write '{f}', found a folder there")
             self._not_an_input(f, flag)
+            self._not_declared(f, flag)
             self.declared.append((f, flag))
         return path
+
+
+def _bases(path: Path, depth: int = 0) -> list[Path]:
+    """The vehicle or terrain files a YAML file takes its values from (``base:``, in a
+    chain): inputs too, though the command names only the first."""
+    if depth > 8 or path.suffix.lower() not in (".yaml", ".yml"):
+        return []
+    from dynamics.params import read_yaml_text
+    try:
+        doc = read_yaml_text(path)
+    except (OSError, ValueError):          # the loader reports it
+        return []
+    b = doc.get("base") if isinstance(doc, dict) else None
+    if not isinstance(b, str) or not b:
+        return []
+    out = []
+    for cand in (path.parent / b, path.parent / f"{b}.yaml"):
+        if _is_file(cand):
+            out += [cand] + _bases(cand, depth + 1)
+            break
+    return out
 
 
 @contextlib.contextmanager
@@ -110,7 +148,11 @@ def atomic(path: Path):
     from it still do) that replaces ``path`` when the block ends without an error; on
     an error the temporary file is removed and ``path`` is untouched."""
     path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    if path.exists() and not path.is_file() and not path.is_dir():
+        yield path          # a device or a pipe (/dev/null, a FIFO): written into, never replaced
+        return
+    name = f".{path.stem}.{os.getpid()}.tmp{path.suffix}"
+    tmp = path.with_name(name if len(os.fsencode(name)) <= 200 else f".sbmpc.{os.getpid()}.tmp{path.suffix}")
     try:
         yield tmp
         os.replace(tmp, path)
@@ -123,6 +165,24 @@ def write_text(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def _finite(x):
+    """``x`` with every NaN or infinite float as None (JSON has no NaN: Python wrote a bare
+    ``NaN`` that strict readers refuse)."""
+    if isinstance(x, float):
+        return x if x == x and abs(x) != float("inf") else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
+
+
+def write_json(path: Path, doc) -> None:
+    """Write ``doc`` as JSON (indent 1) to ``path`` atomically, a non-finite number as null."""
+    import json
+    write_text(path, json.dumps(_finite(doc), indent=1, allow_nan=False))
 
 
 def scenario_inputs(path: Path) -> list[Path]:
@@ -148,13 +208,15 @@ def scenario_inputs(path: Path) -> list[Path]:
             names.append(v)
         elif isinstance(v, dict):
             names += [x for x in (v.get("default"),) if isinstance(x, str)]
-            for r in v.get("regions") or []:
+            regions = v.get("regions")
+            for r in regions if isinstance(regions, list) else []:
                 if isinstance(r, dict) and isinstance(r.get("terrain"), str):
                     names.append(r["terrain"])
             ras = v.get("raster")
             if isinstance(ras, dict):
                 names += [x for x in (ras.get("file"),) if isinstance(x, str)]
-                names += [x for x in (ras.get("classes") or {}).values() if isinstance(x, str)]
+                classes = ras.get("classes")
+                names += [x for x in (classes.values() if isinstance(classes, dict) else []) if isinstance(x, str)]
     for n in names:
         out += [cand for cand in (base / n, base / f"{n}.yaml", Path(n)) if _is_file(cand)]
     return out

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputError
-from .files import Outputs, atomic
+from .files import Outputs, atomic, path_arg
 
 # DRIVE's terrains and the nearest shipped terrain (what `# terrain:` names)
 DRIVE_TERRAINS = {"asphalt": "asphalt", "gravel": "packed_dirt", "sand": "grass"}
@@ -21,8 +21,8 @@ def add_parsers(sub):
                        "wheel speeds and motor currents; it logs no commands, so the measured wheel speeds stand in "
                        "for them, and its currents are magnitudes, signed here by the wheel's direction of travel.")
     p.add_argument("dataset", choices=("drive", "borealtc"), help="the dataset the source comes from")
-    p.add_argument("source", type=Path, help="the dataset's file")
-    p.add_argument("--out", type=Path, required=True, help="run CSV to write")
+    p.add_argument("source", type=path_arg, help="the dataset's file")
+    p.add_argument("--out", type=path_arg, required=True, help="run CSV to write")
     p.add_argument("--terrain", help="terrain of the run: a DRIVE terrain (asphalt, gravel, sand) or a BorealTC one "
                    "(ASPHALT, FLOORING, ICE, MIXED, SANDY_LOAM, SNOW), written as the nearest shipped terrain, or any "
                    "shipped name or file (default: from the file's name, or for BorealTC its folder's)")

@@ -1,7 +1,6 @@
 """``sbmpc plan`` and ``sbmpc compare``: plan a scenario for one cost, or for both."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 import time
@@ -10,17 +9,17 @@ from pathlib import Path
 
 from ..errors import InputError, NoResult
 from ..search.counters import budget_text
-from .files import Outputs, atomic, scenario_inputs, write_text
+from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 
 
 def add_parsers(sub):
     p = sub.add_parser("plan", help="plan a scenario (SBMPC over its elevation map)",
                        description="Plan a scenario with SBMPC: print a summary; optionally write the plan "
                        "JSON (schema sbmpc.plan/1) and a rerun recording. Exit code 1 when no path is found.")
-    p.add_argument("scenario", type=Path, help="scenario YAML file")
+    p.add_argument("scenario", type=path_arg, help="scenario YAML file")
     p.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
-    p.add_argument("--json", type=Path, help="write the plan JSON here")
-    p.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
+    p.add_argument("--json", type=path_arg, help="write the plan JSON here")
+    p.add_argument("--rrd", type=path_arg, help="write a rerun recording (.rrd) here")
     p.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
     add_backend_flags(p)
@@ -30,8 +29,8 @@ def add_parsers(sub):
                        description="Plan the time-optimal and the energy-optimal path of a scenario; write "
                        "compare.json, compare.png (map with both paths; speed, power, energy along each) and "
                        "compare.rrd into --out.")
-    c.add_argument("scenario", type=Path, help="scenario YAML file")
-    c.add_argument("--out", type=Path, default=Path("."), help="output folder (created if missing; default .)")
+    c.add_argument("scenario", type=path_arg, help="scenario YAML file")
+    c.add_argument("--out", type=path_arg, default=Path("."), help="output folder (created if missing; default .)")
     c.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     c.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
     add_backend_flags(c)
@@ -88,10 +87,10 @@ def _world(args):
         over["time_budget_s"] = args.time_budget
     if over:
         scn = replace(scn, planner=replace(scn.planner, **over))
-    if getattr(args, "start", None):
+    if getattr(args, "start", None) is not None:
         v = _numbers(args.start, "--start", 2, 3, "X,Y or X,Y,YAW_DEG in metres and degrees")
         scn = replace(scn, start=dict(scn.start, x=v[0], y=v[1], **({"yaw_deg": v[2]} if len(v) > 2 else {})))
-    if getattr(args, "goal", None):
+    if getattr(args, "goal", None) is not None:
         v = _numbers(args.goal, "--goal", 2, 3, "X,Y or X,Y,RADIUS in metres")
         if len(v) > 2 and not 0.01 <= v[2] <= 1e4:
             raise InputError(f"--goal: expected a radius in [0.01, 10000] m, found {v[2]:g}")
@@ -218,7 +217,7 @@ def run_plan(args) -> int:
                    time_progress=Progress("time search (the energy plan is checked against it)", args.quiet, cost="time"))
     print(summary(plan))
     if args.json:
-        write_text(args.json, json.dumps(plan.to_json(), indent=1))
+        write_json(args.json, plan.to_json())
     if args.rrd:
         with atomic(args.rrd) as tmp:
             recording.write(tmp, world.emap, {cost: plan}, app=f"sbmpc plan {world.scenario.name}",
@@ -264,7 +263,7 @@ def run_compare(args) -> int:
         doc["tradeoff"] = {"time_saved_s": e.travel_time_s - t.travel_time_s,
                            "energy_saved_J": t.energy_J - e.energy_J,
                            "holds": bool(t.travel_time_s <= e.travel_time_s + 1e-9 and e.energy_J <= t.energy_J + 1e-9)}
-    write_text(out / "compare.json", json.dumps(doc, indent=1))
+    write_json(out / "compare.json", doc)
     found = [c for c, p in plans.items() if p.found]
     title = (f"{world.scenario.name}: time- vs energy-optimal" if len(found) == 2 and not any(p.found_by for p in plans.values())
              else f"{world.scenario.name}: " + ("no path" if not found else

@@ -1,12 +1,11 @@
 """``sbmpc run``: receding-horizon execution of a scenario by a simulated true vehicle."""
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError, NoResult
-from .files import Outputs, atomic, scenario_inputs, write_text
+from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 from .plan import Progress, _world, add_backend_flags, compile_note
 
 
@@ -17,15 +16,15 @@ def add_parsers(sub):
                        "measured state when it leaves the tolerance around the prediction (or every period). "
                        "Prints predicted vs executed time and energy and the re-plans. Exit code 1 when the run "
                        "fails to reach the goal.")
-    r.add_argument("scenario", type=Path, help="scenario YAML file")
+    r.add_argument("scenario", type=path_arg, help="scenario YAML file")
     r.add_argument("--truth", help="the vehicle that really drives: a shipped name or a vehicle YAML "
                    "(e.g. the extended vehicle of sbmpc diagnose); default: the planning vehicle")
     r.add_argument("--vehicle", help="the vehicle the planner plans with (default: the scenario's)")
     r.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
     r.add_argument("--trigger", choices=("tolerance", "every"), help="when to re-plan (default: the scenario's "
                    "run.trigger, else tolerance)")
-    r.add_argument("--json", type=Path, help="write the run JSON (schema sbmpc.run/1) here")
-    r.add_argument("--rrd", type=Path, help="write a rerun recording (.rrd) here")
+    r.add_argument("--json", type=path_arg, help="write the run JSON (schema sbmpc.run/1) here")
+    r.add_argument("--rrd", type=path_arg, help="write a rerun recording (.rrd) here")
     r.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     add_backend_flags(r)
     r.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
@@ -70,9 +69,9 @@ def run_run(args) -> int:
     outs.file(args.rrd, "--rrd")
     world = _world(args)
     base = world.scenario.base
-    if args.vehicle:
+    if args.vehicle is not None:
         world = replace(world, vehicle=_vehicle(args.vehicle, "--vehicle", Path(".")))
-    truth = _vehicle(args.truth, "--truth", Path(".")) if args.truth else None
+    truth = _vehicle(args.truth, "--truth", Path(".")) if args.truth is not None else None
     settings = world.scenario.run
     if args.trigger:
         settings = replace(settings, trigger=args.trigger)
@@ -84,7 +83,7 @@ def run_run(args) -> int:
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost))
     print(summary(res))
     if args.json:
-        write_text(args.json, json.dumps(res.to_json(), indent=1))
+        write_json(args.json, res.to_json())
     if args.rrd:
         with atomic(args.rrd) as tmp:
             recording.write_run(tmp, world.emap, res, app=f"sbmpc run {world.scenario.name}",

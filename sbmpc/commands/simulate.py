@@ -1,14 +1,12 @@
 """``sbmpc simulate``: run one manoeuvre through the closed-loop (or open-loop) model."""
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
-from .files import Outputs, atomic, write_text
+from .files import Outputs, atomic, path_arg, write_json
 
 
 def add_parser(sub):
@@ -29,8 +27,8 @@ def add_parser(sub):
     p.add_argument("--dt", type=float, help="integration step [s] (default: the controller period, 1 ms)")
     p.add_argument("--open-loop", action="store_true",
                    help="drive the open-loop model (no PID, paper Fig. 16) with the current profile the closed loop applies")
-    p.add_argument("--json", type=Path, help="write the trajectory JSON here")
-    p.add_argument("--plot", type=Path, help="write a PNG of speeds, torques, power and path here")
+    p.add_argument("--json", type=path_arg, help="write the trajectory JSON here")
+    p.add_argument("--plot", type=path_arg, help="write a PNG of speeds, torques, power and path here")
     p.set_defaults(func=run)
     return p
 
@@ -132,7 +130,7 @@ def run(args) -> int:
         doc = {"schema": "sbmpc.simulate/1", "manoeuvre": manoeuvre, "vehicle": model.vehicle.name,
                "terrain": model.terrain.name, "open_loop": bool(args.open_loop), "dt_s": dt,
                "stalled": traj.stalled, **info, "summary": summary, "trajectory": traj.to_json()}
-        write_text(args.json, json.dumps(doc, indent=1))
+        write_json(args.json, doc)
     if args.plot:
         from ..figures import plot_trajectory
         with atomic(args.plot) as tmp:

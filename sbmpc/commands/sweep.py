@@ -3,10 +3,9 @@ command, on Ray (:mod:`sbmpc.sweep`)."""
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 from ..errors import InputError
-from .files import Outputs
+from .files import Outputs, path_arg
 
 
 def add_parsers(sub):
@@ -16,8 +15,8 @@ def add_parsers(sub):
                        "vehicles drawn from parameter distributions; rows stream into DIR/results.parquet, a summary "
                        "table is printed and DIR/summary.png drawn. Runs on Ray when it is installed "
                        "(pip install 'sbmpc[sweep]'), else one task after another.")
-    s.add_argument("spec", type=Path, help="sweep spec YAML file")
-    s.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
+    s.add_argument("spec", type=path_arg, help="sweep spec YAML file")
+    s.add_argument("--out", type=path_arg, required=True, help="output folder (created if missing)")
     s.add_argument("--workers", type=int, default=0, help="Ray workers on this machine (default: every core)")
     s.add_argument("--address", help="address of a running Ray cluster (default: start Ray on this machine)")
     s.add_argument("--resume", action="store_true", help="skip the tasks whose rows are already in --out")
