@@ -78,7 +78,10 @@ def _origin(spec, where):
 def read_png_heights(path: Path, zmin: float, zmax: float) -> np.ndarray:
     """Heights [m] from a greyscale (or colour: mean of RGB) PNG, row 0 = largest y."""
     import matplotlib.image as mpimg
+    from PIL import Image
     try:
+        with Image.open(path) as im:      # a file cut short (no image data) read as zeros: a flat map
+            im.verify()
         img = mpimg.imread(str(path))
     except (OSError, SyntaxError, ValueError) as exc:
         raise MapError(f"{path}: expected a PNG image, found a file that cannot be read as one ({exc})") from None
@@ -136,9 +139,12 @@ def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
     res = _number(spec, "resolution", where, positive=True)
     origin = _origin(spec, where)
     if path.suffix.lower() == ".npy":
+        if "height_range" in spec:
+            raise MapError(f"{where}.height_range: expected only with a PNG map (a .npy holds heights in metres), "
+                           "found it with '.npy'")
         try:
             H = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
+        except (ValueError, OSError, EOFError) as exc:
             raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
     elif path.suffix.lower() == ".png":
         hr = spec.get("height_range")
@@ -171,12 +177,32 @@ def _read_tif(path: Path) -> tuple:
         raise MapError(f"{path}: expected a GeoTIFF, found a file that cannot be read as one ({exc})") from None
 
 
+def _linear_units(crs):
+    """(unit name, metres per unit) of a projected CRS, or None where it says none."""
+    if crs is None:
+        return None
+    try:
+        name, factor = crs.linear_units_factor
+        return str(name), float(factor)
+    except Exception:               # (rasterio's CRSError: no linear units to read)
+        return None
+
+
 def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
     """(heights with row 0 = south, resolution [m], origin) of a GeoTIFF (module doc)."""
     band, tr, crs = _read_tif(path)
+    if "height_range" in spec:
+        raise MapError(f"{where}.height_range: expected only with a PNG map (a GeoTIFF holds heights in metres), "
+                       f"found it with '{path.suffix}'")
     if crs is not None and crs.is_geographic:
         raise MapError(f"{path}: expected a projected CRS in metres, found {crs.to_string()} (degrees): "
                        "reproject the DEM first (e.g. gdalwarp -t_srs to a UTM zone)")
+    units = _linear_units(crs)
+    if units is not None and not math.isclose(units[1], 1.0, rel_tol=1e-9):
+        raise MapError(f"{path}: expected a projected CRS in metres, found {crs.to_string()} in {units[0]} "
+                       f"({units[1]:g} m): reproject the DEM to metres first (e.g. gdalwarp -t_srs to a UTM zone)")
+    if np.iscomplexobj(band) or band.dtype == bool or not np.issubdtype(band.dtype, np.number):
+        raise MapError(f"{path}: expected real heights, found a band of {band.dtype}")
     if tr.b != 0.0 or tr.d != 0.0 or not math.isclose(tr.a, -tr.e, rel_tol=1e-6) or tr.a <= 0:
         raise MapError(f"{path}: expected square, north-up pixels, found the transform {tuple(tr)[:6]}")
     res = float(tr.a)
@@ -209,7 +235,7 @@ def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "t
     if suf == ".npy":
         try:
             C = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as exc:
+        except (ValueError, OSError, EOFError) as exc:
             raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
     elif suf == ".png":
         from PIL import Image
@@ -226,6 +252,8 @@ def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "t
         raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
     if C.ndim != 2 or tuple(C.shape) != tuple(shape):
         raise MapError(f"{path}: expected classes on the map's grid, {shape[0]} x {shape[1]} cells, found shape {C.shape}")
+    if C.dtype == bool or not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
+        raise MapError(f"{path}: expected integer classes, found an array of {C.dtype}")
     if not np.issubdtype(C.dtype, np.integer):
         if not (np.all(np.isfinite(C)) and np.all(C == np.round(C))):
             raise MapError(f"{path}: expected integer classes, found {C.dtype} values with fractions or NaN")

@@ -165,3 +165,30 @@ def test_geotiff_nodata_and_degrees_are_handled(tmp_path):
     _geotiff(tmp_path / "geo.tif", np.ones((4, 4)), x0=10.0, y_top=50.0, res=0.001, crs="EPSG:4326")
     with pytest.raises(MapError, match="projected CRS in metres"):
         load_map({"file": "geo.tif"}, tmp_path)
+
+
+def test_maps_in_feet_cut_short_or_of_the_wrong_kind_are_refused(tmp_path):
+    """A DEM in US survey feet was planned as if in metres, a PNG cut after its header
+    read as a flat map, an empty .npy and a class raster of text ended in exit 3, and a
+    height range beside a GeoTIFF or a .npy was silently ignored."""
+    from PIL import Image
+    from maps.io import load_class_raster
+    _geotiff(tmp_path / "feet.tif", np.ones((4, 4)), x0=6_000_000.0, y_top=2_000_000.0, res=3.0, crs="EPSG:2227")
+    with pytest.raises(MapError, match=r"expected a projected CRS in metres, found .* in US survey foot \(0.3048"):
+        load_map({"file": "feet.tif"}, tmp_path)
+    _geotiff(tmp_path / "m.tif", np.ones((4, 4)))
+    with pytest.raises(MapError, match="map.height_range: expected only with a PNG map"):
+        load_map({"file": "m.tif", "height_range": [0, 5]}, tmp_path)
+    np.save(tmp_path / "h.npy", np.zeros((4, 4)))
+    with pytest.raises(MapError, match="map.height_range: expected only with a PNG map"):
+        load_map({"file": "h.npy", "resolution": 1, "height_range": [0, 5]}, tmp_path)
+    Image.fromarray(np.arange(1600, dtype=np.uint8).reshape(40, 40)).save(tmp_path / "full.png")
+    (tmp_path / "cut.png").write_bytes((tmp_path / "full.png").read_bytes()[:60])
+    with pytest.raises(MapError, match="expected a PNG image, found a file that cannot be read as one"):
+        load_map({"file": "cut.png", "resolution": 1, "height_range": [0, 1]}, tmp_path)
+    (tmp_path / "empty.npy").write_bytes(b"")
+    with pytest.raises(MapError, match="expected a NumPy .npy array"):
+        load_map({"file": "empty.npy", "resolution": 1}, tmp_path)
+    np.save(tmp_path / "text.npy", np.full((4, 4), "grass"))
+    with pytest.raises(MapError, match="expected integer classes, found an array of <U5"):
+        load_class_raster("text.npy", tmp_path, (4, 4))
