@@ -66,9 +66,9 @@ def lemniscate(model: Model, t0: float = 0.0, duration: float = 18.0, run_up: fl
     """The paper's Section V-C test: accelerate at the reference rate limit to the initial
     speed during ``run_up`` seconds, then follow eqs. 29, 30 from time t0 for ``duration``
     seconds through the inverse kinematic model with the terrain's alpha (Fig. 8)."""
-    dt = model.step_s if dt is None else dt
+    dt, n = _steps(model, duration, dt)
     veh = model.vehicle
-    t = t0 + np.arange(int(round(duration / dt))) * dt
+    t = t0 + np.arange(max(n, 1)) * dt          # (at least one step: a duration under dt/2 rounds to none)
     v, kappa, _ = lemniscate_reference(t)
     wl, wr = wheel_speeds(v, kappa, veh.wheel_radius, veh.width, model.terrain.alpha)
     n_up = int(round(run_up / dt))

@@ -62,11 +62,20 @@ def test_open_loop_option_drives_the_closed_loops_current_profile(tmp_path):
     (["simulate", "--v", "1", "--slope-deg", "80", "--v0", "0.5", "--length", "2"], "--slope-deg"),
     (["simulate", "--v", "1", "--duration", "-1"], "--duration"),
     (["simulate", "--v", "1", "--json", "/no/such/dir/x.json"], "--json"),
+    (["simulate", "--v", "1", "--slope-deg", "10", "--v0", "1", "--length", "1e300"], "--length: expected a length in (0, 10000]"),
+    (["simulate", "--v", "1", "--slope-deg", "60", "--v0", "1", "--length", "1"], "strictly between -60 and 60"),
+    (["simulate", "--v", "1", "--dt", "2"], "--dt: expected a step between"),
 ])
 def test_bad_options_exit_2_with_one_line(argv, words, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert words in err and "\n" not in err and "Traceback" not in err
+
+
+def test_a_lemniscate_shorter_than_one_step_still_runs(capsys):
+    """--duration under half a step rounded the lemniscate to no steps (an IndexError, exit 3)."""
+    assert main(["simulate", "--lemniscate", "--dt", "0.05", "--duration", "0.001"]) == 0
+    assert "lemniscate on vinyl" in capsys.readouterr().out
 
 
 def test_unknown_option_and_module_entry():

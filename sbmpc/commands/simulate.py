@@ -83,8 +83,8 @@ def run(args) -> int:
         length = _need(args.length, "--length", "a ramp length in metres")
         if not -60 < slope < 60:
             raise InputError(f"--slope-deg: expected a grade strictly between -60 and 60 degrees, found {slope}")
-        if length <= 0:
-            raise InputError(f"--length: expected a positive length in metres, found {length}")
+        if not 0 < length <= 10_000:
+            raise InputError(f"--length: expected a length in (0, 10000] metres, found {length:g}")
         if abs(v0) > 20:
             raise InputError(f"--v0: expected a speed of at most 20 m/s in magnitude, found {v0}")
         traj, crossed, t_top = ramp_run(model, v, v0, slope, length, args.duration or 20.0, dt)
