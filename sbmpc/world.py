@@ -54,9 +54,11 @@ class World:
         return Model(self.vehicle, self.terrain_at(x, y), self.scenario.planner.dt)
 
 
-def resolve(scn: Scenario) -> World:
+def resolve(scn: Scenario, given: dict | None = None) -> World:
     """Load the map, vehicle and terrains of a scenario; one InputError listing every
-    problem (map, vehicle, each terrain, start and goal) at once."""
+    problem (map, vehicle, each terrain, start and goal) at once. ``given`` names where
+    a key's value came from when not from the file (``{"start": "--start"}``)."""
+    given = given or {}
     src = str(scn.path) if scn.path else scn.name
     problems = []
     emap = vehicle = None
@@ -105,11 +107,11 @@ def resolve(scn: Scenario) -> World:
     m = world.margin
     for key, p in (("start", scn.start), ("goal", scn.goal)):
         if not emap.contains(p["x"], p["y"], m):
-            problems.append(f"{key}: expected (x, y) at least {math.ceil(m * 1000) / 1000:.3f} m inside the map "
+            problems.append(f"{key}{' (' + given[key] + ')' if key in given else ''}: expected (x, y) at least {math.ceil(m * 1000) / 1000:.3f} m inside the map "
                             f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
     s, g = scn.start, scn.goal
     if not problems and math.hypot(s["x"] - g["x"], s["y"] - g["y"]) <= g["radius"]:
-        problems.append(f"start: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
+        problems.append(f"start{' (' + given['start'] + ')' if 'start' in given else ''}: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
                         f"{g['radius']:g} m), found ({s['x']:g}, {s['y']:g}) inside it: nothing to plan")
     if scn.cost == "energy" and vehicle.regen:
         problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")

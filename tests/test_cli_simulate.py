@@ -72,6 +72,18 @@ def test_bad_options_exit_2_with_one_line(argv, words, capsys):
     assert words in err and "\n" not in err and "Traceback" not in err
 
 
+def test_negative_values_need_no_equals_sign(capsys):
+    """argparse took '-1e3' (and '-1,3') for an option and refused it; such values of the
+    signed options are read as values."""
+    assert main(["simulate", "--v", "0.3", "--radius", "-1e3", "--duration", "1"]) == 0
+    assert "radius_m               -1000" in capsys.readouterr().out
+    from pathlib import Path
+    flat = Path(__file__).resolve().parents[1] / "scenarios" / "flat.yaml"
+    assert main(["plan", str(flat), "--start", "-1,3"]) == 2
+    err = capsys.readouterr().err
+    assert "start (--start): expected (x, y) at least" in err and "found (-1, 3)" in err
+
+
 def test_a_lemniscate_shorter_than_one_step_still_runs(capsys):
     """--duration under half a step rounded the lemniscate to no steps (an IndexError, exit 3)."""
     assert main(["simulate", "--lemniscate", "--dt", "0.05", "--duration", "0.001"]) == 0

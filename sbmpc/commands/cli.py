@@ -85,12 +85,30 @@ def _broken_install(exc: ImportError) -> str:
     return f"the installation is incomplete: {exc} (install again: pip install -e .)"
 
 
+SIGNED = ("--start", "--goal", "--radius", "--v", "--v0", "--slope-deg")   # options whose value may be negative
+
+
+def _negative_values(argv: list) -> list:
+    """``--start -1,3`` as ``--start=-1,3``: argparse takes a value that starts with '-'
+    and is not a plain number (a list, an exponent) for an option and refuses it."""
+    out, i = [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a in SIGNED and i + 1 < len(argv) and re.match(r"-\.?\d", argv[i + 1]):
+            out.append(f"{a}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(a)
+            i += 1
+    return out
+
+
 def main(argv=None) -> int:
     """Run one command. Exit codes: 0 done, 1 no result (no path, a failed run), 2 bad
     input (one line saying which file, key or flag, what was expected and what was
     found), 3 an internal error (one line; ``--debug`` shows the traceback), 130
     interrupted."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _negative_values(list(sys.argv[1:] if argv is None else argv))
     debug = "--debug" in argv
     if debug:
         argv.remove("--debug")

@@ -99,7 +99,8 @@ def _world(args):
     note = device_note(scn.planner)
     if note:
         print(f"note: {note}", file=sys.stderr)
-    world = WO.resolve(scn)
+    given = {key: f"--{key}" for key in ("start", "goal") if getattr(args, key, None) is not None}
+    world = WO.resolve(scn, given)
     _, limit = WO.capability(world)
     if limit:
         print(f"note: {limit}", file=sys.stderr)

@@ -17,8 +17,7 @@ def add_parser(sub):
     p.add_argument("--vehicle", default="p3at", help="shipped vehicle name or YAML path (default p3at)")
     p.add_argument("--terrain", default="vinyl", help="shipped terrain name or YAML path (default vinyl)")
     p.add_argument("--v", type=float, help="desired speed [m/s]")
-    p.add_argument("--radius", type=float, help="commanded turning radius [m], positive turns left (a negative "
-                   "one with an exponent takes '=': --radius=-1e3)")
+    p.add_argument("--radius", type=float, help="commanded turning radius [m], positive turns left")
     p.add_argument("--slope-deg", type=float, help="ramp grade [deg]")
     p.add_argument("--v0", type=float, help="speed entering the ramp [m/s]")
     p.add_argument("--length", type=float, help="ramp length along the slope [m]")
