@@ -76,7 +76,7 @@ def scenario() -> dict:
 def _trajectory() -> dict:
     from .trajectory import TRAJECTORY_KEYS
     return _obj({k: {"type": "array", "items": NUM} for k in TRAJECTORY_KEYS},
-                ("t", "x", "y", "z", "yaw", "v", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"))
+                ("t", "x", "y", "z", "yaw", "v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J"))
 
 
 def plan() -> dict:
@@ -122,7 +122,15 @@ def compare() -> dict:
 
 
 def run() -> dict:
-    pe = _obj({"travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL, "length_m": NUM_OR_NULL})
+    from .plan import FAILURES
+    pe = _obj({"travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL, "length_m": NUM_OR_NULL},
+              ("travel_time_s", "energy_J"))
+    row = _obj({"t": NUM, "x": NUM, "y": NUM, "why": {"type": "string"}, "status": {"enum": ["found", "no_path"]},
+                "reason": STR_OR_NULL, "failure": {"enum": [*FAILURES, None]}, "planning_time_s": NUM,
+                "nodes_expanded": {"type": "integer"}, "predicted_travel_time_s": NUM_OR_NULL,
+                "predicted_energy_J": NUM_OR_NULL, "controls": {"type": "integer"}, "warm_start": {"type": "boolean"},
+                "goal_radius_m": NUM, "found_by": STR_OR_NULL, "rival": {"type": ["object", "null"]}},
+               ("t", "x", "y", "why", "status", "planning_time_s", "nodes_expanded", "controls"))
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": "sbmpc.run/1", "title": "sbmpc run JSON",
             **_obj({"schema": {"const": "sbmpc.run/1"}, "scenario": {"type": "string"}, "cost": {"enum": ["time", "energy"]},
                     "vehicle": {"type": "string"}, "truth": {"type": "string"},
@@ -131,9 +139,15 @@ def run() -> dict:
                     "energy_J": NUM_OR_NULL, "predicted": pe, "executed": pe,
                     "prediction_error": _obj({"travel_time": NUM_OR_NULL, "energy": NUM_OR_NULL}),
                     "stalls": {"type": "integer"}, "periods": {"type": "integer"},
-                    "trigger": {"enum": ["tolerance", "every"]}},
+                    "trigger": {"enum": ["tolerance", "every"]},
+                    "first_planning_time_s": NUM_OR_NULL, "replan_time_s": {"type": "array", "items": NUM},
+                    "tolerance": _obj({"xy_m": NUM, "yaw_deg": NUM, "v_m_s": NUM}),
+                    "warm_start": {"type": "string"},
+                    "plans": {"type": "array", "items": row},
+                    "trajectory": {"oneOf": [_trajectory(), {"type": "object", "maxProperties": 0}]}},
                    ("schema", "scenario", "cost", "vehicle", "truth", "status", "reason", "replans",
-                    "travel_time_s", "energy_J", "predicted", "executed"))}
+                    "planning_time_s", "travel_time_s", "energy_J", "predicted", "executed", "stalls", "periods",
+                    "trigger", "plans", "trajectory"))}
 
 
 def diagnosis() -> dict:

@@ -83,7 +83,14 @@ def test_outputs_validate(tmp_path, capsys):
     assert main(["compare", str(SCEN / "runup_ramp.yaml"), "--out", str(tmp_path / "c"), "--quiet"]) == 0
     valid("compare", json.loads((tmp_path / "c" / "compare.json").read_text()))
     assert main(["run", str(SCEN / "flat.yaml"), "--json", str(tmp_path / "r.json"), "--quiet"]) == 0
-    valid("run", json.loads((tmp_path / "r.json").read_text()))
+    r = json.loads((tmp_path / "r.json").read_text())
+    valid("run", r)
+    import jsonschema                       # the contract's keys are required, not just allowed
+    from sbmpc.schemas import run as run_schema
+    for broken in ({k: v for k, v in r.items() if k != "trajectory"}, {k: v for k, v in r.items() if k != "planning_time_s"},
+                   dict(r, plans="garbage"), dict(r, trajectory={k: v for k, v in r["trajectory"].items() if k != "yaw_rate"})):
+        with pytest.raises(jsonschema.ValidationError):
+            jsonschema.validate(broken, run_schema())
     assert main(["synth", "--effect", "none", "--duration", "20", "--out", str(tmp_path / "s.csv")]) == 0
     assert main(["diagnose", str(tmp_path / "s.csv"), "--json", str(tmp_path / "d.json")]) == 0
     valid("diagnosis", json.loads((tmp_path / "d.json").read_text()))
