@@ -77,7 +77,10 @@ def _num(d, key, path, positive=False, limit=COORD):
     v = d[key]
     want = f"a number in (0, {limit:g}]" if positive else f"a number in [{-limit:g}, {limit:g}]"
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not -limit <= v <= limit or (positive and v <= 0):
-        found = f"{v:.6g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{v!r:.60}"
+        if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 10 ** 30:
+            found = f"an integer of {len(str(abs(v)))} digits"
+        else:
+            found = f"{v:.6g}" if isinstance(v, (int, float)) and not isinstance(v, bool) else f"{v!r:.60}"
         raise GeneratorError(f"{path}.{key}: expected {want}, found {found}{text_number_hint(v)}")
     return float(v)
 
