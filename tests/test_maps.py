@@ -192,3 +192,30 @@ def test_maps_in_feet_cut_short_or_of_the_wrong_kind_are_refused(tmp_path):
     np.save(tmp_path / "text.npy", np.full((4, 4), "grass"))
     with pytest.raises(MapError, match="expected integer classes, found an array of <U5"):
         load_class_raster("text.npy", tmp_path, (4, 4))
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+_ANY = st.one_of(st.none(), st.booleans(), st.integers(-10**40, 10**40), st.floats(allow_nan=True, allow_infinity=True),
+                 st.text(max_size=6), st.lists(st.floats(-1e3, 1e3), max_size=3))
+_FEATURE = st.fixed_dictionaries({"type": st.sampled_from(["hill", "plateau", "ramp", "ridge", "valley", "random_hills"])},
+                                 optional={k: _ANY for k in ("x", "y", "x0", "y0", "x1", "y1", "height", "depth",
+                                                             "radius", "edge", "width", "count")})
+
+
+@settings(max_examples=300, deadline=None)
+@given(top=st.dictionaries(st.sampled_from(["size", "resolution", "origin", "seed", "base", "name", "seeds"]), _ANY,
+                           max_size=4),
+       features=st.lists(_FEATURE, max_size=3))
+def test_any_generator_description_gives_a_finite_map_or_one_named_error(top, features):
+    """Random descriptions around a valid one (10 m x 8 m at 0.5 m): either a map of
+    finite heights or a GeneratorError naming a key under map.generate, never another
+    exception (an overflow, an IndexError or NaN heights were exit 3 or a flat map)."""
+    from maps.generate import GeneratorError
+    desc = {"size": [10, 8], "resolution": 0.5, **top, "features": features}
+    try:
+        m = generate(desc)
+    except GeneratorError as exc:
+        assert str(exc).startswith("map.generate") and "\n" not in str(exc)
+        return
+    assert np.isfinite(m.heights).all() and min(m.heights.shape) >= 2
