@@ -35,9 +35,11 @@ def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> fl
     tau = available_torque(vehicle, omega)
     if tau <= required_torque(vehicle, terrain, 0.0, omega):
         return -1.0
-    if tau >= required_torque(vehicle, terrain, 0.5 * math.pi, omega):
+    # sin b + mu cos b, what the grade asks, is largest at tan b = 1 / mu (short of 90 deg)
+    peak = math.atan2(1.0, terrain.mu_roll)
+    if tau >= required_torque(vehicle, terrain, peak, omega):
         return 0.5 * math.pi
-    return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, math.pi / 2)
+    return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, peak)
 
 
 def steepest_braked_grade(vehicle: Vehicle, terrain: Terrain, omega: float) -> float:

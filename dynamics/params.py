@@ -327,6 +327,9 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
         return _from_mapping(cls, spec, f"<{kind[:-1]} mapping>", True, kind, base, depth)
     spec_s = str(spec)
     shipped = _shipped(kind)
+    if not spec_s:
+        raise ParameterError(f"{kind[:-1]}: expected a shipped name ({', '.join(sorted(shipped))}) or a path to a "
+                             "YAML file, found an empty string")
     if spec_s in shipped:
         return _from_mapping(cls, _read_yaml(shipped[spec_s]), str(shipped[spec_s]), True, kind, depth=depth)
     path = Path(spec_s)

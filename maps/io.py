@@ -252,7 +252,9 @@ def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "t
         raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
     if C.ndim != 2 or tuple(C.shape) != tuple(shape):
         raise MapError(f"{path}: expected classes on the map's grid, {shape[0]} x {shape[1]} cells, found shape {C.shape}")
-    if C.dtype == bool or not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
+    if C.dtype == bool:                   # a 1-bit PNG or a mask: classes 0 and 1
+        C = C.astype(np.int64)
+    if not np.issubdtype(C.dtype, np.number) or np.iscomplexobj(C):
         raise MapError(f"{path}: expected integer classes, found an array of {C.dtype}")
     if not np.issubdtype(C.dtype, np.integer):
         if not (np.all(np.isfinite(C)) and np.all(C == np.round(C))):

@@ -52,9 +52,13 @@ def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **
     Scenario built or changed in code is checked as its file would be), with an optional
     heights array for its map (``origin`` None: (0, 0)) and planner overrides."""
     from . import scenario as SC
+    from dynamics import Vehicle
+    vehicle = None
     if isinstance(scenario, SC.Scenario):
         data = SC.to_data(scenario)
         src, path = str(scenario.path or f"<scenario {scenario.name!r:.40}>"), scenario.path
+        if isinstance(scenario.vehicle, Vehicle):      # a vehicle object (validated when it was made) is kept
+            vehicle, data["vehicle"] = scenario.vehicle, scenario.vehicle.name or "vehicle"
     elif isinstance(scenario, dict):
         data, src, path = dict(scenario), "<scenario dict>", None
     elif isinstance(scenario, (str, Path)):
@@ -68,6 +72,8 @@ def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **
         if heights is not None:      # (a stand-in for validation; the array replaces it below)
             data["map"] = {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0}
         scn = SC.parse(data, src, path)
+        if vehicle is not None:
+            scn = replace(scn, vehicle=vehicle)
     if heights is not None:
         if resolution is None:
             raise InputError("resolution: expected the cell size in metres of the heights array, found None")

@@ -171,7 +171,7 @@ class Scenario:
     name: str
     map_spec: dict
     terrain: object            # str (name or path) or {"default": str, "regions": [Region]}
-    vehicle: str
+    vehicle: object            # str (name or path), or a dynamics.Vehicle built in code
     start: dict
     goal: dict
     cost: str = "time"
@@ -454,14 +454,14 @@ def to_data(scn: Scenario) -> dict:
     """The scenario-file mapping of a :class:`Scenario` (what :func:`parse` reads back to
     an equal value): a Scenario built or changed in code is validated by parsing this."""
     terrain = scn.terrain
-    if isinstance(terrain, dict):
+    if isinstance(terrain, dict) and isinstance(terrain.get("regions"), (list, tuple)):
         regions = []
-        for r in terrain.get("regions", []):
+        for r in terrain["regions"]:
             if isinstance(r, Region):
                 coords = [list(p) for p in r.coords] if r.kind == "polygon" else list(r.coords)
                 r = {"terrain": r.terrain, r.kind: coords}
             regions.append(r)
-        terrain = {**terrain, "regions": regions}
+        terrain = {**terrain, "regions": regions}      # (anything else: parse names it)
     planner = scn.planner
     if dataclasses.is_dataclass(planner) and not isinstance(planner, type):
         planner = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(planner).items()

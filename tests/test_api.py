@@ -75,6 +75,11 @@ def test_a_scenario_object_is_checked_as_its_file_would_be():
         with pytest.raises(InputError, match=says):
             sbmpc.load_scenario(bad)
     assert sbmpc.load_scenario(replace(scn, start={"x": 2.0, "y": 2.0})).start == {"x": 2.0, "y": 2.0, "yaw_deg": 0.0, "v": 0.0}
+    from dynamics import load_vehicle                # a Vehicle object in the Scenario is kept, as resolve takes it
+    heavy = load_vehicle("p3at").replace(mass=40.0)
+    assert sbmpc.load_world(replace(scn, vehicle=heavy)).vehicle.mass == 40.0
+    with pytest.raises(InputError, match="terrain.regions: expected a list"):
+        sbmpc.load_scenario(replace(scn, terrain={"default": "vinyl", "regions": None}))
 
 
 def test_numpy_numbers_are_numbers_and_bad_python_arguments_are_named():

@@ -30,9 +30,13 @@ def test_a_command_beyond_the_drive_is_noted(capsys):
     commanded, with no note."""
     assert main(["simulate", "--v", "1.0", "--radius", "2", "--duration", "5"]) == 0
     out = capsys.readouterr().out
-    assert "note: the drive ends short of the commanded wheel speeds" in out and "right 8.2" in out
-    assert main(["simulate", "--v", "0.6", "--radius", "2", "--duration", "5"]) == 0
-    assert "note:" not in capsys.readouterr().out
+    assert "note: the drive stays short of the commanded wheel speeds" in out and "right 8.2" in out
+    for argv in (["--v", "0.6", "--radius", "2", "--duration", "5"],      # reached
+                 ["--v", "0.5", "--duration", "0.3"],                     # still accelerating: no verdict
+                 ["--v", "0.5", "--radius", "1", "--duration", "0.5"],    # overshoot is not short
+                 ["--v", "0.3", "--duration", "0.0004"]):                # under half a step: no steps (was exit 3)
+        assert main(["simulate", *argv]) == 0
+        assert "note:" not in capsys.readouterr().out, argv
 
 
 def test_ramp_reports_crossing_and_stall(tmp_path):

@@ -143,6 +143,16 @@ def test_a_vehicle_whose_drive_holds_any_grade_is_limited_by_none():
     assert 0.5 < beta < math.pi / 2
     from dynamics.limits import available_torque, required_torque
     assert required_torque(heavy, m.terrain, beta, 0.0) == pytest.approx(available_torque(heavy, 0.0), rel=1e-9)
+    # sin b + mu cos b peaks before 90 deg (at tan b = 1 / mu): a drive that holds a wall
+    # may still fail below it, so the peak, not 90 deg, decides whether no grade limits it
+    grass = m.terrain.replace(mu_roll=0.2)
+    wall = 2 * light.continuous_torque / (light.wheel_radius * 9.81) / 1.01     # mass that just holds 90 deg
+    nearly = light.replace(mass=wall)
+    assert required_torque(nearly, grass, math.pi / 2, 0.0) < available_torque(nearly, 0.0)
+    peak = math.atan(1 / 0.2)
+    assert required_torque(nearly, grass, peak, 0.0) > available_torque(nearly, 0.0)
+    beta = steepest_grade(nearly, grass)
+    assert beta < peak and required_torque(nearly, grass, beta, 0.0) == pytest.approx(available_torque(nearly, 0.0))
 
 
 def test_integral_does_not_wind_up_while_saturated(vinyl):

@@ -189,6 +189,8 @@ def test_maps_in_feet_cut_short_or_of_the_wrong_kind_are_refused(tmp_path):
     (tmp_path / "empty.npy").write_bytes(b"")
     with pytest.raises(MapError, match="expected a NumPy .npy array"):
         load_map({"file": "empty.npy", "resolution": 1}, tmp_path)
+    np.save(tmp_path / "mask.npy", np.eye(4, dtype=bool))              # a boolean mask is classes 0 and 1
+    assert load_class_raster("mask.npy", tmp_path, (4, 4)).tolist() == np.eye(4, dtype=int).tolist()
     np.save(tmp_path / "text.npy", np.full((4, 4), "grass"))
     with pytest.raises(MapError, match="expected integer classes, found an array of <U5"):
         load_class_raster("text.npy", tmp_path, (4, 4))

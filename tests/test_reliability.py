@@ -106,6 +106,13 @@ def test_a_pipe_is_written_into_and_a_reader_that_leaves_changes_nothing(work):
     assert main(["simulate", "--v", "0.5", "--duration", "1", "--json", str(fifo)]) == 0
     reader.join(30)
     assert stat.S_ISFIFO(fifo.stat().st_mode) and '"schema": "sbmpc.simulate/1"' in got[0]
+    from sbmpc.commands.files import Outputs, atomic
+    assert Outputs().file(fifo, "--json") == fifo          # a pipe needs no writable folder, as /dev/null
+    Outputs().file(Path(os.devnull), "--json")
+    from sbmpc.errors import InputError
+    with pytest.raises(InputError, match="the reader of the pipe went away"):   # a failed write is exit 2, not
+        with atomic(fifo):                                                       # stdout's reader leaving (exit 0)
+            raise BrokenPipeError(32, "Broken pipe")
     out = work / "u.json"
     p = subprocess.Popen([sys.executable, "-m", "sbmpc", "plan", str(SCEN / "unreachable.yaml"), "--json", str(out)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)

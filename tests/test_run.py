@@ -209,3 +209,23 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     # the two searches of a re-plan share its budget: half for the inner disc, the rest after
     rb = flat.scenario.run.replan_time_budget_s
     assert budgets[1] == pytest.approx(0.5 * rb) and budgets[2] == pytest.approx(rb - 5.0)
+
+
+def test_a_failed_replan_row_says_drove_on_only_when_the_run_went_on():
+    """A re-plan that finds nothing keeps the previous plan for a period; the summary said
+    so even when that failure ended the run (the last row then contradicted it)."""
+    from types import SimpleNamespace
+    from sbmpc.commands.run import summary
+    row = {"t": 5.0, "why": "left the tolerance", "status": "no_path", "reason": "exhausted", "found_by": None,
+           "goal_radius_m": 0.4}
+    first = dict(row, t=0.0, status="found", why="start", goal_radius_m=0.5)
+
+    def res(status, plans):
+        doc = {"predicted": {"travel_time_s": None}, "executed": {"travel_time_s": None}, "replan_time_s": [1.0],
+               "replans": len(plans) - 1, "trigger": "tolerance", "stalls": 0, "periods": 5, "planning_time_s": 2.0,
+               "first_planning_time_s": 1.0, "plans": plans}
+        return SimpleNamespace(to_json=lambda: doc, scenario="s", cost="time", vehicle="p3at", truth="p3at",
+                               status=status, reason=None)
+    assert "(drove on with the previous plan)" not in summary(res("failed", [first, row]))
+    assert "exhausted (drove on with the previous plan)" in summary(res("reached", [first, row]))
+    assert summary(res("failed", [first, row, dict(row, t=6.0)])).count("(drove on with the previous plan)") == 1

@@ -40,6 +40,14 @@ def _is_file(p) -> bool:
         return False
 
 
+def _special(path: Path) -> bool:
+    """Whether ``path`` exists and is neither a regular file nor a folder (a device, a pipe)."""
+    try:
+        return path.exists() and not path.is_file() and not path.is_dir()
+    except OSError:
+        return False
+
+
 def _same(a: Path, b: Path) -> bool:
     try:
         return a.exists() and b.exists() and os.path.samefile(a, b)
@@ -79,6 +87,10 @@ class Outputs:
         path = Path(path)
         if path.is_dir():
             raise InputError(f"{flag}: expected a file path, found the folder '{path}'")
+        if _special(path):                # /dev/null, a FIFO: written into, in a folder we need not write
+            if not os.access(path, os.W_OK):
+                raise InputError(f"{flag}: cannot write into '{path}' (permission denied)")
+            return path
         parent = path.parent
         if not parent.exists():
             raise InputError(f"{flag}: expected a path in an existing folder, found '{path}' (no folder '{parent}')")
@@ -134,12 +146,11 @@ def _bases(path: Path, depth: int = 0) -> list[Path]:
     b = doc.get("base") if isinstance(doc, dict) else None
     if not isinstance(b, str) or not b:
         return []
-    out = []
-    for cand in (path.parent / b, path.parent / f"{b}.yaml"):
-        if _is_file(cand):
-            out += [cand] + _bases(cand, depth + 1)
-            break
-    return out
+    from dynamics.params import _shipped
+    if b in _shipped("vehicles") or b in _shipped("terrains"):
+        return []                          # the loader takes a shipped name first, as here
+    cand = path.parent / b                 # (as the loader reads it: beside the file, as written)
+    return [cand] + _bases(cand, depth + 1) if _is_file(cand) else []
 
 
 @contextlib.contextmanager
@@ -148,8 +159,12 @@ def atomic(path: Path):
     from it still do) that replaces ``path`` when the block ends without an error; on
     an error the temporary file is removed and ``path`` is untouched."""
     path = Path(path)
-    if path.exists() and not path.is_file() and not path.is_dir():
-        yield path          # a device or a pipe (/dev/null, a FIFO): written into, never replaced
+    if _special(path):      # a device or a pipe (/dev/null, a FIFO): written into, never replaced
+        try:
+            yield path
+        except BrokenPipeError:            # (not stdout's reader, which main forgives: an output not written)
+            raise InputError(f"cannot write '{path}': the reader of the pipe went away before the output "
+                             "was written") from None
         return
     name = f".{path.stem}.{os.getpid()}.tmp{path.suffix}"
     tmp = path.with_name(name if len(os.fsencode(name)) <= 200 else f".sbmpc.{os.getpid()}.tmp{path.suffix}")

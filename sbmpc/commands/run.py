@@ -52,9 +52,12 @@ def summary(res) -> str:
     lines.append(f"  {d['replans']} re-plans ({d['trigger']} trigger), {d['stalls']} stalls, {d['periods']} periods; "
                  f"planning {d['planning_time_s']:.2f} s (first {d['first_planning_time_s'] or 0:.2f} s"
                  + (f", re-plans {sum(rt) / len(rt):.2f} s on average)" if rt else ")"))
+    last = len(d["plans"]) - 1
     for k, p in enumerate(d["plans"][1:], 1):
+        # a failed re-plan drives on with the previous plan, unless it ended the run
+        drove_on = " (drove on with the previous plan)" if k < last or res.status == "reached" else ""
         lines.append(f"  re-plan {k} at t = {p['t']:.1f} s: {p['why']}"
-                     + ("" if p["status"] == "found" else f" -> {p['reason']} (drove on with the previous plan)")
+                     + ("" if p["status"] == "found" else f" -> {p['reason']}{drove_on}")
                      + (" (the rest of the previous plan: the search found nothing cheaper)"
                         if (p["found_by"] or "").startswith("previous") else "")
                      + (" (aimed at the goal disc itself: no way found into the inner disc re-plans aim at)"

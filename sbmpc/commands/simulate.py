@@ -121,7 +121,7 @@ def run(args) -> int:
           f"{' (open loop)' if args.open_loop else ''}: {traj.t[-1]:.2f} s simulated")
     for key, value in {**info, **summary}.items():
         print(f"  {key:22s} {value:.4g}" if isinstance(value, float) else f"  {key:22s} {value}")
-    if manoeuvre in ("straight", "circle") and not args.open_loop:
+    if manoeuvre in ("straight", "circle") and not args.open_loop and len(cl):
         short = _short_of_command(traj, cl[-1], cr[-1])
         if short:
             print(f"note: {short}")
@@ -137,16 +137,22 @@ def run(args) -> int:
     return 0
 
 
-def _short_of_command(traj, cmd_l: float, cmd_r: float) -> str:
-    """A note when the drive ends short of the commanded wheel speeds [rad/s] (by more
-    than 5 % of the larger command and 0.05 rad/s): the command is beyond what the
-    motors deliver there (the voltage or current limit, eqs. 26, 27), so the vehicle
-    drives another path than the commanded one (a circle at 1 m/s on vinyl runs
-    nearly straight); '' when it reaches them."""
-    wl, wr = float(traj.wl[-1]), float(traj.wr[-1])
+def _short_of_command(traj, cmd_l: float, cmd_r: float, settle_s: float = 1.0) -> str:
+    """A note when the drive stays short of the commanded wheel speeds [rad/s] (by more
+    than 5 % of the larger command and 0.05 rad/s) at least ``settle_s`` after its
+    rate-limited reference reached them: the command is beyond what the motors deliver
+    there (the voltage or current limit, eqs. 26, 27), so the vehicle drives another
+    path than the commanded one (a circle at 1 m/s on vinyl runs nearly straight); ''
+    when it reaches them, or while the reference is still ramping (no verdict yet)."""
     tol = max(0.05 * max(abs(cmd_l), abs(cmd_r)), 0.05)
-    if abs(wl - cmd_l) <= tol and abs(wr - cmd_r) <= tol:
+    at = np.nonzero((np.abs(traj.ref_l - cmd_l) <= 1e-6 * (1 + abs(cmd_l)))
+                    & (np.abs(traj.ref_r - cmd_r) <= 1e-6 * (1 + abs(cmd_r))))[0]
+    if not at.size or traj.t[-1] - traj.t[at[0]] < settle_s:
         return ""
-    return (f"the drive ends short of the commanded wheel speeds (left {wl:.2f} of {cmd_l:.2f} rad/s, right "
+    wl, wr = float(traj.wl[-1]), float(traj.wr[-1])
+    short = [abs(w) < abs(c) - tol and w * c >= 0.0 or w * c < 0.0 for w, c in ((wl, cmd_l), (wr, cmd_r))]
+    if not any(short):
+        return ""
+    return (f"the drive stays short of the commanded wheel speeds (left {wl:.2f} of {cmd_l:.2f} rad/s, right "
             f"{wr:.2f} of {cmd_r:.2f} rad/s): the command is beyond what the motors deliver here (voltage or "
             "current limit), so the path driven is not the commanded one; a lower --v reaches it")
