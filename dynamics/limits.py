@@ -39,7 +39,10 @@ def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> fl
     peak = math.atan2(1.0, terrain.mu_roll)
     if tau >= required_torque(vehicle, terrain, peak, omega):
         return 0.5 * math.pi
-    return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, peak)
+    # the one root lies below the peak; bracketed by 90 deg where the wall is also too steep
+    # (the bracket the root finder always had: its last digits, and the plans, stay as they were)
+    top = 0.5 * math.pi if tau < required_torque(vehicle, terrain, 0.5 * math.pi, omega) else peak
+    return brentq(lambda b: required_torque(vehicle, terrain, b, omega) - tau, 0.0, top)
 
 
 def steepest_braked_grade(vehicle: Vehicle, terrain: Terrain, omega: float) -> float:

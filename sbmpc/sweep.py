@@ -75,23 +75,42 @@ def load_spec(path: Path) -> dict:
                          f"{did_you_mean(k, KNOWN)}")
     base = path.parent
     files = []
-    for s in spec.get("scenarios", []) or []:
+    listed = spec.get("scenarios") or []
+    if isinstance(listed, str):                       # one file or folder, not in a list
+        listed = [listed]
+    if not isinstance(listed, list):
+        probs.append(f"scenarios: expected a list of scenario files or folders, found {shown(listed)}")
+        listed = []
+    for s in listed:
         p = base / str(s)
-        if p.is_dir():
-            files += sorted(p.glob("*.yaml"))
+        if not isinstance(s, str) or not s:
+            probs.append(f"scenarios: expected scenario files or folders (paths), found {shown(s)}")
+        elif p.is_dir():                              # the scenario files in it (not the spec, vehicles ...)
+            files += [f for f in sorted(p.glob("*.yaml")) if _looks_like_scenario(f) and f.resolve() != path.resolve()]
         elif p.is_file():
             files.append(p)
         else:
             probs.append(f"scenarios: expected scenario files or folders, found no {shown(str(s))}")
+    files = list({f.resolve(): f for f in files}.values())      # a file listed twice (or in a folder too) runs once
     families = []
-    for i, f in enumerate(spec.get("families", []) or []):
-        if not (isinstance(f, dict) and isinstance(f.get("scenario"), str) and isinstance(f.get("seeds"), list)
-                and all(isinstance(x, int) and not isinstance(x, bool) for x in f["seeds"])):
-            probs.append(f"families[{i}]: expected {{scenario: FILE, seeds: [integers]}}, found {shown(f)}")
+    fams = spec.get("families") or []
+    if not isinstance(fams, list):
+        probs.append(f"families: expected a list of {{scenario: FILE, seeds: [integers]}}, found {shown(fams)}")
+        fams = []
+    for i, f in enumerate(fams):
+        if not (isinstance(f, dict) and set(f) == {"scenario", "seeds"} and isinstance(f.get("scenario"), str)
+                and isinstance(f.get("seeds"), list) and f["seeds"]
+                and all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 2 ** 63 for x in f["seeds"])):
+            probs.append(f"families[{i}]: expected {{scenario: FILE, seeds: [integers in [0, 2^63), at least one]}}, "
+                         f"found {shown(f)}")
             continue
-        families.append((base / f["scenario"], list(f["seeds"])))
+        if not (base / f["scenario"]).is_file():
+            probs.append(f"families[{i}].scenario: expected a scenario file, found no {shown(f['scenario'])}")
+            continue
+        families.append((base / f["scenario"], list(dict.fromkeys(f["seeds"]))))
     costs = spec.get("costs")
-    if costs is not None and not (isinstance(costs, list) and costs and set(costs) <= {"time", "energy"}):
+    if costs is not None and not (isinstance(costs, list) and costs and all(isinstance(c, str) for c in costs)
+                                  and set(costs) <= {"time", "energy"}):
         probs.append(f"costs: expected a list of time and/or energy, found {shown(costs)}")
     seeds = spec.get("seeds")
     if seeds is not None and not (isinstance(seeds, list) and seeds and all(
@@ -110,8 +129,12 @@ def load_spec(path: Path) -> dict:
     else:
         for i, v in enumerate(variants):
             probs += _variant_problems(f"variants[{i}]", v, base)
+            if [w["name"] for w in variants].index(v["name"]) < i:
+                probs.append(f"variants[{i}].name: expected a name of its own (rows are told apart by it), "
+                             f"found {shown(v['name'])} again")
     rob = spec.get("robustness")
-    if rob is not None and not (isinstance(rob, dict) and isinstance(rob.get("samples"), int) and rob["samples"] > 0
+    if rob is not None and not (isinstance(rob, dict) and isinstance(rob.get("samples"), int)
+                                and not isinstance(rob["samples"], bool) and 0 < rob["samples"] <= 10_000
                                 and isinstance(rob.get("vary", {}) or {}, dict)):
         probs.append(f"robustness: expected {{samples: N, seed: S, vary: {{parameter: relative std}}}}, found {shown(rob)}")
     elif rob is not None:
@@ -122,11 +145,16 @@ def load_spec(path: Path) -> dict:
     variants = [dict(v, vehicle=str((base / v["vehicle"]).resolve()))
                 if isinstance(v.get("vehicle"), str) and (base / v["vehicle"]).is_file() else v for v in variants]
     from . import scenario as SC
+    family_files = {p for p, _ in families}
     for f in dict.fromkeys(files + [p for p, _ in families]):     # each scenario file checked once, up front
         try:
-            SC.load(f)
+            scn = SC.load(f)
         except InputError as exc:
             probs.append(str(exc).replace("\n", " "))
+            continue
+        if f in family_files and not (isinstance(scn.map_spec, dict) and "generate" in scn.map_spec):
+            probs.append(f"families: {f}: expected a scenario with a generated map (map: generate:), one map per "
+                         "seed; found a map read from a file")
     if probs:
         raise InputError(f"{path}: " + (probs[0] if len(probs) == 1 else f"{len(probs)} problems:\n  " + "\n  ".join(probs)))
     return {"scenarios": files, "families": families, "costs": costs, "seeds": seeds, "planner": grid,
@@ -229,19 +257,49 @@ def _setting_problems(grid: dict) -> list:
     return out
 
 
+def _looks_like_scenario(path: Path) -> bool:
+    """Whether a YAML file in a listed folder is a scenario (a mapping with a start or a
+    goal): a folder's vehicle, terrain or sweep spec files are left out."""
+    from dynamics.params import read_yaml_text
+    try:
+        doc = read_yaml_text(path)
+    except (OSError, ValueError):
+        return True                                  # (a broken scenario is reported by the loader)
+    return isinstance(doc, dict) and ("start" in doc or "goal" in doc)
+
+
 def tasks(spec: dict) -> list:
     """Every combination of the spec, one dict per task, with its ``task_id``."""
     sources = [(p, None) for p in spec["scenarios"]] + [(p, s) for p, seeds in spec["families"] for s in seeds]
+    labels = _labels([p for p, _ in sources], spec.get("base"))
     keys = sorted(spec["planner"])
     grid = [dict(zip(keys, vals)) for vals in itertools.product(*(spec["planner"][k] for k in keys))] or [{}]
     out = []
     for (path, fam), settings, variant in itertools.product(sources, grid, spec["variants"]):
         for cost in spec["costs"] or [None]:
             for seed in spec["seeds"] or [None]:
-                t = {"scenario": str(path), "family_seed": fam, "cost": cost, "seed": seed, "settings": settings,
-                     "variant": variant, "robustness": spec["robustness"]}
+                t = {"scenario": str(Path(path).resolve()), "family_seed": fam, "cost": cost, "seed": seed,
+                     "settings": settings, "variant": variant, "robustness": spec["robustness"]}
+                # the id hashes the scenario's resolved path: the same task however the spec was named
                 t["task_id"] = hashlib.sha256(json.dumps(t, sort_keys=True, default=str).encode()).hexdigest()[:16]
+                t.update(scenario=str(path), label=labels[Path(path)])
                 out.append(t)
+    return out
+
+
+def _labels(paths: list, base) -> dict:
+    """The ``scenario`` column of each file: its stem, or where two files share a stem,
+    its path relative to the spec's folder (without .yaml), so rows are told apart."""
+    stems = [Path(p).stem for p in dict.fromkeys(map(Path, paths))]
+    out = {}
+    for p in map(Path, paths):
+        if stems.count(p.stem) == 1:
+            out[p] = p.stem
+        else:
+            try:
+                out[p] = str(p.with_suffix("").relative_to(base)) if base is not None else str(p.with_suffix(""))
+            except ValueError:
+                out[p] = str(p.with_suffix(""))
     return out
 
 
@@ -276,16 +334,28 @@ def _variant_world(world, variant: dict):
 def _drawn_worlds(world, rob: dict, task_id: str):
     """``samples`` worlds with vehicle and terrain parameters drawn from normal
     distributions (relative standard deviation ``vary[name]``) around ``world``'s."""
+    from dynamics import ParameterError
     rng = np.random.default_rng([int(rob.get("seed", 0)), int(task_id[:8], 16)])
     vary = rob.get("vary", {}) or {}
     out = []
     for _ in range(int(rob["samples"])):
-        v, ts = world.vehicle, world.terrains
-        vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
-        tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
-        ts = tuple(t.replace(**{k: getattr(t, k) * max(0.05, 1.0 + e) for k, e in tk.items()}) for t in ts)
-        out.append(replace(world, vehicle=v.replace(**vk), terrains=ts))
+        for attempt in range(DRAW_TRIES):         # a draw outside a parameter's range is drawn again
+            v, ts = world.vehicle, world.terrains
+            vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
+            tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
+            try:
+                ts = tuple(t.replace(**{k: getattr(t, k) * max(0.05, 1.0 + e) for k, e in tk.items()}) for t in ts)
+                out.append(replace(world, vehicle=v.replace(**vk), terrains=ts))
+                break
+            except ParameterError as exc:
+                last = str(exc).replace("<replace>: ", "")
+        else:
+            raise InputError(f"no draw of {', '.join(sorted(vary))} within the parameters' ranges in {DRAW_TRIES} "
+                             f"tries (the last: {last}); lower the relative standard deviations")
     return out
+
+
+DRAW_TRIES = 100      # draws per robustness sample before its parameters are said to leave their ranges
 
 
 def run_task(task: dict) -> dict:
@@ -297,7 +367,8 @@ def run_task(task: dict) -> dict:
     from .problems import skidsteer as SS
     t0 = time.perf_counter()
     row = {k: None for k in COLUMNS}
-    row.update(task_id=task["task_id"], scenario=Path(task["scenario"]).stem, family_seed=task["family_seed"],
+    row.update(task_id=task["task_id"], scenario=task.get("label") or Path(task["scenario"]).stem,
+               family_seed=task["family_seed"], cost=task["cost"],
                seed=task["seed"], settings=json.dumps(task["settings"], sort_keys=True),
                variant=task["variant"]["name"], status="error")
     try:
@@ -322,7 +393,13 @@ def run_task(task: dict) -> dict:
                    reached_at_rate=bool(plan.check.reached) if plan.check is not None else None)
         rob = task["robustness"]
         if rob and plan.found:
-            checks = [CK.check(w, cost, plan.controls) for w in _drawn_worlds(world, rob, task["task_id"])]
+            try:
+                drawn = _drawn_worlds(world, rob, task["task_id"])
+            except InputError as exc:            # the plan stands; its robustness could not be measured
+                row.update(robust_samples=0, reason=f"robustness: {exc}"[:500])
+                drawn = []
+            checks = [CK.check(w, cost, plan.controls) for w in drawn]
+        if rob and plan.found and checks:
             stall = [c.end == -SS.STALL for c in checks]
             miss = [not c.reached for c in checks]
             e = np.array([c.energy_J for c in checks if c.reached], float)
@@ -363,20 +440,20 @@ def write_part(out: Path, rows: list, k: int) -> Path:
 
 
 def read_rows(out: Path) -> list:
-    """Every row written so far (the parts, or the merged results)."""
+    """Every task's row written so far, one per task id (the merged results, then the
+    parts: a part's row is the newer)."""
     import pyarrow.parquet as pq
-    rows = []
+    rows = pq.read_table(out / "results.parquet").to_pylist() if (out / "results.parquet").is_file() else []
     for p in sorted((out / "parts").glob("*.parquet")) if (out / "parts").is_dir() else []:
         rows += pq.read_table(p).to_pylist()
-    if not rows and (out / "results.parquet").is_file():
-        rows = pq.read_table(out / "results.parquet").to_pylist()
-    return rows
+    return list({r["task_id"]: r for r in rows}.values())
 
 
-def merge(out: Path) -> list:
-    """Merge the parts into DIR/results.parquet (one row per task id, the last kept)."""
+def merge(out: Path, ids=None) -> list:
+    """Merge the results so far and the parts into DIR/results.parquet: one row per task
+    id, the last kept, only the ids given (the sweep's tasks) when ``ids`` is not None."""
     import pyarrow.parquet as pq
-    rows = {r["task_id"]: r for r in read_rows(out)}
+    rows = {r["task_id"]: r for r in read_rows(out) if ids is None or r["task_id"] in ids}
     table = _table(list(rows.values()))
     tmp = out / ".results.tmp.parquet"
     pq.write_table(table, tmp)
@@ -392,9 +469,10 @@ def execute(task_list: list, out: Path, workers: int = 0, address: str | None = 
     import os
     out.mkdir(parents=True, exist_ok=True)
     done = {r["task_id"] for r in read_rows(out)} if resume else set()
-    if not resume and (out / "parts").is_dir():
-        for p in (out / "parts").glob("*.parquet"):
+    if not resume:                                 # a new sweep: nothing of an earlier one is kept
+        for p in ((out / "parts").glob("*.parquet") if (out / "parts").is_dir() else []):
             p.unlink()
+        (out / "results.parquet").unlink(missing_ok=True)
     todo = [t for t in task_list if t["task_id"] not in done]
     workers = workers or os.cpu_count() or 1
     # batches: Ray costs about 0.5 ms a task, a plan 0.1-10 s, so one task per batch
@@ -434,7 +512,7 @@ def execute(task_list: list, out: Path, workers: int = 0, address: str | None = 
             if progress:
                 progress(finished, len(todo), time.perf_counter() - t0)
     wall = time.perf_counter() - t0
-    rows = merge(out)
+    rows = merge(out, {t["task_id"] for t in task_list})
     return {"rows": rows, "ran": len(todo), "skipped": len(task_list) - len(todo), "wall_s": wall,
             "engine": engine, "workers": workers if engine == "ray" else 1}
 

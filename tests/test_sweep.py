@@ -144,3 +144,82 @@ def test_a_variants_vehicle_file_is_the_specs_and_changes_parse_as_they_apply(tm
     assert SW._variant_world(world, spec["variants"][0]).vehicle.mass == 40.0
     w2 = SW._variant_world(world, spec["variants"][1])
     assert w2.vehicle.mass == pytest.approx(world.vehicle.mass * 1.005) and w2.vehicle.inertia == 1.5
+
+
+def test_a_resumed_sweep_keeps_every_row_and_ids_do_not_depend_on_the_paths_spelling(tmp_path):
+    """--resume after the parts were merged (and removed) lost the merged rows; the same
+    spec named by another path ran every task again (the ids hashed the path as spelt)."""
+    import shutil
+    work = tmp_path / "w"
+    work.mkdir()
+    shutil.copy(ROOT / "scenarios" / "runup_ramp.yaml", work / "a.yaml")
+    spec = work / "spec.yaml"
+    spec.write_text("scenarios: [a.yaml]\ncosts: [time]\nseeds: [0]\nvariants: [{name: n1}, {name: n2, vehicle: {mass: '+5%'}}]\n")
+    out = tmp_path / "out"
+    first = SW.execute(SW.tasks(SW.load_spec(spec)), out, use_ray=False)
+    assert first["ran"] == 2 and len(first["rows"]) == 2
+    shutil.rmtree(out / "parts")
+    spec.write_text(spec.read_text().replace("{name: n2, vehicle: {mass: '+5%'}}]",
+                                             "{name: n2, vehicle: {mass: '+5%'}}, {name: n3}]"))
+    again = SW.execute(SW.tasks(SW.load_spec(spec)), out, resume=True, use_ray=False)
+    assert again["ran"] == 1 and again["skipped"] == 2 and len(again["rows"]) == 3
+    other = Path(os.path.relpath(spec, Path.cwd())) if spec.is_absolute() else spec
+    same = SW.execute(SW.tasks(SW.load_spec(other)), out, resume=True, use_ray=False)
+    assert same["ran"] == 0 and len(same["rows"]) == 3
+    fresh = SW.execute(SW.tasks(SW.load_spec(spec))[:1], out, use_ray=False)    # no --resume: a new sweep
+    assert fresh["ran"] == 1 and len(fresh["rows"]) == 1
+
+
+def test_spec_types_families_and_labels_are_checked_or_told_apart(tmp_path, capsys):
+    """Types that crashed (exit 3) or misled (a string split into characters), families
+    that only failed task by task, duplicate names, and two files with one stem."""
+    import shutil
+    (tmp_path / "alt").mkdir()
+    shutil.copy(ROOT / "scenarios" / "flat.yaml", tmp_path / "flat.yaml")
+    shutil.copy(ROOT / "scenarios" / "flat.yaml", tmp_path / "alt" / "flat.yaml")
+    np_map = tmp_path / "m.npy"
+    import numpy as np
+    np.save(np_map, np.zeros((20, 30)))
+    (tmp_path / "filemap.yaml").write_text((ROOT / "scenarios" / "flat.yaml").read_text().split("map:")[0]
+                                           + "map: {file: m.npy, resolution: 0.5}\nterrain: vinyl\nstart: {x: 2, y: 2}\n"
+                                           "goal: {x: 10, y: 6, radius: 0.5}\n")
+    for text, says in [("scenarios: 5", "scenarios: expected a list of scenario files or folders, found 5"),
+                       ("scenarios: [flat.yaml]\nfamilies: 3", "families: expected a list"),
+                       ("scenarios: [flat.yaml]\ncosts: [[time]]", "costs: expected a list of time and/or energy"),
+                       ("scenarios: [flat.yaml]\ncosts: [{time: 1}]", "costs: expected a list of time and/or energy"),
+                       ("families: [{scenario: filemap.yaml, seeds: [1]}]", "expected a scenario with a generated map"),
+                       ("families: [{scenario: flat.yaml, seeds: [-1]}]", "families[0]: expected {scenario: FILE"),
+                       ("families: [{scenario: flat.yaml, seeds: []}]", "at least one"),
+                       ("families: [{scenario: flat.yaml, seeds: [1], extra: 1}]", "families[0]: expected"),
+                       ("scenarios: [flat.yaml]\nvariants: [{name: a}, {name: a}]", "variants[1].name: expected a name of its own"),
+                       ("scenarios: [flat.yaml]\nrobustness: {samples: true}", "robustness: expected {samples: N")]:
+        spec = tmp_path / "spec.yaml"
+        spec.write_text(text + "\n")
+        assert main(["sweep", str(spec), "--out", str(tmp_path / "o"), "--serial"]) == 2, text
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err, (text, err)
+    spec = tmp_path / "spec.yaml"
+    spec.write_text("scenarios: flat.yaml\n")                               # one file, not in a list
+    assert [t["label"] for t in SW.tasks(SW.load_spec(spec))] == ["flat"]
+    spec.write_text("scenarios: [flat.yaml, alt/flat.yaml, flat.yaml, .]\n")
+    assert sorted(t["label"] for t in SW.tasks(SW.load_spec(spec))) == ["alt/flat", "filemap", "flat"]
+
+
+def test_a_robustness_draw_outside_a_parameters_range_is_drawn_again(monkeypatch):
+    """patch_inner varied by 100 %: a draw above patch_outer failed the whole task (an
+    error row that kept the plan's figures); draws outside the range are drawn again, and
+    where none lands in it the plan stands with the reason."""
+    from sbmpc import world as WO, scenario as SC
+    world = WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml"))
+    drawn = SW._drawn_worlds(world, {"samples": 20, "seed": 0, "vary": {"patch_inner": 1.0}}, "0" * 16)
+    assert len(drawn) == 20 and all(w.vehicle.patch_inner < w.vehicle.patch_outer for w in drawn)
+    assert len({w.vehicle.patch_inner for w in drawn}) > 15          # (a few clip at 5 % of the value)
+    from sbmpc.errors import InputError
+    from dynamics import ParameterError
+
+    def refuse(self, **changes):
+        raise ParameterError("<replace>: key 'mass': expected a number > 0 and <= 100000, found 2e5")
+    monkeypatch.setattr(type(world.vehicle), "replace", refuse)      # every draw out of range
+    with pytest.raises(InputError, match=r"no draw of mass within the parameters' ranges in 100 tries \(the last: "
+                                         r"key 'mass'"):
+        SW._drawn_worlds(world, {"samples": 1, "vary": {"mass": 1.0}}, "0" * 16)

@@ -53,6 +53,10 @@ def run_sweep(args) -> int:
     SW.plot_summary(rows, args.out / "summary.png")
     errors = [r for r in rows if r["status"] == "error"]
     for r in errors[:5]:
-        print(f"error: {r['scenario']} [{r['cost']}, {r['variant']}]: {r['reason']}", file=sys.stderr)
+        where = ", ".join(str(x) for x in (r["cost"] or "scenario's cost",
+                                           None if r["family_seed"] is None else f"map seed {r['family_seed']}",
+                                           None if r["seed"] is None else f"seed {r['seed']}", r["variant"])
+                          if x is not None)
+        print(f"error: {r['scenario']} [{where}]: {r['reason']}", file=sys.stderr)
     print(f"wrote {args.out / 'results.parquet'}, {args.out / 'summary.png'}")
     return 0
