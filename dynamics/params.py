@@ -328,7 +328,7 @@ def _load(cls, kind: str, spec: "str | Path | dict | Vehicle | Terrain", base: P
     spec_s = str(spec)
     shipped = _shipped(kind)
     if not spec_s:
-        raise ParameterError(f"{kind[:-1]}: expected a shipped name ({', '.join(sorted(shipped))}) or a path to a "
+        raise ParameterError(f"expected a shipped {kind[:-1]} name ({', '.join(sorted(shipped))}) or a path to a "
                              "YAML file, found an empty string")
     if spec_s in shipped:
         return _from_mapping(cls, _read_yaml(shipped[spec_s]), str(shipped[spec_s]), True, kind, depth=depth)

@@ -81,6 +81,24 @@ class Run:
         return Run({k: v[a:b] for k, v in self.columns.items()}, self.meta, self.source)
 
 
+def _limit(name: str, default: float, whole: bool = False) -> float:
+    """A positive, finite limit from the environment variable ``name`` (``default`` when
+    unset); a RunError naming it otherwise."""
+    import math
+    import os
+    text = os.environ.get(name)
+    if text is None:
+        return float(default)
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0 and (not whole or v.is_integer())):
+        raise RunError(f"environment variable {name}: expected a positive {'whole number' if whole else 'number'}, "
+                       f"found {text!r:.40}")
+    return v
+
+
 def read_run(path: Path | str) -> Run:
     """Read a run CSV; raises :class:`RunError` with file and line on any problem. The
     file is only read."""
@@ -94,8 +112,8 @@ def read_run(path: Path | str) -> Run:
         text = path.read_text(encoding="utf-8-sig")        # (a byte-order mark, as spreadsheets write it)
     except UnicodeDecodeError:
         raise RunError(f"{path}: expected a text CSV file, found binary data") from None
-    max_rows = int(float(os.environ.get("SBMPC_MAX_RUN_ROWS", MAX_ROWS)))
-    max_span = float(os.environ.get("SBMPC_MAX_RUN_S", MAX_SPAN_S))
+    max_rows = int(_limit("SBMPC_MAX_RUN_ROWS", MAX_ROWS, whole=True))
+    max_span = _limit("SBMPC_MAX_RUN_S", MAX_SPAN_S)
     lines = text.splitlines()
     meta: dict = {}
     i = 0

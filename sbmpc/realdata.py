@@ -16,6 +16,7 @@
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -30,13 +31,24 @@ def _columns(path: Path, dataset: str, kind: str, need: tuple) -> np.ndarray:
     """The named columns of a CSV file with a header row (a byte-order mark allowed), as
     a one-dimensional structured array (one row included), or a RunError naming the
     file, what it should be (``kind``, from ``dataset``) and what is missing."""
+    import warnings
     try:
-        d = np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig"))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")             # (an empty file: 'no data', said below)
+            d = np.atleast_1d(np.genfromtxt(path, delimiter=",", names=True, encoding="utf-8-sig"))
     except (OSError, ValueError, IndexError) as exc:
-        raise RunError(f"{path}: expected {kind}, found a file that cannot be read ({exc or 'no rows'})") from None
+        why = " ".join(str(exc).split())               # genfromtxt's message spans lines
+        m = re.search(r"Line #(\d+) \(got (\d+) columns instead of (\d+)\)", why)
+        if m:
+            why = f"line {m.group(1)} has {m.group(2)} cells where the header names {m.group(3)}"
+        elif isinstance(exc, IndexError) or not why:
+            why = "no header row"
+        raise RunError(f"{path}: expected {kind}, found a file that cannot be read ({why[:200]})") from None
     missing = [c for c in need if c not in (d.dtype.names or ())]
     if missing:
         raise RunError(f"{path}: expected the {dataset} columns {', '.join(need)}, found no {', '.join(missing)}")
+    if d.size == 0:
+        raise RunError(f"{path}: expected {kind} with data rows, found the header alone")
     return d
 
 
@@ -66,6 +78,12 @@ def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     t = win * DRIVE_WINDOW_S + d["t"]
     order = np.argsort(t, kind="stable")
     d, win, t = d[order], win[order], t[order]
+    same = np.flatnonzero(np.diff(t) <= 0)
+    if same.size:                       # (a row written twice: the run's time would stand still)
+        k = int(order[same[0] + 1])
+        raise RunError(f"{path}: expected one row per time, found window {int(win[same[0] + 1])} t = "
+                       f"{float(d['t'][same[0] + 1]):g} s twice ({same.size} such row{'s' if same.size > 1 else ''}; "
+                       f"the second is data row {k + 1})")
     wl, wr = d["left_wheel_vel"], d["right_wheel_vel"]
     first = np.r_[True, win[1:] != win[:-1]]
     jump = np.r_[False, (np.abs(np.diff(wl)) > JUMP) | (np.abs(np.diff(wr)) > JUMP)]
@@ -131,8 +149,11 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     rec = read_borealtc(path)
     t = rec["t"]
     if t.size < 2 or np.any(np.diff(t) <= 0):
-        raise RunError(f"{path}, column time: expected strictly increasing times, found "
-                       + ("fewer than 2 rows" if t.size < 2 else "times that do not increase"))
+        if t.size < 2:
+            raise RunError(f"{path}, column time: expected strictly increasing times, found fewer than 2 rows")
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+        raise RunError(f"{path}, data row {k + 1}, column time: expected strictly increasing times, found "
+                       f"{t[k]:.6g} after {t[k - 1]:.6g}")
     wl, wr = rec["wl"], rec["wr"]
     cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
             "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}

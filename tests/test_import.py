@@ -92,11 +92,12 @@ def test_import_borealtc_names_what_is_wrong(tmp_path, capsys):
     assert "expected the BorealTC columns" in err and "curR" in err and "Traceback" not in err
     assert not (tmp_path / "r2.csv").exists()
     for name, text, says in [("empty", "", "cannot be read"),
-                             ("header_only", "time,curL,curR,velL,velR\n", "fewer than 2 rows"),
+                             ("header_only", "time,curL,curR,velL,velR\n", "with data rows, found the header alone"),
+                             ("one_row", "time,curL,curR,velL,velR\n0,1,1,0.1,0.1\n", "fewer than 2 rows"),
                              ("inf", "time,curL,curR,velL,velR\n0,1,1,0.1,0.1\n0.15,1,1,inf,0.1\n", "column velL"),
                              ("text", "time,curL,curR,velL,velR\n0,1,1,0.1,0.1\n0.15,x,1,0.1,0.1\n", "column curL"),
                              ("backwards", "time,curL,curR,velL,velR\n0.3,1,1,0.1,0.1\n0.15,1,1,0.1,0.1\n",
-                              "times that do not increase")]:
+                              "data row 2, column time: expected strictly increasing times, found 0.15 after 0.3")]:
         f = tmp_path / "ASPHALT" / f"{name}.csv"
         f.write_text(text)
         assert main(["import", "borealtc", str(f), "--out", str(tmp_path / f"{name}_run.csv")]) == 2, name
@@ -125,6 +126,42 @@ def test_import_drive_names_what_is_wrong(tmp_path, capsys):
         assert not out.exists()
     assert main(["import", "drive", str(src), "--terrain", "vinyl", "--out", str(out)]) == 0   # a shipped name
     assert read_run(out).meta["terrain"] == "vinyl"
+    capsys.readouterr()
+    # the header alone (exit 3 before), a row written twice (imported, then refused by diagnose),
+    # a row cut short (a two-line message), an empty file ('list index out of range')
+    head = lines[0]
+    for name, text, says in [("header", head + "\n", "with data rows, found the header alone"),
+                             ("twice", "\n".join(lines[:6] + [lines[5]] + lines[6:]) + "\n",
+                              "expected one row per time, found window 0 t = 0.2 s twice"),
+                             ("cut", "\n".join(lines[:9] + [",".join(lines[9].split(",")[:7])] + lines[10:]) + "\n",
+                              "line 10 has 7 cells where the header names 16"),
+                             ("empty", "", "(no header row)")]:
+        f = tmp_path / f"drive_warthog_sand_{name}.csv"
+        f.write_text(text)
+        assert main(["import", "drive", str(f), "--out", str(tmp_path / f"{name}.csv")]) == 2, name
+        err = capsys.readouterr().err
+        assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err, (name, err)
+
+
+def test_a_terrain_file_named_in_a_runs_header_is_found_beside_the_run(tmp_path, capsys, monkeypatch):
+    """import --terrain sub/t.yaml --out sub/run.csv wrote '# terrain: sub/t.yaml', which
+    diagnose read from the current folder: run from sub/ it was not found. The header
+    names the file from the run's folder, and diagnose reads it from there."""
+    src = _borealtc_like(tmp_path / "ASPHALT" / "pro_02.csv")
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    (sub / "t.yaml").write_text("base: asphalt\nname: mine\nmu_roll: 0.05\n")
+    monkeypatch.chdir(tmp_path)
+    assert main(["import", "borealtc", str(src), "--terrain", "sub/t.yaml", "--out", "sub/run.csv"]) == 0
+    assert read_run(sub / "run.csv").meta["terrain"] == "t.yaml"
+    monkeypatch.chdir(sub)
+    assert main(["diagnose", "run.csv", "--json", "d.json"]) == 0
+    monkeypatch.chdir(tmp_path)
+    assert main(["diagnose", "sub/run.csv"]) == 0
+    capsys.readouterr()
+    monkeypatch.setenv("SBMPC_MAX_RUN_ROWS", "abc")                      # was a ValueError, exit 3
+    assert main(["diagnose", "sub/run.csv"]) == 2
+    assert "environment variable SBMPC_MAX_RUN_ROWS: expected a positive whole number, found 'abc'" in capsys.readouterr().err
 
 
 def test_a_bad_cell_is_named_by_its_line_behind_blank_comment_and_hash_header_lines(tmp_path, capsys):

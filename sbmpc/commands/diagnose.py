@@ -49,9 +49,14 @@ def _load_models(vehicle, terrain, run=None, path=None):
         given = vehicle if key == "vehicle" else terrain
         header = run.meta.get(key) if run is not None else None
         try:
-            out.append(load(given or header or default))
+            if given is not None:
+                out.append(load(given))
+            elif header:                 # a file named in the run's header lies beside the run
+                out.append(load(header, Path(path).parent if path is not None else None))
+            else:
+                out.append(load(default))
         except ParameterError as exc:
-            where = opt if given else f"{path}: its '# {key}:' line" if header else opt
+            where = opt if given is not None else f"{path}: its '# {key}:' line" if header else opt
             raise InputError(f"{where}: {exc}") from None
     return tuple(out)
 

@@ -69,6 +69,9 @@ def run_import(args) -> int:
         except ParameterError:
             raise InputError(f"--terrain: expected a {label} terrain ({', '.join(known)}), or a shipped terrain name "
                              f"or terrain file, found {name!r}") from None
+    if key not in known and Path(name).is_file():      # a terrain file: named from where the run CSV will be
+        import os
+        shipped = os.path.relpath(Path(name).resolve(), Path(args.out).resolve().parent)
     try:
         run = read(args.source, shipped)
     except RunError as exc:
