@@ -120,6 +120,10 @@ def test_a_pipe_is_written_into_and_a_reader_that_leaves_changes_nothing(work):
     _, err = p.communicate(timeout=300)
     assert p.returncode == 1, err
     assert out.exists() and '"status": "no_path"' in out.read_text()
+    q = subprocess.Popen([sys.executable, "-m", "sbmpc", "plan", str(work / "none.yaml")],       # `2>&1 | true`
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    q.stdout.close()
+    assert q.wait(timeout=300) == 2              # bad input (it was 1: the error line could not be printed)
 
 
 def test_every_json_output_is_strict_json(work, capsys):

@@ -104,6 +104,19 @@ def _negative_values(argv: list) -> list:
 
 
 def main(argv=None) -> int:
+    """:func:`_main`, with stderr that may lose its reader too (``2>&1 | true``: the exit
+    code of a bad input was 1, Python's for the error line it could not print)."""
+    err, sys.stderr = sys.stderr, _ReaderMayLeave(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        try:
+            sys.stderr.flush()
+        finally:
+            sys.stderr = err
+
+
+def _main(argv=None) -> int:
     """Run one command. Exit codes: 0 done, 1 no result (no path, a failed run), 2 bad
     input (one line saying which file, key or flag, what was expected and what was
     found), 3 an internal error (one line; ``--debug`` shows the traceback), 130
