@@ -352,8 +352,6 @@ def heldout_evidence(run, pred, chans, scales, mask, gain: float, k: int) -> flo
     less the candidate's k parameters. Below -10: very strong evidence."""
     if gain >= 1.0:
         return -math.inf
-    if gain <= -1.0:
-        return math.inf
     n_eff = sum(effective_samples(((run[c] - pred[c]) / scales[c])[mask]) for c in chans)
     return 2.0 * n_eff * math.log(1.0 - gain) + k * math.log(max(n_eff, 1.0))
 
@@ -654,10 +652,45 @@ def _pick(cands: list) -> tuple:
     return (max(cands, key=lambda c: c.gain), None) if cands else (None, None)
 
 
+MIN_SAMPLES, MIN_SEGMENT = 50, 20     # samples of a run, of its longest segment, to diagnose it
+
+
+def _checked_arguments(run, vehicle, terrain, pitch, effects):
+    """:func:`diagnose`'s arguments checked (the command line checks the same before
+    calling it); returns ``effects`` as a tuple or None."""
+    from .params import ParameterError
+    from .runs import RunError
+    if not isinstance(run, Run):
+        raise ParameterError(f"run: expected a dynamics.runs.Run (read_run), found {type(run).__name__}")
+    if len(run) < MIN_SAMPLES:
+        raise RunError(f"{run.source or 'run'}: expected at least {MIN_SAMPLES} samples to diagnose, found {len(run)}")
+    if max((b - a for a, b in run.segments()), default=0) < MIN_SEGMENT:
+        raise RunError(f"{run.source or 'run'}: expected a segment of at least {MIN_SEGMENT} samples to replay")
+    for name, value, cls in (("vehicle", vehicle, Vehicle), ("terrain", terrain, Terrain)):
+        if not isinstance(value, cls):
+            raise ParameterError(f"{name}: expected a {cls.__name__} (dynamics.load_{name}), found {type(value).__name__}")
+    if isinstance(pitch, bool) or not isinstance(pitch, (int, float, np.floating, np.integer)) \
+            or not abs(pitch) <= math.pi / 4:
+        raise ParameterError(f"pitch: expected the run's grade in radians within [-0.785, 0.785] (45 deg), "
+                             f"found {pitch!r:.40}")
+    if effects is None:
+        return None
+    if isinstance(effects, str) or not all(isinstance(e, str) for e in effects) or not len(effects):
+        raise ParameterError(f"effects: expected a sequence of candidate names ({', '.join(CANDIDATES)}), "
+                             f"found {effects!r:.60}")
+    unknown = [e for e in effects if e not in CANDIDATES]
+    if unknown:
+        raise ParameterError(f"effects: expected names among {', '.join(CANDIDATES)}, found {unknown[0]!r}")
+    return tuple(effects)
+
+
 def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
              effects: tuple | None = None, progress=None) -> Diagnosis:
     """Diagnose a measured run (module doc). ``progress(i, n, effect)`` is called before
-    each candidate's fit."""
+    each candidate's fit. ``pitch`` [rad] is the run's constant grade; ``effects`` the
+    names of the candidates to fit (default: every one of CANDIDATES). A run too short to
+    diagnose is a RunError, a bad argument a ParameterError, each naming it."""
+    effects = _checked_arguments(run, vehicle, terrain, pitch, effects)
     chans = channels(run)
     scales = {c: noise_scale(run[c]) for c in chans}
     t = run.t

@@ -91,7 +91,7 @@ def read_drive_windows(path: Path | str, terrain: str = "") -> Run:
     x, y, yaw = _chain_windows(win, d["icp_x"], d["icp_y"], d["icp_yaw"])
     cols = {"t": t, "wl_cmd": d["cmd_left"], "wr_cmd": d["cmd_right"], "wl": wl, "wr": wr,
             "x": x, "y": y, "yaw": yaw, "segment": seg.astype(float)}
-    meta = {"vehicle": "warthog", "terrain": terrain, "slope_deg": "0",
+    meta = {"vehicle": "warthog", **({"terrain": terrain} if terrain else {}), "slope_deg": "0",
             "note": f"Norlab DRIVE Warthog windows, {path.name}"}
     return Run(cols, meta, str(path))
 
@@ -126,6 +126,8 @@ def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) ->
     """One BorealTC ``pro_XX.csv`` as arrays: t [s], wl, wr [rad/s] (the logged wheel
     linear speeds over ``wheel_radius``), i_l, i_r [A] (motor currents, unsigned)."""
     path = Path(path)
+    if isinstance(wheel_radius, bool) or not isinstance(wheel_radius, (int, float)) or not 0 < wheel_radius <= 5:
+        raise RunError(f"wheel_radius: expected a radius in (0, 5] m, found {wheel_radius!r:.40}")
     need = ("time", "curL", "curR", "velL", "velR")
     d = _columns(path, "BorealTC", "a BorealTC CSV", need)
     _finite(path, d, need)
@@ -147,6 +149,8 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     the sign of their wheel's direction of travel (a braking wheel's current comes out
     with the wrong sign; the runs are on level ground)."""
     rec = read_borealtc(path)
+    if not terrain:                  # the dataset's folder names the terrain; else none (not vinyl silently)
+        terrain = BOREALTC_TERRAINS.get(Path(path).resolve().parent.name.upper(), "")
     t = rec["t"]
     if t.size < 2 or np.any(np.diff(t) <= 0):
         if t.size < 2:
@@ -157,7 +161,7 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     wl, wr = rec["wl"], rec["wr"]
     cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
             "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}
-    meta = {"vehicle": "husky", "terrain": terrain, "slope_deg": "0",
+    meta = {"vehicle": "husky", **({"terrain": terrain} if terrain else {}), "slope_deg": "0",
             "note": f"BorealTC Husky {Path(path).resolve().parent.name}/{Path(path).name}: no commands logged "
                     "(the measured wheel speeds stand in for them: a command delay or lag cannot be seen), "
                     "currents signed by the direction of travel"}

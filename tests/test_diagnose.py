@@ -306,3 +306,41 @@ def test_a_right_but_not_identical_model_is_none(seed, kw):
     run, _ = synth_run("none", seed, vehicle=vehicle, duration=DURATION, step_s=kw.get("step_s"))
     d = diagnose(run, P3AT, VINYL)
     assert d.cause == "none", [(c.effect, round(c.gain, 3), round(c.evidence, 1)) for c in d.candidates[:3]]
+
+
+def test_diagnose_in_python_names_a_bad_argument():
+    """From Python, diagnose took a NaN or a 10 rad pitch (cause 'none' with NaN errors),
+    an empty run (IndexError), effects='grade' (KeyError 'g') or an unknown effect
+    (KeyError); each is now one error naming the argument."""
+    from dynamics import ParameterError
+    run, _ = synth_run("none", 0, duration=10.0)
+    v, t = load_vehicle("p3at"), load_terrain("vinyl")
+    for kw, err, says in [(dict(pitch=float("nan")), ParameterError, "pitch: expected the run's grade in radians"),
+                          (dict(pitch=10.0), ParameterError, "within [-0.785, 0.785]"),
+                          (dict(effects="grade"), ParameterError, "effects: expected a sequence of candidate names"),
+                          (dict(effects=("bogus",)), ParameterError, "found 'bogus'"),
+                          (dict(terrain="vinyl"), ParameterError, "terrain: expected a Terrain")]:
+        with pytest.raises(err, match=says.replace("[", r"\[").replace("(", r"\(")):
+            diagnose(run, v, kw.pop("terrain", t), **kw)
+    empty = Run({k: a[:0] for k, a in run.columns.items()}, dict(run.meta), "empty.csv")
+    with pytest.raises(RunError, match="empty.csv: expected at least 50 samples to diagnose, found 0"):
+        diagnose(empty, v, t)
+    d = diagnose(run, v, t, effects=["grade"])                  # a list of names is fine
+    assert [c.effect for c in d.candidates] == ["grade"]
+
+
+def test_the_report_says_what_the_terminal_says(tmp_path, capsys):
+    """report.md left out the caveats, gave a pose-fitted cause's pose gain with no word
+    of the pose, and printed 'nan' where a short run gives no standard error."""
+    run, _ = synth_run("wheel_radius", 1, duration=60.0)
+    write_run(tmp_path / "wr.csv", run)
+    assert main(["diagnose", str(tmp_path / "wr.csv"), "--report", str(tmp_path / "rep")]) == 0
+    out = capsys.readouterr().out
+    report = (tmp_path / "rep" / "report.md").read_text()
+    cause = next(line for line in out.splitlines() if line.startswith("cause: "))
+    assert "fitted to and decided on the pose" in cause
+    assert f"**{cause.replace('cause: ', 'Cause: ', 1)}**" in report
+    for line in out.splitlines():
+        if line.startswith("caveat: "):
+            assert f"Caveat: {line[8:]}." in report
+    assert "(pose " in report and "nan" not in report

@@ -173,3 +173,16 @@ def test_a_bad_cell_is_named_by_its_line_behind_blank_comment_and_hash_header_li
     bad.write_text(text)                             # the bad cell is on line 7
     assert main(["import", "drive", str(bad), "--out", str(tmp_path / "r.csv")]) == 2
     assert f"{bad}, line 7, column cmd_left: expected a finite number" in capsys.readouterr().err
+
+
+def test_borealtc_from_python_checks_the_radius_and_names_the_terrain_by_its_folder(tmp_path):
+    """read_borealtc(wheel_radius=0) gave infinite wheel speeds; read_borealtc_run without
+    a terrain wrote '# terrain: ' and diagnose silently took vinyl."""
+    import pytest
+    from dynamics.runs import RunError
+    from sbmpc.realdata import read_borealtc, read_borealtc_run
+    src = _borealtc_like(tmp_path / "ASPHALT" / "pro_04.csv")
+    with pytest.raises(RunError, match=r"wheel_radius: expected a radius in \(0, 5\] m, found 0"):
+        read_borealtc(src, wheel_radius=0)
+    assert read_borealtc_run(src).meta["terrain"] == "asphalt"
+    assert "terrain" not in read_borealtc_run(_borealtc_like(tmp_path / "elsewhere" / "pro_05.csv")).meta

@@ -78,7 +78,7 @@ def run_synth(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    from dynamics.discrepancy import EVIDENCE, MARGIN, TRAINING_EVIDENCE, diagnose, replay
+    from dynamics.discrepancy import diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
     outs = Outputs([args.run, args.vehicle, args.terrain])
@@ -130,29 +130,14 @@ def run_diagnose(args) -> int:
     print(f"{'candidate':18s} {'held-out':>9s} {'gain':>7s} {'BIC change':>11s} {'held-out BIC':>12s}  "
           "parameters (± standard error)")
     for c in d.candidates:
-        ps = ", ".join(f"{k} = {v:.4g} ± {d_se:.2g}" + (" (at its bound)" if k in c.at_bound else "")
+        ps = ", ".join(f"{k} = {v:.4g}" + (f" ± {d_se:.2g}" if math.isfinite(d_se) else " (standard error: n/a)")
+                       + (" (at its bound)" if k in c.at_bound else "")
                        for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
         pose = (f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else
                 "  [fitted on the held-out part: the training part cannot test it]" if c.fitted_on == "heldout" else "")
-        ev = "" if math.isnan(c.evidence) else f"{c.evidence:.0f}"
+        ev = "" if not math.isfinite(c.evidence) else f"{c.evidence:.0f}"
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f} {ev:>12s}  {ps}{pose}")
-    named = next((c for c in d.candidates if c.effect == d.cause), None)
-    in_pose = named is not None and named.fitted_on == "pose"
-    if d.cause == "none":
-        why = (f" (no candidate gains {100 * MARGIN:.0f} % on held-out data with very strong evidence (BIC "
-               f"falls by more than {EVIDENCE:g} on both parts, or by more than {TRAINING_EVIDENCE:g} on the one "
-               "part that sees it), nor halves the pose error)")
-    elif d.decided_on == "training":
-        why = (f" (the held-out part cannot test it: its prediction there moves by {named.reach:.3f} noise units; "
-               f"training evidence {named.train_evidence:.0f})")
-    elif d.decided_on == "heldout_only":
-        why = (f" (the training part cannot test it: its prediction there moves by {named.train_reach:.3f} noise "
-               f"units; fitted on the held-out part: gain there {d.gain:.2f}, BIC change there "
-               f"{named.evidence:.0f})")
-    else:
-        why = (f" (held-out {'pose ' if in_pose else ''}gain {d.gain:.2f}"
-               + (": seen only in the pose" if in_pose else f", held-out BIC change {named.evidence:.0f}") + ")")
-    print(f"cause: {d.cause}{why}")
+    print(cause_line(d))
     for line in caveats(d):
         print(f"caveat: {line}")
     pose_line = _pose_line(d.pose)
@@ -183,6 +168,32 @@ def run_diagnose(args) -> int:
     return 0
 
 
+def cause_line(d) -> str:
+    """'cause: NAME (why)': the verdict and what it rests on, as the terminal and the
+    report both say it."""
+    from dynamics.discrepancy import EVIDENCE, MARGIN, TRAINING_EVIDENCE
+    named = next((c for c in d.candidates if c.effect == d.cause), None)
+    in_pose = named is not None and named.fitted_on == "pose"
+    if d.cause == "none":
+        why = (f" (no candidate gains {100 * MARGIN:.0f} % on held-out data with very strong evidence (BIC "
+               f"falls by more than {EVIDENCE:g} on both parts, or by more than {TRAINING_EVIDENCE:g} on the one "
+               "part that sees it), nor halves the pose error)")
+    elif d.decided_on == "training":
+        why = (f" (the held-out part cannot test it: its prediction there moves by {named.reach:.3f} noise units; "
+               f"training evidence {named.train_evidence:.0f})")
+    elif d.decided_on == "heldout_only":
+        why = (f" (the training part cannot test it: its prediction there moves by {named.train_reach:.3f} noise "
+               f"units; fitted on the held-out part: gain there {d.gain:.2f}, BIC change there "
+               f"{named.evidence:.0f})")
+    elif in_pose:
+        why = (f" (fitted to and decided on the pose: held-out pose gain {d.gain:.2f}; its wheel-speed and "
+               f"current gain {named.gain:.2f})")
+    else:
+        ev = f"{named.evidence:.0f}" if math.isfinite(named.evidence) else "n/a"
+        why = f" (held-out gain {d.gain:.2f}, held-out BIC change {ev})"
+    return f"cause: {d.cause}{why}"
+
+
 def caveats(d) -> list:
     """What weakens the named cause: its fit ended at a bound of the candidate's range,
     or other candidates explain the held-out data within noise of it."""
@@ -195,6 +206,11 @@ def caveats(d) -> list:
         out.append(f"{', '.join(d.rivals)} explain{'s' if len(d.rivals) == 1 else ''} the held-out data within "
                    f"noise of {d.cause} (gains within 0.02): the data cannot tell them apart")
     return out
+
+
+def _n(x: float, fmt: str) -> str:
+    """A number for the report, 'n/a' where it is not finite (too few samples)."""
+    return format(x, fmt) if math.isfinite(x) else "n/a"
 
 
 def _pose_line(pose: dict) -> str:
@@ -249,16 +265,20 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     fig.savefig(folder / "residuals.png", dpi=100)
     plt.close(fig)
     lines = [f"# Diagnosis of `{doc['run']}`", "",
-             f"**Cause: {d.cause}**" + (f", held-out gain {d.gain:.2f}" if d.cause != "none" else ""), "",
+             f"**{cause_line(d).replace('cause: ', 'Cause: ', 1)}**", "",
+             *[f"Caveat: {line}." for line in caveats(d)], *([""] if caveats(d) else []),
              f"Baseline held-out error: {d.baseline_error:.2f} noise units (1 = explained within the sensor noise). "
-             f"Ljung-Box Q of the wheel-speed residuals (20 lags): {d.baseline_whiteness_q:.0f}.", "",
+             f"Ljung-Box Q of the wheel-speed residuals (20 lags): {_n(d.baseline_whiteness_q, '.0f')}.", "",
              "Where the baseline errs (noise units): " + ", ".join(f"{k} {v:.2f}" for k, v in d.where.items()), "",
              f"Peak cross-correlation of the residuals with the command changes: {d.xcorr['peak_rho']:.2f} at a lag "
              f"of {d.xcorr['lag_s']:.3f} s.", "",
              *([_pose_line(d.pose).capitalize() + ".", ""] if d.pose else []),
              "| candidate | held-out error | gain | BIC change | parameters | whiteness Q |", "|---|---|---|---|---|---|"]
     for c in d.candidates:
-        ps = ", ".join(f"{k} = {v:.4g} ± {c.stderr[k]:.2g}" for k, v in c.params.items())
-        lines.append(f"| {c.effect} | {c.heldout_error:.2f} | {c.gain:.3f} | {c.bic_delta:.0f} | {ps} | {c.whiteness_q:.0f} |")
+        ps = ", ".join(f"{k} = {v:.4g} ± {_n(c.stderr[k], '.2g')}" + (" (at its bound)" if k in c.at_bound else "")
+                       for k, v in c.params.items())
+        gain = f"{c.gain:.3f}" + (f" (pose {c.pose_gain:.3f})" if c.fitted_on == "pose" else "")
+        lines.append(f"| {c.effect} | {c.heldout_error:.2f} | {gain} | {c.bic_delta:.0f} | {ps} | "
+                     f"{_n(c.whiteness_q, '.0f')} |")
     lines += ["", "![measured vs baseline vs extended](replay.png)", "", "![residuals and ranking](residuals.png)", ""]
     write_text(folder / "report.md", "\n".join(lines))
