@@ -344,3 +344,13 @@ def test_the_report_says_what_the_terminal_says(tmp_path, capsys):
         if line.startswith("caveat: "):
             assert f"Caveat: {line[8:]}." in report
     assert "(pose " in report and "nan" not in report
+
+
+def test_a_column_with_one_value_is_refused(tmp_path, capsys):
+    """wl set to 1 in every row gave a noise scale of 1e-9, a baseline error of 2e8 and
+    the cause 'none' without a word; such a column is named."""
+    run, _ = synth_run("none", 0, duration=10.0)
+    run.columns["wl"] = np.ones_like(run["wl"])
+    write_run(tmp_path / "flat_wl.csv", run)
+    assert main(["diagnose", str(tmp_path / "flat_wl.csv")]) == 2
+    assert "column wl: expected a measured signal, found 1 in every row" in capsys.readouterr().err

@@ -126,6 +126,8 @@ def test_import_drive_names_what_is_wrong(tmp_path, capsys):
         assert not out.exists()
     assert main(["import", "drive", str(src), "--terrain", "vinyl", "--out", str(out)]) == 0   # a shipped name
     assert read_run(out).meta["terrain"] == "vinyl"
+    assert main(["import", "drive", str(src), "--terrain", "GRAVEL", "--out", str(out)]) == 0  # any case, as BorealTC's
+    assert read_run(out).meta["terrain"] == "packed_dirt"
     capsys.readouterr()
     # the header alone (exit 3 before), a row written twice (imported, then refused by diagnose),
     # a row cut short (a two-line message), an empty file ('list index out of range')

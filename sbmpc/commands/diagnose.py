@@ -73,7 +73,8 @@ def run_synth(args) -> int:
     run, params = synth_run(args.effect, args.seed, vehicle, terrain, duration=args.duration)
     with atomic(args.out) as tmp:
         write_run(tmp, run)
-    print(f"wrote {args.out}: {len(run)} samples, hidden effect {args.effect} {params}")
+    shown = ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
+    print(f"wrote {args.out}: {len(run)} samples, hidden effect {args.effect}" + (f" ({shown})" if shown else ""))
     return 0
 
 
@@ -117,7 +118,10 @@ def run_diagnose(args) -> int:
     def progress(i, n, effect):
         if sys.stderr.isatty():
             print(f"  fitting {effect} ({i + 1}/{n}), {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
-    d = diagnose(run, vehicle, terrain, pitch, progress=progress)
+    try:
+        d = diagnose(run, vehicle, terrain, pitch, progress=progress)
+    except RunError as exc:              # (a column with the same value in every row)
+        raise InputError(str(exc)) from None
     elapsed = time.perf_counter() - t0
     out_vehicle = args.vehicle_out
     if out_vehicle is None and args.report is not None:

@@ -42,7 +42,7 @@ def _datasets() -> dict:
         folder = source.resolve().parent.name
         return (folder.upper() if folder.upper() in BOREALTC_TERRAINS else None), f"the folder name '{folder}'"
 
-    return {"drive": ("DRIVE", "a DRIVE windows CSV", DRIVE_TERRAINS, drive_terrain, str, read_drive_windows),
+    return {"drive": ("DRIVE", "a DRIVE windows CSV", DRIVE_TERRAINS, drive_terrain, str.lower, read_drive_windows),
             "borealtc": ("BorealTC", "a BorealTC pro_XX.csv", BOREALTC_TERRAINS, borealtc_terrain, str.upper,
                          read_borealtc_run)}
 
