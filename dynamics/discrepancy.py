@@ -666,8 +666,11 @@ def _checked_arguments(run, vehicle, terrain, pitch, effects):
         raise RunError(f"{run.source or 'run'}: expected at least {MIN_SAMPLES} samples to diagnose, found {len(run)}")
     if max((b - a for a, b in run.segments()), default=0) < MIN_SEGMENT:
         raise RunError(f"{run.source or 'run'}: expected a segment of at least {MIN_SEGMENT} samples to replay")
-    for c in channels(run):          # a constant column has no noise to measure errors in (1e-9: errors of 1e8)
-        if np.ptp(run[c]) == 0.0:
+    # a constant column has no noise to measure errors in (1e-9: errors of 1e8): a stuck
+    # sensor, unless the vehicle was told to stand still and it reads 0 (nothing to explain)
+    standing = all(c in run and not np.any(run[c]) for c in ("wl_cmd", "wr_cmd"))
+    for c in channels(run):
+        if np.ptp(run[c]) == 0.0 and not (standing and run[c][0] == 0.0):
             raise RunError(f"{run.source or 'run'}, column {c}: expected a measured signal, found {run[c][0]:g} in "
                            "every row")
     for name, value, cls in (("vehicle", vehicle, Vehicle), ("terrain", terrain, Terrain)):
