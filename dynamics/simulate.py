@@ -80,6 +80,12 @@ class Model:
         resistance and gravity, so that a constant command keeps the state constant.
         """
         wr = wl if wr is None else wr
+        from .params import ParameterError
+        for name, value in (("wl", wl), ("wr", wr), ("pitch", pitch), ("x", x), ("y", y), ("yaw", yaw), ("z", z)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
+                raise ParameterError(f"{name}: expected a finite number, found {value!r:.40}")
+        if abs(pitch) > np.pi / 2:
+            raise ParameterError(f"pitch: expected a grade in [-pi/2, pi/2] rad, found {pitch!r:.40}")
         S = np.zeros(K.NS)
         S[K.S_WL], S[K.S_WR] = wl, wr
         S[K.S_REFL], S[K.S_REFR] = wl, wr
@@ -138,13 +144,38 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
     every ``profile_step`` m of signed path distance from ``profile_start`` (flat outside).
     The vehicle's ``delay`` extension shifts the commands by round(delay / dt) steps.
     """
+    from .params import ParameterError
     dt = model.step_s if dt is None else check_step(dt)
-    cmd_l = np.ascontiguousarray(cmd_l, dtype=float)
-    cmd_r = np.ascontiguousarray(cmd_r, dtype=float)
+    cmd_l, cmd_r = _finite_array(cmd_l, "cmd_l"), _finite_array(cmd_r, "cmd_r")
     if cmd_l.shape != cmd_r.shape or cmd_l.ndim != 1:
-        raise ValueError("cmd_l and cmd_r must be 1-D arrays of equal length")
-    S = model.state() if state is None else np.array(state, dtype=float)
+        raise ParameterError(f"cmd_l, cmd_r: expected 1-D arrays of equal length, found shapes {cmd_l.shape} "
+                             f"and {cmd_r.shape}")
+    S = model.state() if state is None else _finite_array(state, "state").copy()
+    if S.shape != (K.NS,):
+        raise ParameterError(f"state: expected a model state of {K.NS} numbers (Model.state), found shape {S.shape}")
     n = len(cmd_l)
+    if profile is not None:
+        if np.any(np.asarray(pitch, float) != 0.0):
+            raise ParameterError("pitch, profile: expected one of them (a profile sets the pitch along the path), "
+                                 "found both")
+        profile = _finite_array(profile, "profile")
+        if profile.ndim != 1:
+            raise ParameterError(f"profile: expected a 1-D array of pitches [rad], found shape {profile.shape}")
+        for name, value in (("profile_step", profile_step), ("profile_start", profile_start)):
+            if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) \
+                    or (name == "profile_step" and value <= 0):
+                raise ParameterError(f"{name}: expected a {'positive ' if name == 'profile_step' else ''}finite "
+                                     f"distance in metres, found {value!r:.40}")
+    else:
+        p = _finite_array(pitch, "pitch")
+        if p.shape not in ((), (n,)):
+            raise ParameterError(f"pitch: expected one grade [rad] or one per command ({n}), found shape {p.shape}")
+        if np.any(np.abs(p) > np.pi / 2):
+            raise ParameterError(f"pitch: expected grades in [-pi/2, pi/2] rad, found {float(np.max(np.abs(p))):.4g} "
+                                 "(in degrees? radians are expected)")
+    if isinstance(record_dt, bool) or not isinstance(record_dt, (int, float, np.number)) \
+            or not 0.0 < record_dt < np.inf:
+        raise ParameterError(f"record_dt: expected a positive recording interval in seconds, found {record_dt!r:.40}")
     lag_steps = int(round(model.vehicle.delay / dt))
     if lag_steps > 0:
         hold_l = S[K.S_IL] if open_loop else S[K.S_REFL]
@@ -159,6 +190,19 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
                      float(profile_step), float(dt), bool(open_loop), every, out)
     data = {name: out[:rows, i].copy() for i, name in enumerate(K.CHANNELS)}
     return Trajectory(data=data, stalled=bool(S[K.S_STALLED] > 0.5), final_state=S)
+
+
+def _finite_array(x, name: str) -> np.ndarray:
+    """``x`` as a contiguous float array, or a ParameterError naming ``name`` when it is
+    not numbers or holds NaN or inf."""
+    from .params import ParameterError
+    try:
+        a = np.array(x, dtype=float)              # (a 0-d array stays one: a constant pitch)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name}: expected numbers, found {type(x).__name__}") from None
+    if not np.all(np.isfinite(a)):
+        raise ParameterError(f"{name}: expected finite numbers, found NaN or inf")
+    return a
 
 
 def hold(value: float, duration: float, dt: float) -> np.ndarray:

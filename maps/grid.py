@@ -118,18 +118,30 @@ class ElevationMap:
     name: str = ""
 
     def __post_init__(self):
-        H = np.ascontiguousarray(self.heights, dtype=float)
+        raw = np.asarray(self.heights)
+        if raw.dtype == bool or np.iscomplexobj(raw) or not np.issubdtype(raw.dtype, np.number):
+            raise ValueError(f"heights: expected a 2-D array of real heights in metres, found an array of {raw.dtype}")
+        H = np.ascontiguousarray(raw, dtype=float)
         if H.ndim != 2 or min(H.shape) < 2:
             raise ValueError(f"heights: expected a 2-D array of at least 2 x 2 cells, found shape {H.shape}")
         if not np.all(np.isfinite(H)):
             raise ValueError("heights: expected finite numbers, found NaN or inf")
-        if not (self.resolution > 0 and math.isfinite(self.resolution)):
-            raise ValueError(f"resolution: expected a positive number of metres per cell, found {self.resolution}")
+        r = self.resolution
+        if isinstance(r, bool) or not isinstance(r, (int, float, np.number)) or not (r > 0 and math.isfinite(r)):
+            raise ValueError(f"resolution: expected a positive number of metres per cell, found {r!r:.40}")
+        o = self.origin
+        if not (len(o) == 2 if hasattr(o, "__len__") else False) or not all(
+                not isinstance(a, bool) and isinstance(a, (int, float, np.number)) and math.isfinite(a) for a in o):
+            raise ValueError(f"origin: expected (x, y), two finite numbers in metres, found {o!r:.60}")
         H.setflags(write=False)
         object.__setattr__(self, "heights", H)
-        object.__setattr__(self, "origin", (float(self.origin[0]), float(self.origin[1])))
+        object.__setattr__(self, "resolution", float(r))
+        object.__setattr__(self, "origin", (float(o[0]), float(o[1])))
         if self.terrain_layer is not None:
-            Lr = np.ascontiguousarray(self.terrain_layer, dtype=np.int64)
+            raw_layer = np.asarray(self.terrain_layer)
+            if not np.issubdtype(raw_layer.dtype, np.integer):
+                raise ValueError(f"terrain layer: expected integer indices, found an array of {raw_layer.dtype}")
+            Lr = np.ascontiguousarray(raw_layer, dtype=np.int64)
             if Lr.shape != H.shape:
                 raise ValueError(f"terrain layer: expected shape {H.shape} like the heights, found {Lr.shape}")
             if Lr.min() < 0 or Lr.max() >= len(self.terrain_names):

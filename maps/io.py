@@ -93,9 +93,29 @@ def read_png_heights(path: Path, zmin: float, zmax: float) -> np.ndarray:
     return np.flipud(zmin + (zmax - zmin) * img)
 
 
-def load_map(spec, base: Path | str = ".", where: str = "map") -> ElevationMap:
-    """An :class:`ElevationMap` from a map specification (module doc)."""
-    base = Path(base)
+def plain_data(x, key=None):
+    """Data from Python as a YAML file would hold it (a map spec, a scenario): NumPy
+    scalars as Python numbers, arrays and tuples as lists (a map's ``heights`` kept as it
+    is: checked as an array), so that a value computed with NumPy passes the same checks
+    as a typed one."""
+    if key == "heights":
+        return x
+    if isinstance(x, dict):
+        return {k: plain_data(v, k) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [plain_data(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [plain_data(v) for v in x.tolist()]
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def load_map(spec, base: Path | str | None = ".", where: str = "map") -> ElevationMap:
+    """An :class:`ElevationMap` from a map specification (module doc); ``base`` (None: the
+    current folder) is the folder its file paths are relative to."""
+    base = Path("." if base is None else base)
+    spec = plain_data(spec)
     if not isinstance(spec, dict):
         raise MapError(f"{where}: expected a mapping with 'file' or 'generate', found {spec!r}")
     if "generate" in spec:

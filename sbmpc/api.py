@@ -24,21 +24,9 @@ from .errors import InputError
 
 
 def _plain(x, key=None):
-    """Python data as a scenario file would hold it: NumPy scalars as Python numbers,
-    arrays and tuples as lists (a map's ``heights`` array is kept: the map reader checks
-    it), so that a value computed with NumPy passes the same checks as a typed one."""
-    import numpy as np
-    if key == "heights":
-        return x
-    if isinstance(x, dict):
-        return {k: _plain(v, k) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_plain(v) for v in x.tolist()]
-    if isinstance(x, np.generic):
-        return x.item()
-    return x
+    """:func:`maps.io.plain_data` (imported when needed: ``import sbmpc`` stays light)."""
+    from maps.io import plain_data
+    return plain_data(x, key)
 
 
 def _cost(cost):

@@ -11,9 +11,10 @@ import numpy as np
 
 from dynamics import kernels as K
 
+from .errors import InputError
 from .problem import pack_world
 from .problems import skidsteer as SS
-from .world import World, _start
+from .world import MAX_REPLAY_STEPS, World, _start, checked_controls, checked_cost
 
 
 def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray | None = None,
@@ -24,13 +25,22 @@ def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray 
     the last step, end code (0 or IN_GOAL, negative if invalid), final state, number of
     controls used: a replay stops at the first control that enters the goal or fails).
     ``hold_last`` [s] holds the last control that much longer (it stops in the goal)."""
+    cost = checked_cost(world, cost)
+    controls = checked_controls(controls)
     dt = world.scenario.planner.dt if dt is None else dt
-    Q, data = pack_world(world, cost, dt)
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt <= 1.0:
+        raise InputError(f"dt: expected an integration step in (0, 1] s, found {dt!r:.40}")
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise InputError(f"every: expected a whole number of steps >= 1, found {every!r:.40}")
     cl = np.array([c[0] for c in controls], float)
     cr = np.array([c[1] for c in controls], float)
     n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
     if len(n) and hold_last > 0:
         n[-1] += int(round(hold_last / dt))
+    if n.sum() > MAX_REPLAY_STEPS:
+        raise InputError(f"controls: expected at most {MAX_REPLAY_STEPS:,} steps of {dt:g} s in all, found "
+                         f"{int(n.sum()):,} ({sum(c[2] for c in controls):.6g} s)")
+    Q, data = pack_world(world, cost, dt)
     rec = np.zeros((int(n.sum()) + 1, K.NR))
     X0 = _start(world, start)
     rows, S, end, early = SS.replay(Q, data, X0, cl, cr, n, rec)

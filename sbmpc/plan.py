@@ -24,6 +24,7 @@ from .problems import skidsteer as SS
 from .search.astar import Problem, Search, SearchResult, numba_threads
 from .search.counters import budget_text
 from .trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
+from . import world as WO
 from .world import World, _start, capability, wheel_speed_range
 
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
@@ -203,6 +204,16 @@ def _incumbent(world: World, cost: str, start: np.ndarray, controls) -> tuple | 
     return float(c), kept
 
 
+def _checked_inputs(world: World, start, incumbent) -> tuple:
+    """(start, incumbent) checked: a planner state of SS.NX finite numbers or None, controls
+    of three finite numbers or None (InputErrors naming them)."""
+    if start is not None:
+        start = WO._start(world, start)
+    if incumbent is not None:
+        incumbent = WO.checked_controls(incumbent, "incumbent")
+    return start, incumbent
+
+
 def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
          incumbent: list | None = None, time_budget_s: float | None = None, time_progress=None) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's): the plan
@@ -216,7 +227,9 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     never gets a plan dearer than the fastest one. The two share the time budget (the
     energy search gets what the time search left); ``planning_time_s`` counts both;
     ``rival`` holds the time plan's figures."""
-    cost = cost or world.scenario.cost
+    cost = WO.checked_cost(world, cost)
+    start, incumbent = _checked_inputs(world, start, incumbent)
+    time_budget_s = WO.checked_budget(time_budget_s)
     ps = world.scenario.planner
     if cost != "energy" or incumbent is not None or not ps.energy_vs_time:
         return search_plan(world, cost, progress, start, incumbent, time_budget_s)
@@ -296,7 +309,9 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     it is the plan when the search finds nothing cheaper within its budgets
     (``found_by`` says so). ``time_budget_s`` overrides the
     scenario's."""
-    cost = cost or world.scenario.cost
+    cost = WO.checked_cost(world, cost)
+    start, incumbent = _checked_inputs(world, start, incumbent)
+    time_budget_s = WO.checked_budget(time_budget_s)
     ps = world.scenario.planner
     budget = ps.time_budget_s if time_budget_s is None else time_budget_s
     t0 = time.perf_counter()

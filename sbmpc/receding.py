@@ -219,7 +219,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     default to the scenario's ``run`` section; ``progress(label)`` may return a search
     progress callback; ``warm=False`` plans every re-plan from scratch (for the
     benchmark)."""
-    cost = cost or world.scenario.cost
+    cost = WO.checked_cost(world, cost)
+    truth = WO.checked_vehicle(truth, "truth", world.scenario.base)
     rs = settings or world.scenario.run
     ps = world.scenario.planner
     twin = world if truth is None else replace(world, vehicle=truth)

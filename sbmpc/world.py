@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.stats import qmc
@@ -58,6 +59,9 @@ def resolve(scn: Scenario, given: dict | None = None) -> World:
     """Load the map, vehicle and terrains of a scenario; one InputError listing every
     problem (map, vehicle, each terrain, start and goal) at once. ``given`` names where
     a key's value came from when not from the file (``{"start": "--start"}``)."""
+    if not isinstance(scn, Scenario):
+        raise InputError(f"scn: expected a Scenario (sbmpc.scenario.load, or sbmpc.load_world for a path or a dict), "
+                         f"found {type(scn).__name__}")
     given = given or {}
     src = str(scn.path) if scn.path else scn.name
     problems = []
@@ -164,8 +168,70 @@ def start_state(world: World) -> np.ndarray:
 
 
 def _start(world: World, start) -> np.ndarray:
-    """The planner state to start from: ``start`` (contiguous float64) or the scenario's."""
-    return start_state(world) if start is None else np.ascontiguousarray(start, float)
+    """The planner state to start from: ``start`` (contiguous float64) or the scenario's;
+    an InputError unless it is SS.NX finite numbers (the compiled kernels read that many:
+    a shorter one read past its end)."""
+    if start is None:
+        return start_state(world)
+    try:
+        X = np.ascontiguousarray(start, float)
+    except (TypeError, ValueError):
+        raise InputError(f"start: expected a planner state of {SS.NX} numbers (world.start_state), "
+                         f"found {type(start).__name__}") from None
+    if X.shape != (SS.NX,) or not np.all(np.isfinite(X)):
+        found = f"shape {X.shape}" if X.shape != (SS.NX,) else "NaN or inf in it"
+        raise InputError(f"start: expected a planner state of {SS.NX} finite numbers (world.start_state, "
+                         f"a model state and heading and speed), found {found}")
+    return X
+
+
+def checked_cost(world: World, cost) -> str:
+    """``cost``, or the scenario's when None; an InputError for anything but 'time' or
+    'energy' (any other value planned for energy)."""
+    cost = world.scenario.cost if cost is None else cost
+    if cost not in ("time", "energy"):
+        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r:.40}")
+    return cost
+
+
+MAX_REPLAY_STEPS = 10_000_000   # steps of one replay (about 1.5 GB of records): 2.8 h at the 1 kHz rate
+
+
+def checked_controls(controls, what: str = "controls") -> list:
+    """Controls [(wl [rad/s], wr [rad/s], duration [s])], each three finite numbers with a
+    duration >= 0; an InputError naming the first that is not."""
+    try:
+        out = [tuple(float(a) for a in c) for c in controls]
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: expected a list of (wl, wr, duration_s) numbers, found {controls!r:.60}") from None
+    for k, c in enumerate(out):
+        if len(c) != 3 or not all(math.isfinite(a) for a in c) or c[2] < 0:
+            raise InputError(f"{what}[{k}]: expected (wl, wr, duration_s): finite wheel speeds [rad/s] and a "
+                             f"duration >= 0 s, found {tuple(controls[k])!r:.60}")
+    return out
+
+
+def checked_budget(seconds, what: str = "time_budget_s"):
+    """A time budget [s] (None: the scenario's), a finite number in [0, 86400]."""
+    if seconds is None:
+        return None
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float, np.floating, np.integer)) \
+            or not 0.0 <= seconds <= 86400.0:
+        raise InputError(f"{what}: expected seconds in [0, 86400], found {seconds!r:.40}")
+    return float(seconds)
+
+
+def checked_vehicle(vehicle, what: str = "truth", base: Path | None = None):
+    """A Vehicle, or one loaded from a name or file (None stays None); an InputError else."""
+    if vehicle is None or isinstance(vehicle, Vehicle):
+        return vehicle
+    if isinstance(vehicle, (str, Path)):
+        try:
+            return load_vehicle(vehicle, base)
+        except ParameterError as exc:
+            raise InputError(f"{what}: {exc}") from None
+    raise InputError(f"{what}: expected a dynamics.Vehicle, a vehicle name or a vehicle file, "
+                     f"found {type(vehicle).__name__}")
 
 
 @functools.lru_cache(maxsize=32)

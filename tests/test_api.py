@@ -300,3 +300,30 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     kind = "node_budget"                  # told by its kind, not its words: another failure stands as it is
     p = PL.plan(world, "energy", time_budget_s=5.0)
     assert p.reason == "time budget of 3 s used up; to try: x" and p.failure == "node_budget"
+
+
+def test_the_planning_functions_name_a_bad_argument():
+    """From Python: a start of the wrong length was read past its end by the compiled
+    replay (a corrupted heap, once an LLVM abort); any cost but 'time' planned for energy
+    under the label given; a NaN time budget ran to the node budget; NaN or negative
+    control durations, dt = 0, every = 0 were deep errors or skipped; a truth given by
+    name or a path given to resolve were AttributeErrors."""
+    from sbmpc import check, plan, receding, scenario, world
+    w = world.resolve(scenario.load(FLAT))
+    for call, says in [(lambda: check.replay(w, "time", [(5, 5, 2)], start=np.zeros(5)), "start: expected a planner state of 32"),
+                       (lambda: plan.plan(w, "time", start=world.start_state(w)[:30]), r"found shape \(30,\)"),
+                       (lambda: plan.plan(w, "TIME"), "cost: expected 'time' or 'energy', found 'TIME'"),
+                       (lambda: plan.search_plan(w, 5), "cost: expected 'time' or 'energy', found 5"),
+                       (lambda: receding.run(w, "foo"), "cost: expected"),
+                       (lambda: plan.search_plan(w, "time", time_budget_s=float("nan")), "time_budget_s: expected seconds"),
+                       (lambda: check.replay(w, "time", [(5, 5, float("nan"))]), r"controls\[0\]: expected \(wl, wr, duration_s\)"),
+                       (lambda: check.replay(w, "time", [(5, 5, -1)]), r"controls\[0\]"),
+                       (lambda: check.replay(w, "time", [(5, 5)]), r"controls\[0\]"),
+                       (lambda: check.replay(w, "time", [(5, 5, 1e7)]), "expected at most 10,000,000 steps"),
+                       (lambda: check.replay(w, "time", [(5, 5, 1)], dt=0), r"dt: expected an integration step in \(0, 1\] s"),
+                       (lambda: check.replay(w, "time", [(5, 5, 1)], every=0), "every: expected a whole number"),
+                       (lambda: world.resolve(str(FLAT)), "scn: expected a Scenario"),
+                       (lambda: receding.run(w, "time", truth=3), "truth: expected a dynamics.Vehicle")]:
+        with pytest.raises(InputError, match=says):
+            call()
+    assert check.replay(w, "time", [(5.0, 5.0, 2.0)])[1] == 0                   # a valid replay still runs

@@ -434,3 +434,30 @@ def test_down_the_steepest_braked_grade_the_drive_holds_its_command_and_beyond_r
             assert v_end == pytest.approx(w * m.vehicle.wheel_radius, rel=2e-3)
         else:
             assert v_end > 1.01 * w * m.vehicle.wheel_radius
+
+
+def test_simulate_state_and_limits_name_a_bad_argument(vinyl):
+    """NaN commands, states or pitches gave NaN trajectories with energy 0 and no stall;
+    a pitch beside a profile was ignored, a zero profile step dropped the profile, a
+    short state read past its end; a NaN speed or a grade of 10 rad gave numbers."""
+    from dynamics import ParameterError
+    from dynamics.limits import available_torque
+    n = np.full(200, 5.0)
+    for kw, says in [(dict(cmd_l=np.r_[n[:-1], np.nan]), "cmd_l: expected finite numbers"),
+                     (dict(state=[1.0, 2.0, 3.0]), "state: expected a model state of 30 numbers"),
+                     (dict(pitch=np.zeros(5)), r"pitch: expected one grade \[rad\] or one per command \(200\)"),
+                     (dict(pitch=3.0), r"in degrees\? radians are expected"),
+                     (dict(profile=np.full(10, 0.2), pitch=0.1), "pitch, profile: expected one of them"),
+                     (dict(profile=np.full(10, 0.2), profile_step=0.0), "profile_step: expected a positive"),
+                     (dict(record_dt=0.0), "record_dt: expected a positive recording interval")]:
+        cl = kw.pop("cmd_l", n)
+        with pytest.raises(ParameterError, match=says):
+            simulate(vinyl, cl, n, **kw)
+    with pytest.raises(ParameterError, match="wl: expected a finite number, found nan"):
+        vinyl.state(float("nan"))
+    for call, says in [(lambda: steepest_grade(vinyl.vehicle, vinyl.terrain, -1.0), r"speed: expected a number in \[0, inf\]"),
+                       (lambda: top_speed(vinyl.vehicle, vinyl.terrain, 10.0), "grade: expected a number in"),
+                       (lambda: available_torque(vinyl.vehicle, float("nan")), "omega: expected")]:
+        with pytest.raises(ParameterError, match=says):
+            call()
+    assert simulate(vinyl, n, n, pitch=np.zeros(200)).x[-1] == pytest.approx(simulate(vinyl, n, n).x[-1])

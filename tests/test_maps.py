@@ -221,3 +221,19 @@ def test_any_generator_description_gives_a_finite_map_or_one_named_error(top, fe
         assert str(exc).startswith("map.generate") and "\n" not in str(exc)
         return
     assert np.isfinite(m.heights).all() and min(m.heights.shape) >= 2
+
+
+def test_an_elevation_map_from_python_is_checked_and_numpy_numbers_pass():
+    """ElevationMap took a NaN origin (every height NaN), boolean or complex heights, a
+    resolution of True and fractional terrain indices (truncated); load_map refused
+    np.float32 resolutions and array origins as 'expected a positive number'."""
+    H = np.zeros((10, 10))
+    for kw, says in [(dict(origin=(np.nan, 0.0)), "origin: expected"), (dict(resolution=True), "resolution: expected"),
+                     (dict(heights=H.astype(bool)), "found an array of bool"),
+                     (dict(heights=H.astype(complex)), "found an array of complex128"),
+                     (dict(terrain_layer=np.full((10, 10), 0.7), terrain_names=("a",)), "expected integer indices")]:
+        with pytest.raises(ValueError, match=says):
+            ElevationMap(**{"heights": H, "resolution": 0.5, **kw})
+    m = load_map({"heights": H, "resolution": np.float32(0.5), "origin": np.array([1.0, 2.0])}, None)
+    assert m.origin == (1.0, 2.0) and m.resolution == 0.5
+    assert load_map({"generate": {"size": [10, 10], "resolution": 0.5, "seed": np.int64(3)}}).shape == (21, 21)
