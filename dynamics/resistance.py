@@ -175,9 +175,10 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
     wl = np.asarray(wl, float)
     wr = np.asarray(wr, float)
     scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
-    return _side_torques(unit_friction_right(wr, wl, vehicle, terrain, **quad) * scale,
-                         unit_friction_right(wl, wr, vehicle, terrain, **quad) * scale,
-                         wl, wr, vehicle, terrain, pitch)
+    with np.errstate(invalid="ignore", divide="ignore"):     # (at rest the patch integrals are 0/0)
+        left = np.where(scale > 0.0, unit_friction_right(wr, wl, vehicle, terrain, **quad) * scale, 0.0)
+        right = np.where(scale > 0.0, unit_friction_right(wl, wr, vehicle, terrain, **quad) * scale, 0.0)
+    return _side_torques(left, right, wl, wr, vehicle, terrain, pitch)
 
 
 @jit_inline

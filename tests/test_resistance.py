@@ -156,3 +156,11 @@ def test_friction_table_disk_cache_gives_the_computed_table_and_survives_a_bad_f
     R._table_cached.cache_clear()
     assert np.array_equal(R._table_cached(*args), fresh)     # recomputed
     R._table_cached.cache_clear()
+
+
+def test_a_vehicle_at_rest_on_level_ground_meets_no_resistance():
+    """steady_resistance(0, 0) was (nan, nan): the patch integrals are 0/0 at rest."""
+    from dynamics import load_terrain, load_vehicle
+    from dynamics.resistance import steady_resistance
+    tl, tr = steady_resistance(0.0, 0.0, load_vehicle("p3at"), load_terrain("vinyl"))
+    assert tl == 0.0 and tr == 0.0
