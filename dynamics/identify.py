@@ -53,8 +53,17 @@ def fit_terrain(vehicle: Vehicle, terrain: Terrain, radii, tau_l, tau_r, speed: 
                 guess=(0.001, 0.5, 0.5)) -> TerrainFit:
     """Eq. 28: fit K, mu_sa, mu_op of ``terrain`` (alpha and mu_roll kept) to measured
     steady-state torques tau_l, tau_r [N m] at commanded radii [m]."""
+    from .params import ParameterError
     radii = np.asarray(radii, float)
-    meas = np.concatenate([np.asarray(tau_l, float), np.asarray(tau_r, float)])
+    tau_l, tau_r = np.asarray(tau_l, float), np.asarray(tau_r, float)
+    if radii.ndim != 1 or tau_l.shape != radii.shape or tau_r.shape != radii.shape or len(radii) < 2:
+        raise ParameterError(f"radii, tau_l, tau_r: expected 1-D arrays of one equal length, at least 2 (three "
+                             f"parameters from two torques per circle), found shapes {radii.shape}, {tau_l.shape}, "
+                             f"{tau_r.shape}")
+    if not (np.all(np.isfinite(radii)) and np.all(radii != 0) and np.all(np.isfinite(tau_l))
+            and np.all(np.isfinite(tau_r))):
+        raise ParameterError("radii, tau_l, tau_r: expected finite numbers and non-zero radii, found NaN, inf or 0")
+    meas = np.concatenate([tau_l, tau_r])
     quad = dict(n_long=64, n_lat=8)
 
     def residual(p):

@@ -64,3 +64,14 @@ def test_kinematic_alpha_and_forward_scale_recovered_from_a_jumpy_held_pose():
         assert f["alpha"] == pytest.approx(alpha, rel=0.03)
         assert f["v_scale"] == pytest.approx(s, rel=0.05)
     check()
+
+
+def test_a_fit_without_enough_data_names_it():
+    """fit_terrain on empty lists returned its initial guess with an rms of NaN; torques
+    of other lengths than the radii were an unnamed broadcast error."""
+    from dynamics import ParameterError
+    v, t = load_vehicle("p3at"), load_terrain("vinyl")
+    for radii, tl, tr in [([], [], []), ([1.0, 2.0], [0.1], [0.1, 0.2]), ([1.0, np.nan], [0.1, 0.2], [0.1, 0.2]),
+                          ([0.0, 2.0], [0.1, 0.2], [0.1, 0.2])]:
+        with pytest.raises(ParameterError, match="radii, tau_l, tau_r: expected"):
+            fit_terrain(v, t, radii, tl, tr)
