@@ -655,19 +655,29 @@ def _pick(cands: list) -> tuple:
 MIN_SAMPLES, MIN_SEGMENT = 50, 20     # samples of a run, of its longest segment, to diagnose it
 
 
+def check_run_length(run: Run) -> None:
+    """A RunError unless ``run`` holds MIN_SAMPLES samples and a segment of MIN_SEGMENT
+    to replay (the command line calls it before it loads the models)."""
+    from .runs import RunError
+    if len(run) < MIN_SAMPLES:
+        raise RunError(f"{run.source or 'run'}: expected at least {MIN_SAMPLES} samples to diagnose, found {len(run)}")
+    segs = run.segments()
+    longest = max((b - a for a, b in segs), default=0)
+    if longest < MIN_SEGMENT:
+        raise RunError(f"{run.source or 'run'}: expected a segment of at least {MIN_SEGMENT} samples to replay, found "
+                       f"{len(segs)} segment(s) of at most {longest} (a 'segment' value per row, or gaps in t?)")
+
+
 def _checked_arguments(run, vehicle, terrain, pitch, effects):
     """:func:`diagnose`'s arguments checked (the command line checks the same before
     calling it); returns ``effects`` as a tuple or None."""
-    from .params import ParameterError
-    from .runs import RunError
+    from .params import ParameterError, checked_number
     if not isinstance(run, Run):
         raise ParameterError(f"run: expected a dynamics.runs.Run (read_run), found {type(run).__name__}")
-    if len(run) < MIN_SAMPLES:
-        raise RunError(f"{run.source or 'run'}: expected at least {MIN_SAMPLES} samples to diagnose, found {len(run)}")
-    if max((b - a for a, b in run.segments()), default=0) < MIN_SEGMENT:
-        raise RunError(f"{run.source or 'run'}: expected a segment of at least {MIN_SEGMENT} samples to replay")
+    check_run_length(run)
     # a constant column has no noise to measure errors in (1e-9: errors of 1e8): a stuck
     # sensor, unless the vehicle was told to stand still and it reads 0 (nothing to explain)
+    from .runs import RunError
     standing = all(c in run and not np.any(run[c]) for c in ("wl_cmd", "wr_cmd"))
     for c in channels(run):
         if np.ptp(run[c]) == 0.0 and not (standing and run[c][0] == 0.0):
@@ -676,10 +686,8 @@ def _checked_arguments(run, vehicle, terrain, pitch, effects):
     for name, value, cls in (("vehicle", vehicle, Vehicle), ("terrain", terrain, Terrain)):
         if not isinstance(value, cls):
             raise ParameterError(f"{name}: expected a {cls.__name__} (dynamics.load_{name}), found {type(value).__name__}")
-    if isinstance(pitch, bool) or not isinstance(pitch, (int, float, np.floating, np.integer)) \
-            or not abs(pitch) <= math.pi / 4:
-        raise ParameterError(f"pitch: expected the run's grade in radians within [-0.785, 0.785] (45 deg), "
-                             f"found {pitch!r:.40}")
+    checked_number("pitch", pitch, "the run's grade in radians within [-0.785, 0.785] (45 deg)",
+                   -math.pi / 4, math.pi / 4)
     if effects is None:
         return None
     if isinstance(effects, str) or not all(isinstance(e, str) for e in effects) or not len(effects):

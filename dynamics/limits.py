@@ -10,23 +10,14 @@ import math
 
 from scipy.optimize import brentq
 
-from .params import G, Terrain, Vehicle
-
-
-def _arg(name: str, value, lo: float, hi: float, unit: str) -> float:
-    """``value`` as a float in [lo, hi], or a ParameterError naming it."""
-    from .params import ParameterError
-    ok = not isinstance(value, bool) and (isinstance(value, (int, float)) or hasattr(value, "__float__"))
-    if not ok or not lo <= float(value) <= hi:
-        raise ParameterError(f"{name}: expected a number in [{lo:g}, {hi:g}] {unit}, found {value!r:.40}")
-    return float(value)
+from .params import G, Terrain, Vehicle, checked_number
 
 
 def available_torque(vehicle: Vehicle, omega: float) -> float:
     """Largest torque [N m] of one side at wheel speed omega >= 0 [rad/s] (eqs. 26, 27 and
     the continuous current limit)."""
     v = vehicle
-    omega = _arg("omega", omega, 0.0, math.inf, "rad/s")
+    omega = checked_number("omega", omega, "a number in [0, inf] rad/s", 0.0)
     return min(v.continuous_torque, v.torque_constant * (v.v_max - v.torque_constant * omega) / v.armature_resistance)
 
 
@@ -41,7 +32,7 @@ def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> fl
     the steepest grade climbable at any constant speed). Negative if none; pi/2 when the
     drive holds it even straight up a wall (a light or strong vehicle: the grade then does
     not limit it, tipping over and wheel grip do)."""
-    omega = _arg("speed", speed, 0.0, math.inf, "m/s") / vehicle.wheel_radius
+    omega = checked_number("speed", speed, "a number in [0, inf] m/s", 0.0) / vehicle.wheel_radius
     tau = available_torque(vehicle, omega)
     if tau <= required_torque(vehicle, terrain, 0.0, omega):
         return -1.0
@@ -66,7 +57,7 @@ def steepest_braked_grade(vehicle: Vehicle, terrain: Terrain, omega: float) -> f
 def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
     """Highest constant straight speed [m/s] on a grade [rad]; 0 if the grade cannot be held,
     the no-load speed's when gravity down a slope pulls harder than the drive's losses."""
-    grade = _arg("grade", grade, -0.5 * math.pi, 0.5 * math.pi, "rad")
+    grade = checked_number("grade", grade, "a number in [-1.5708, 1.5708] rad", -0.5 * math.pi, 0.5 * math.pi)
     f = lambda w: available_torque(vehicle, w) - required_torque(vehicle, terrain, grade, w)
     w_hi = vehicle.no_load_speed
     if f(0.0) <= 0.0:

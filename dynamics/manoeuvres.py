@@ -7,15 +7,14 @@ from __future__ import annotations
 import numpy as np
 
 from .kinematics import wheel_speeds
-from .params import ParameterError
+from .params import ParameterError, checked_number
 from .simulate import Model, check_step, simulate
 
 
 def _steps(model: Model, duration: float, dt: float | None) -> tuple[float, int]:
     """(dt [s], number of steps) of a manoeuvre ``duration`` [s] long, both checked."""
     dt = model.step_s if dt is None else check_step(dt)
-    if isinstance(duration, bool) or not isinstance(duration, (int, float, np.number)) or not 0.0 <= duration <= 1e6:
-        raise ParameterError(f"duration: expected a number of seconds in [0, 1e6], found {duration!r:.40}")
+    duration = checked_number("duration", duration, "a number of seconds in [0, 1e6]", 0.0, 1e6)
     return dt, int(round(duration / dt))
 
 

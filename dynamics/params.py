@@ -143,6 +143,19 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
 }
 
 
+def checked_number(name: str, value: Any, want: str, lo: float = -math.inf, hi: float = math.inf,
+                   lo_open: bool = False) -> float:
+    """``value`` as a float when it is a finite number (not a bool) in [lo, hi] ((lo, hi]
+    with ``lo_open``); else a ParameterError '``name``: expected ``want``, found ...'. The
+    one check of the numeric arguments of the model's functions."""
+    import numpy as np
+    ok = (not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+          and math.isfinite(value) and (lo < value if lo_open else lo <= value) and value <= hi)
+    if not ok:
+        raise ParameterError(f"{name}: expected {want}, found {value!r:.40}")
+    return float(value)
+
+
 def _check_number(src: str, key: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not -1e300 < value < 1e300:
         raise ParameterError(f"{src}: key '{key}': expected a number, found {value!r:.60}")

@@ -102,7 +102,6 @@ def _limit(name: str, default: float, whole: bool = False) -> float:
 def read_run(path: Path | str) -> Run:
     """Read a run CSV; raises :class:`RunError` with file and line on any problem. The
     file is only read."""
-    import os
     path = Path(path)
     if path.is_dir():
         raise RunError(f"{path}: expected a run CSV file, found a folder")

@@ -15,17 +15,13 @@ from . import kernels as K
 from .params import Terrain, Vehicle, load_terrain, load_vehicle
 from .resistance import friction_table, steady_resistance_fast
 from .body import gravity_torque
-from .params import G
+from .params import G, checked_number
 
 
 def check_step(dt, what: str = "dt") -> float:
     """``dt`` [s] as a float when it is an integration step the model can take: positive,
     finite, at most 1 s; else a ParameterError naming ``what``."""
-    from .params import ParameterError
-    ok = not isinstance(dt, bool) and isinstance(dt, (int, float, np.floating, np.integer)) and 0.0 < dt <= 1.0
-    if not ok:
-        raise ParameterError(f"{what}: expected an integration step in (0, 1] s, found {dt!r:.40}")
-    return float(dt)
+    return checked_number(what, dt, "an integration step in (0, 1] s", 0.0, 1.0, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -80,12 +76,9 @@ class Model:
         resistance and gravity, so that a constant command keeps the state constant.
         """
         wr = wl if wr is None else wr
-        from .params import ParameterError
-        for name, value in (("wl", wl), ("wr", wr), ("pitch", pitch), ("x", x), ("y", y), ("yaw", yaw), ("z", z)):
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not np.isfinite(value):
-                raise ParameterError(f"{name}: expected a finite number, found {value!r:.40}")
-        if abs(pitch) > np.pi / 2:
-            raise ParameterError(f"pitch: expected a grade in [-pi/2, pi/2] rad, found {pitch!r:.40}")
+        for name, value in (("wl", wl), ("wr", wr), ("x", x), ("y", y), ("yaw", yaw), ("z", z)):
+            checked_number(name, value, "a finite number")
+        checked_number("pitch", pitch, "a grade in [-pi/2, pi/2] rad", -np.pi / 2, np.pi / 2)
         S = np.zeros(K.NS)
         S[K.S_WL], S[K.S_WR] = wl, wr
         S[K.S_REFL], S[K.S_REFR] = wl, wr
@@ -161,11 +154,8 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
         profile = _finite_array(profile, "profile")
         if profile.ndim != 1:
             raise ParameterError(f"profile: expected a 1-D array of pitches [rad], found shape {profile.shape}")
-        for name, value in (("profile_step", profile_step), ("profile_start", profile_start)):
-            if not isinstance(value, (int, float, np.number)) or not np.isfinite(value) \
-                    or (name == "profile_step" and value <= 0):
-                raise ParameterError(f"{name}: expected a {'positive ' if name == 'profile_step' else ''}finite "
-                                     f"distance in metres, found {value!r:.40}")
+        checked_number("profile_step", profile_step, "a positive finite distance in metres", 0.0, lo_open=True)
+        checked_number("profile_start", profile_start, "a finite distance in metres")
     else:
         p = _finite_array(pitch, "pitch")
         if p.shape not in ((), (n,)):
@@ -173,9 +163,7 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
         if np.any(np.abs(p) > np.pi / 2):
             raise ParameterError(f"pitch: expected grades in [-pi/2, pi/2] rad, found {float(np.max(np.abs(p))):.4g} "
                                  "(in degrees? radians are expected)")
-    if isinstance(record_dt, bool) or not isinstance(record_dt, (int, float, np.number)) \
-            or not 0.0 < record_dt < np.inf:
-        raise ParameterError(f"record_dt: expected a positive recording interval in seconds, found {record_dt!r:.40}")
+    checked_number("record_dt", record_dt, "a positive recording interval in seconds", 0.0, lo_open=True)
     lag_steps = int(round(model.vehicle.delay / dt))
     if lag_steps > 0:
         hold_l = S[K.S_IL] if open_loop else S[K.S_REFL]

@@ -30,9 +30,9 @@ def _plain(x, key=None):
 
 
 def _cost(cost):
-    if cost not in (None, "time", "energy"):
-        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r:.60}")
-    return cost
+    """``cost`` checked before the world is loaded (None: the scenario's)."""
+    from .scenario import checked_cost
+    return cost if cost is None else checked_cost(cost)
 
 
 def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner):
@@ -124,13 +124,6 @@ def run_scenario(scenario, cost: str | None = None, truth=None, heights=None, re
     name, a vehicle YAML path or a :class:`dynamics.Vehicle`; default the planning
     vehicle itself), re-plan where the vehicle leaves the prediction. Returns a
     :class:`sbmpc.receding.RunResult`."""
-    from dynamics import ParameterError, Vehicle, load_vehicle
     from . import receding
     _cost(cost)
-    world = load_world(scenario, heights, resolution, origin, **planner)
-    if truth is not None and not isinstance(truth, Vehicle):
-        try:
-            truth = load_vehicle(truth)
-        except ParameterError as exc:
-            raise InputError(f"truth: {exc}") from None
-    return receding.run(world, cost, truth)
+    return receding.run(load_world(scenario, heights, resolution, origin, **planner), cost, truth)

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynamics import kernels as K
+from dynamics import ParameterError, kernels as K
+from dynamics.simulate import check_step
 
 from .errors import InputError
 from .problem import pack_world
@@ -27,9 +28,10 @@ def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray 
     ``hold_last`` [s] holds the last control that much longer (it stops in the goal)."""
     cost = checked_cost(world, cost)
     controls = checked_controls(controls)
-    dt = world.scenario.planner.dt if dt is None else dt
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating)) or not 0.0 < dt <= 1.0:
-        raise InputError(f"dt: expected an integration step in (0, 1] s, found {dt!r:.40}")
+    try:
+        dt = world.scenario.planner.dt if dt is None else check_step(dt)
+    except ParameterError as exc:
+        raise InputError(str(exc)) from None
     if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
         raise InputError(f"every: expected a whole number of steps >= 1, found {every!r:.40}")
     cl = np.array([c[0] for c in controls], float)

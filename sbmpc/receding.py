@@ -220,7 +220,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     progress callback; ``warm=False`` plans every re-plan from scratch (for the
     benchmark)."""
     cost = WO.checked_cost(world, cost)
-    truth = WO.checked_vehicle(truth, "truth", world.scenario.base)
+    truth = WO.checked_vehicle(truth, "truth")
     rs = settings or world.scenario.run
     ps = world.scenario.planner
     twin = world if truth is None else replace(world, vehicle=truth)

@@ -31,6 +31,14 @@ from .errors import InputError
 COSTS = ("time", "energy")
 
 
+def checked_cost(cost) -> str:
+    """``cost`` when it is 'time' or 'energy'; an InputError else (any other value planned
+    for energy)."""
+    if cost not in COSTS:
+        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r:.40}")
+    return cost
+
+
 @dataclass(frozen=True)
 class PlannerSettings:
     """Settings of the SBMPC search (scenario key ``planner``).

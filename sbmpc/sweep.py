@@ -339,7 +339,7 @@ def _drawn_worlds(world, rob: dict, task_id: str):
     vary = rob.get("vary", {}) or {}
     out = []
     for _ in range(int(rob["samples"])):
-        for attempt in range(DRAW_TRIES):         # a draw outside a parameter's range is drawn again
+        for _ in range(DRAW_TRIES):         # a draw outside a parameter's range is drawn again
             v, ts = world.vehicle, world.terrains
             vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
             tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
@@ -453,12 +453,11 @@ def merge(out: Path, ids=None) -> list:
     """Merge the results so far and the parts into DIR/results.parquet: one row per task
     id, the last kept, only the ids given (the sweep's tasks) when ``ids`` is not None."""
     import pyarrow.parquet as pq
-    rows = {r["task_id"]: r for r in read_rows(out) if ids is None or r["task_id"] in ids}
-    table = _table(list(rows.values()))
+    rows = [r for r in read_rows(out) if ids is None or r["task_id"] in ids]      # (one per id already)
     tmp = out / ".results.tmp.parquet"
-    pq.write_table(table, tmp)
+    pq.write_table(_table(rows), tmp)
     tmp.replace(out / "results.parquet")
-    return list(rows.values())
+    return rows
 
 
 # ---- running ----------------------------------------------------------------------------

@@ -19,6 +19,7 @@ from maps.io import MapError, load_class_raster, load_map
 
 from .errors import InputError
 from .problems import skidsteer as SS
+from . import scenario as SC
 from .scenario import Scenario, terrain_layer
 
 
@@ -63,6 +64,7 @@ def resolve(scn: Scenario, given: dict | None = None) -> World:
         raise InputError(f"scn: expected a Scenario (sbmpc.scenario.load, or sbmpc.load_world for a path or a dict), "
                          f"found {type(scn).__name__}")
     given = given or {}
+    label = lambda key: f"{key} ({given[key]})" if key in given else key     # noqa: E731
     src = str(scn.path) if scn.path else scn.name
     problems = []
     emap = vehicle = None
@@ -111,11 +113,11 @@ def resolve(scn: Scenario, given: dict | None = None) -> World:
     m = world.margin
     for key, p in (("start", scn.start), ("goal", scn.goal)):
         if not emap.contains(p["x"], p["y"], m):
-            problems.append(f"{key}{' (' + given[key] + ')' if key in given else ''}: expected (x, y) at least {math.ceil(m * 1000) / 1000:.3f} m inside the map "
+            problems.append(f"{label(key)}: expected (x, y) at least {math.ceil(m * 1000) / 1000:.3f} m inside the map "
                             f"[{x0:g}, {x1:g}] x [{y0:g}, {y1:g}], found ({p['x']:g}, {p['y']:g})")
     s, g = scn.start, scn.goal
     if not problems and math.hypot(s["x"] - g["x"], s["y"] - g["y"]) <= g["radius"]:
-        problems.append(f"start{' (' + given['start'] + ')' if 'start' in given else ''}: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
+        problems.append(f"{label('start')}: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
                         f"{g['radius']:g} m), found ({s['x']:g}, {s['y']:g}) inside it: nothing to plan")
     if scn.cost == "energy" and vehicle.regen:
         problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
@@ -188,10 +190,7 @@ def _start(world: World, start) -> np.ndarray:
 def checked_cost(world: World, cost) -> str:
     """``cost``, or the scenario's when None; an InputError for anything but 'time' or
     'energy' (any other value planned for energy)."""
-    cost = world.scenario.cost if cost is None else cost
-    if cost not in ("time", "energy"):
-        raise InputError(f"cost: expected 'time' or 'energy', found {cost!r:.40}")
-    return cost
+    return SC.checked_cost(world.scenario.cost if cost is None else cost)
 
 
 MAX_REPLAY_STEPS = 10_000_000   # steps of one replay (about 1.5 GB of records): 2.8 h at the 1 kHz rate
@@ -222,7 +221,8 @@ def checked_budget(seconds, what: str = "time_budget_s"):
 
 
 def checked_vehicle(vehicle, what: str = "truth", base: Path | None = None):
-    """A Vehicle, or one loaded from a name or file (None stays None); an InputError else."""
+    """A Vehicle, or one loaded from a shipped name or a file (a relative path from ``base``,
+    None: the current folder); None stays None; an InputError naming ``what`` else."""
     if vehicle is None or isinstance(vehicle, Vehicle):
         return vehicle
     if isinstance(vehicle, (str, Path)):

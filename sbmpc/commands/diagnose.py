@@ -79,7 +79,7 @@ def run_synth(args) -> int:
 
 
 def run_diagnose(args) -> int:
-    from dynamics.discrepancy import diagnose, replay
+    from dynamics.discrepancy import check_run_length, diagnose, replay
     from dynamics.params import vehicle_to_yaml
     from dynamics.runs import RunError, read_run
     outs = Outputs([args.run, args.vehicle, args.terrain])
@@ -95,13 +95,10 @@ def run_diagnose(args) -> int:
     except RunError as exc:
         raise InputError(str(exc)) from None
     outs.add_inputs([run.meta.get("vehicle"), run.meta.get("terrain")])
-    if len(run) < 50:
-        raise InputError(f"{args.run}: expected at least 50 samples to diagnose, found {len(run)}")
-    segs = run.segments()
-    longest = max((b - a for a, b in segs), default=0)
-    if longest < 20:
-        raise InputError(f"{args.run}: expected a segment of at least 20 samples to replay, found {len(segs)} "
-                         f"segment(s) of at most {longest} (a 'segment' value per row, or gaps in t?)")
+    try:
+        check_run_length(run)
+    except RunError as exc:
+        raise InputError(str(exc)) from None
     vehicle, terrain = _load_models(args.vehicle, args.terrain, run, args.run)
     pitch = 0.0
     if "slope_deg" in run.meta:

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
@@ -29,14 +28,6 @@ def add_parsers(sub):
     add_backend_flags(r)
     r.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
     r.set_defaults(func=run_run)
-
-
-def _vehicle(spec: str, flag: str, base: Path):
-    from dynamics import ParameterError, load_vehicle
-    try:
-        return load_vehicle(spec, base)
-    except ParameterError as exc:
-        raise InputError(f"{flag}: {exc}") from None
 
 
 def summary(res) -> str:
@@ -67,14 +58,15 @@ def summary(res) -> str:
 
 def run_run(args) -> int:
     from .. import receding, recording
+    from ..world import checked_vehicle
     outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
     world = _world(args)
     base = world.scenario.base
     if args.vehicle is not None:
-        world = replace(world, vehicle=_vehicle(args.vehicle, "--vehicle", Path(".")))
-    truth = _vehicle(args.truth, "--truth", Path(".")) if args.truth is not None else None
+        world = replace(world, vehicle=checked_vehicle(args.vehicle, "--vehicle"))
+    truth = checked_vehicle(args.truth, "--truth")
     settings = world.scenario.run
     if args.trigger:
         settings = replace(settings, trigger=args.trigger)
