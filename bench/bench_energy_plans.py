@@ -36,7 +36,8 @@ OUT = ROOT / "bench" / "results" / "energy_plans.json"
 def _summary(p) -> dict:
     return {"status": p.status, "energy_J": p.energy_J, "travel_time_s": p.travel_time_s,
             "expansions": p.nodes_expanded, "planning_time_s": round(p.planning_time_s, 3),
-            "repairs": p.repairs, "found_by": p.found_by or f"{p.cost} search", "reason": p.reason}
+            "repairs": p.repairs, "found_by": p.found_by or f"{p.cost} search", "reason": p.reason,
+            "polish": p.polish.to_json() if p.polish else None}
 
 
 def main(argv=None) -> int:
