@@ -532,6 +532,7 @@ def plan_both(world: World, progress=None) -> dict:
     against the other on its own cost; the better one is kept, a search that found
     nothing takes the other's plan (its own reason is kept in ``found_by``), and
     ``found_by`` says which search produced it (reported by ``sbmpc compare``)."""
+    WO.checked_cost(world, "energy")       # before the time search: a regenerating vehicle is refused
     t, e = (search_plan(world, c, progress=progress(c) if progress else None) for c in ("time", "energy"))
     return {"time": cross_checked(t, e), "energy": cross_checked(e, t)}
 

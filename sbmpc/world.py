@@ -119,8 +119,10 @@ def resolve(scn: Scenario, given: dict | None = None) -> World:
     if not problems and math.hypot(s["x"] - g["x"], s["y"] - g["y"]) <= g["radius"]:
         problems.append(f"{label('start')}: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
                         f"{g['radius']:g} m), found ({s['x']:g}, {s['y']:g}) inside it: nothing to plan")
-    if scn.cost == "energy" and vehicle.regen:
-        problems.append("cost: energy needs a vehicle without regeneration (regen: false), found regen: true")
+    if scn.cost == "energy" and vehicle is not None and vehicle.regen:
+        problems.append(f"{label('cost')}: energy needs a planning vehicle without regeneration (regen: false), "
+                        f"found {label('vehicle')} {vehicle.name!r} with regen: true (the energy search counts no "
+                        "energy won back; plan it for time)")
     if problems:
         raise InputError(f"{src}: " + "; ".join(problems))
     return world
@@ -189,8 +191,16 @@ def _start(world: World, start) -> np.ndarray:
 
 def checked_cost(world: World, cost) -> str:
     """``cost``, or the scenario's when None; an InputError for anything but 'time' or
-    'energy' (any other value planned for energy)."""
-    return SC.checked_cost(world.scenario.cost if cost is None else cost)
+    'energy' (any other value planned for energy), and for 'energy' with a planning
+    vehicle that regenerates (its edges could gain energy: the search takes a negative
+    edge cost for a failure code, and the energy heuristic banks nothing)."""
+    cost = SC.checked_cost(world.scenario.cost if cost is None else cost)
+    if cost == "energy" and world.vehicle.regen:
+        scn = world.scenario
+        raise InputError(f"{scn.path or scn.name}: cost energy needs a planning vehicle without regeneration "
+                         f"(regen: false), found vehicle {world.vehicle.name!r} with regen: true (the energy search "
+                         "counts no energy won back; plan it for time)")
+    return cost
 
 
 MAX_REPLAY_STEPS = 10_000_000   # steps of one replay (about 1.5 GB of records): 2.8 h at the 1 kHz rate

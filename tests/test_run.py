@@ -229,3 +229,37 @@ def test_a_failed_replan_row_says_drove_on_only_when_the_run_went_on():
     assert "(drove on with the previous plan)" not in summary(res("failed", [first, row]))
     assert "exhausted (drove on with the previous plan)" in summary(res("reached", [first, row]))
     assert summary(res("failed", [first, row, dict(row, t=6.0)])).count("(drove on with the previous plan)") == 1
+
+
+def test_energy_with_a_regenerating_planning_vehicle_is_refused_everywhere(tmp_path, capsys):
+    """The energy search takes a negative edge cost for a failure code: a vehicle that
+    wins energy back (regen: true) had its gaining edges thrown away as 'code 5-7' and
+    plan and compare reported a plan (exit 0); the API's run took it too. Each now
+    refuses it before any search, naming the vehicle and the key."""
+    import sbmpc
+    (tmp_path / "regen.yaml").write_text("base: p3at\nname: p3at_regen\nregen: true\n")
+    scn = tmp_path / "flat_regen.yaml"
+    scn.write_text((SCN / "flat.yaml").read_text().replace("vehicle: p3at", "vehicle: regen.yaml"))
+    out = tmp_path / "cmp"
+    for argv in (["compare", str(scn), "--out", str(out)], ["plan", str(scn), "--cost", "energy"],
+                 ["run", str(scn), "--cost", "energy"],
+                 ["run", str(SCN / "flat.yaml"), "--vehicle", str(tmp_path / "regen.yaml"), "--cost", "energy"]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "regen: true" in err and "'p3at_regen'" in err and len(err.splitlines()) == 1, err
+        assert ("--vehicle" in err) == ("--vehicle" in argv) and ("--cost" in err) == ("--cost" in argv)
+    assert not out.exists()                       # refused before the folder was made
+    for call in (lambda: sbmpc.run_scenario(scn, cost="energy"), lambda: sbmpc.compare_scenario(scn),
+                 lambda: sbmpc.plan_scenario(scn, cost="energy")):
+        with pytest.raises(SC.InputError, match="regen: true"):
+            call()
+    assert main(["plan", str(scn), "--max-expansions", "2000", "--quiet"]) == 0      # time plans it
+
+
+def test_run_checks_the_start_against_the_planning_vehicle_it_is_given(capsys):
+    """--vehicle replaced the planning vehicle after the start and goal were checked
+    against the scenario's: a start 0.35 m from the edge, inside the Warthog's 0.9 m
+    margin, searched and failed (exit 1) instead of being named (exit 2)."""
+    assert main(["run", str(SCN / "flat.yaml"), "--start", "0.35,0.35,45", "--vehicle", "warthog"]) == 2
+    err = capsys.readouterr().err
+    assert "start (--start)" in err and "0.896 m inside the map" in err

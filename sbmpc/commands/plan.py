@@ -99,7 +99,11 @@ def _world(args):
     note = device_note(scn.planner)
     if note:
         print(f"note: {note}", file=sys.stderr)
-    given = {key: f"--{key}" for key in ("start", "goal") if getattr(args, key, None) is not None}
+    if getattr(args, "cost", None) is not None:
+        scn = replace(scn, cost=args.cost)
+    if getattr(args, "vehicle", None) is not None:     # run's planning vehicle: margins and cost checked with it
+        scn = replace(scn, vehicle=WO.checked_vehicle(args.vehicle, "--vehicle"))
+    given = {key: f"--{key}" for key in ("start", "goal", "cost", "vehicle") if getattr(args, key, None) is not None}
     world = WO.resolve(scn, given)
     _, limit = WO.capability(world)
     if limit:
@@ -247,6 +251,8 @@ def run_compare(args) -> int:
     out = args.out
     Outputs(scenario_inputs(args.scenario)).folder(out, "--out", ("compare.json", "compare.png", "compare.rrd"))
     world = _world(args)
+    from ..world import checked_cost
+    checked_cost(world, "energy")       # both costs are planned: refused before the folder is made
     out.mkdir(parents=True, exist_ok=True)
     compile_note(args.quiet)
     t0 = time.perf_counter()

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from ..errors import InputError, NoResult
+from ..errors import NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 from .plan import Progress, _world, add_backend_flags, compile_note
 
@@ -62,18 +62,12 @@ def run_run(args) -> int:
     outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
-    world = _world(args)
-    base = world.scenario.base
-    if args.vehicle is not None:
-        world = replace(world, vehicle=checked_vehicle(args.vehicle, "--vehicle"))
+    world = _world(args)          # with --vehicle as its planning vehicle
     truth = checked_vehicle(args.truth, "--truth")
     settings = world.scenario.run
     if args.trigger:
         settings = replace(settings, trigger=args.trigger)
-    cost = args.cost or world.scenario.cost
-    if cost == "energy" and world.vehicle.regen:
-        raise InputError(f"{args.vehicle or base}: energy cost needs a planning vehicle without regeneration "
-                         "(regen: false), found regen: true")
+    cost = world.scenario.cost          # --cost applied by _world
     compile_note(args.quiet)
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost))
     print(summary(res))
