@@ -133,7 +133,7 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
     "patch_inner": (0.0, 10.0, True), "patch_width": (0.0, 2.0, False),
     "v_max": (0.0, 1e4, False), "torque_constant": (0.0, 1e4, False),
     "armature_resistance": (0.0, 1e4, False), "current_limit": (0.0, 1e5, False),
-    "controller_rate": (0.0, 1e6, False), "kp": (0.0, 1e6, True), "ki": (0.0, 1e6, True),
+    "controller_rate": (1.0, 1e6, True), "kp": (0.0, 1e6, True), "ki": (0.0, 1e6, True),
     "kd": (0.0, 1e6, True), "ref_accel": (0.0, 1e3, True),
     "radius_scale_left": (0.0, 2.0, False), "radius_scale_right": (0.0, 2.0, False),
     "viscous": (-1e3, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),

@@ -159,28 +159,57 @@ def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
 
 class _Executor:
     """Steps one world's closed-loop model through controls, period by period, at its
-    vehicle's controller period (the paper's 1 kHz digital PID)."""
+    vehicle's controller period (the paper's 1 kHz digital PID). ``delay_s``: the
+    vehicle's command delay: each command reaches the wheel loops that much later (the
+    commands issued still in the pipe are kept across periods, so a delay longer than a
+    period is executed in full; before the first command arrives the loops hold the
+    start state's wheel-speed references: a vehicle that starts at speed keeps it)."""
 
     def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0):
         self.dt = 1.0 / world.vehicle.controller_rate
         self.Q, self.data = PB.pack_world(world, cost, self.dt)
         self.lag = int(round(delay_s / self.dt))
-        self.prev = (0.0, 0.0)
+        self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
+
+    def _applied(self, X: np.ndarray, wl: float, wr: float, n: int) -> list:
+        """The commands [[wl, wr, steps]] that reach the loops over the next n steps."""
+        if self.pipe is None:
+            self.pipe = [[float(X[K.S_REFL]), float(X[K.S_REFR]), self.lag]]
+        self.pipe.append([wl, wr, n])
+        out, need = [], n
+        while need > 0:
+            seg = self.pipe[0]
+            take = min(seg[2], need)
+            if take > 0:
+                out.append([seg[0], seg[1], take])
+            seg[2] -= take
+            need -= take
+            if seg[2] == 0:
+                self.pipe.pop(0)
+        return out
 
     def step(self, X: np.ndarray, control, record: bool = True) -> tuple:
         """Apply (wl, wr, duration_s) from state X. Returns (recorded rows (n, NR) from X
         on, end code, new state)."""
         wl, wr, d = control
         n = max(1, int(round(d / self.dt)))
-        if 0 < self.lag:
-            k = min(self.lag, n)
-            cl, cr, ns = [self.prev[0], wl], [self.prev[1], wr], [k, n - k]
-        else:
-            cl, cr, ns = [wl], [wr], [n]
-        self.prev = (wl, wr)
+        segs = self._applied(X, wl, wr, n) if self.lag > 0 else [[wl, wr, n]]
         rec = np.zeros((n + 1 if record else 1, K.NR))
-        rows, S, end, _ = SS.replay(self.Q, self.data, np.ascontiguousarray(X), np.array(cl, float),
-                                    np.array(cr, float), np.array(ns, np.int64), rec)
+        rows, S, end, _ = SS.replay(self.Q, self.data, np.ascontiguousarray(X), np.array([g[0] for g in segs], float),
+                                    np.array([g[1] for g in segs], float), np.array([g[2] for g in segs], np.int64), rec)
+        if self.lag > 0:
+            # a drive cut short (a stall, the goal) applied fewer steps: what it did not
+            # apply is still in the pipe, in order
+            left = n - int(round((S[K.S_T] - X[K.S_T]) / self.dt))
+            for g in reversed(segs):
+                if left <= 0:
+                    break
+                back = min(left, g[2])
+                if self.pipe and self.pipe[0][:2] == g[:2]:
+                    self.pipe[0][2] += back
+                else:
+                    self.pipe.insert(0, [g[0], g[1], back])
+                left -= back
         return rec[:rows], int(end), S
 
 

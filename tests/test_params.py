@@ -47,6 +47,8 @@ def test_user_file_and_roundtrip(tmp_path, p3at):
     ("mass: 40\n", ["expected every parameter or a 'base'", "found no inertia"]),
     ("base: nosuchbot\nmass: 40\n", ["nosuchbot", "expected a shipped name"]),
     ("- 1\n", ["expected a mapping"]),
+    # under 1 Hz the replay step is over 1 s: simulate ended in exit 3, run drove 2 s steps
+    ("base: p3at\ncontroller_rate: 0.5\n", ["key 'controller_rate'", ">= 1", "0.5"]),
 ])
 def test_bad_files_name_file_key_expected_found(tmp_path, text, words):
     path = tmp_path / "bad.yaml"

@@ -263,3 +263,28 @@ def test_run_checks_the_start_against_the_planning_vehicle_it_is_given(capsys):
     assert main(["run", str(SCN / "flat.yaml"), "--start", "0.35,0.35,45", "--vehicle", "warthog"]) == 2
     err = capsys.readouterr().err
     assert "start (--start)" in err and "0.896 m inside the map" in err
+
+
+def test_a_delay_longer_than_a_period_is_executed_in_full(flat):
+    """The executor held the previous command for at most one period: a 3 s or a 10 s
+    delay ran exactly as a 1 s one (19.24 s, 239.1 J, 3 re-plans). Commands still in the
+    pipe now carry over: with 1.5 s nothing moves for 1.5 s, then the first command
+    arrives."""
+    res = R.run(flat, "time", flat.vehicle.replace(delay=1.5), settings=replace(flat.scenario.run, max_replans=2))
+    t, v = res.trajectory["t"], res.trajectory["v"]
+    assert t[-1] > 2.0
+    assert np.abs(v[t <= 1.5]).max() < 1e-6 and v[(t > 1.6) & (t < 2.0)].max() > 0.05
+    short = R.run(flat, "time", flat.vehicle.replace(delay=1.0))
+    longer = R.run(flat, "time", flat.vehicle.replace(delay=3.0), settings=replace(flat.scenario.run, max_replans=5))
+    assert longer.status != "reached" or longer.travel_time_s > short.travel_time_s + 1.0
+
+
+def test_a_delayed_vehicle_that_starts_at_speed_keeps_it_until_the_first_command_arrives():
+    """The delay's hold began at wheel speeds (0, 0): a truth with 0.3 s of delay that
+    starts at 0.8 m/s braked to 0.5 m/s before the plan's first command reached it. The
+    start state is steady driving at its speed, so its references are held."""
+    scn = SC.load(SCN / "flat.yaml")
+    w = WO.resolve(replace(scn, start=dict(scn.start, v=0.8)))
+    res = R.run(w, "time", w.vehicle.replace(delay=0.3), settings=replace(w.scenario.run, max_replans=2))
+    t, v = res.trajectory["t"], res.trajectory["v"]
+    assert np.allclose(v[t <= 0.3], 0.8, atol=0.01)
