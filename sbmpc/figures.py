@@ -7,7 +7,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 
-def plot_trajectory(traj, path, title: str = "") -> None:
+def plot_trajectory(traj, path, title: str = "", fmt: str | None = None) -> None:
     """PNG of a simulated run: speed and wheel speeds, torques, battery power and energy,
     and the path seen from above."""
     fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
@@ -54,7 +54,7 @@ def plot_trajectory(traj, path, title: str = "") -> None:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, format=fmt)
     plt.close(fig)
 
 

@@ -107,3 +107,19 @@ def test_bad_vehicle_file_names_file_and_key(tmp_path, capsys):
     err = capsys.readouterr().err
     assert str(bad) in err and "'mass'" in err
     assert bad.read_text() == "mass: -1\n"
+
+
+def test_plot_format_follows_the_suffix_and_a_bad_one_is_refused_before_any_work(tmp_path, capsys):
+    """A --plot path without a suffix ended in exit 3 (matplotlib read the temporary
+    file's '.tmp' as the format), and one ending in .txt did too, after --json had been
+    written. No suffix is PNG, .pdf is PDF, anything else exit 2 with nothing written."""
+    assert main(["simulate", "--v", "0.5", "--duration", "0.5", "--plot", str(tmp_path / "plot")]) == 0
+    assert (tmp_path / "plot").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["simulate", "--v", "0.5", "--duration", "0.5", "--plot", str(tmp_path / "p.PDF")]) == 0
+    assert (tmp_path / "p.PDF").read_bytes()[:5] == b"%PDF-"
+    capsys.readouterr()
+    assert main(["simulate", "--v", "0.5", "--duration", "0.5", "--plot", str(tmp_path / "p.txt"),
+                 "--json", str(tmp_path / "s.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--plot" in err and ".png" in err and "p.txt" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "s.json").exists() and not (tmp_path / "p.txt").exists()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +41,25 @@ def _need(value, flag, what):
     return value
 
 
+PLOT_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg")
+
+
+def plot_format(path) -> str | None:
+    """The figure format of ``--plot PATH``: its suffix's, PNG when it has none; an
+    InputError, before any work, for another suffix (the temporary file's name made
+    matplotlib read a path without one as format 'tmp': exit 3 after the JSON was
+    written)."""
+    if path is None:
+        return None
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if not suffix:
+        return "png"
+    if suffix not in PLOT_FORMATS:
+        raise InputError(f"--plot: expected a figure file ending in {', '.join('.' + f for f in PLOT_FORMATS)} "
+                         f"(or no suffix: PNG), found '{path}'")
+    return suffix
+
+
 MAX_STEPS = 20_000_000     # steps of one simulation (its trajectory keeps about 200 bytes a step)
 
 
@@ -51,6 +71,7 @@ def run(args) -> int:
     outs = Outputs([args.vehicle, args.terrain])
     outs.file(args.json, "--json")
     outs.file(args.plot, "--plot")
+    fmt = plot_format(args.plot)
     if args.dt is not None and not (1e-5 <= args.dt <= 0.05):
         raise InputError(f"--dt: expected a step between 1e-05 and 0.05 s, found {args.dt}")
     try:
@@ -133,7 +154,7 @@ def run(args) -> int:
     if args.plot:
         from ..figures import plot_trajectory
         with atomic(args.plot) as tmp:
-            plot_trajectory(traj, tmp, f"{manoeuvre} on {model.terrain.name}")
+            plot_trajectory(traj, tmp, f"{manoeuvre} on {model.terrain.name}", fmt)
     return 0
 
 
