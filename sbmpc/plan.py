@@ -267,9 +267,14 @@ def _shared_budget(own: Plan, fast: Plan, budget: float, left: float) -> Plan:
         return own
     head = f"time budget of {budget_text(left)} s used up"
     rest = own.reason[len(head):] if (own.reason or "").startswith(head) else "; " + (own.reason or "")
-    reason = (f"time budget of {budget_text(budget)} s used up ({fast.planning_time_s:.2f} s of it by the time "
-              f"search the energy plan is checked against, planner.energy_vs_time; {left:.2f} s left to the energy "
-              f"search)" + rest)
+    if fast.planning_time_s < budget:
+        used = (f"{fast.planning_time_s:.2f} s of it by the time search the energy plan is checked against, "
+                f"planner.energy_vs_time; {left:.2f} s left to the energy search")
+    else:       # the budget cuts a search, not its fixed costs (the cost-to-go grid, the 1 kHz check)
+        used = (f"all of it by the time search the energy plan is checked against, planner.energy_vs_time, which "
+                f"took {fast.planning_time_s:.2f} s: a search's grid and its 1 kHz check are not cut by the budget; "
+                "nothing was left to the energy search")
+    reason = f"time budget of {budget_text(budget)} s used up ({used})" + rest
     if not fast.found:
         reason += ("; the time search found no path either; planner.energy_vs_time: false leaves the whole "
                    "budget to the energy search")

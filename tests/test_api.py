@@ -297,6 +297,13 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
                         "found no path either; planner.energy_vs_time: false leaves the whole budget to the energy "
                         "search")
     assert p.failure == "time_budget"
+    # a time search that overran the whole budget (its grid and 1 kHz check are not cut):
+    # the message said "2.00 s of it by the time search ...; 0.00 s left" of 1.5 s
+    p = PL.plan(world, "energy", time_budget_s=1.5)
+    assert budgets["energy"] == 0.0
+    assert p.reason.startswith("time budget of 1.5 s used up (all of it by the time search the energy plan is "
+                               "checked against, planner.energy_vs_time, which took 2.00 s: ")
+    assert "nothing was left to the energy search" in p.reason and " s of it by" not in p.reason
     kind = "node_budget"                  # told by its kind, not its words: another failure stands as it is
     p = PL.plan(world, "energy", time_budget_s=5.0)
     assert p.reason == "time budget of 3 s used up; to try: x" and p.failure == "node_budget"
