@@ -25,17 +25,13 @@ def motor_torque(voltage, omega, k, r_a):
 
 
 @jit
-def max_motor_voltage(v_max, r_a, current):
-    """Eq. 27: largest back-EMF voltage the controller leaves the motor [V],
-    V_m,max = PWM (VCC - U_loss) - (dn/dtau) K_T I / K_n = V_max - R_a |I|
-    (the speed-torque gradient term is the armature drop R_a I)."""
-    return v_max - r_a * abs(current)
-
-
-@jit
 def current_window(omega, v_max, k, r_a, i_max):
-    """The currents [A] the drive can deliver at wheel speed omega [rad/s]: the continuous
-    limit |I| <= I_max intersected with the voltage limit of eq. 27, |k w + R_a I| <= V_max.
+    """Eq. 27 (its one implementation): the currents [A] the drive can deliver at wheel
+    speed omega [rad/s], the continuous limit |I| <= I_max intersected with the
+    controller's voltage limit V_m,max = PWM (VCC - U_loss) - (dn/dtau) K_T I / K_n,
+    i.e. |k w + R_a I| <= V_max [V] (the speed-torque gradient term is the armature drop
+    R_a I: a driving motor's back-EMF is held below V_max - R_a |I|, a braking one's
+    below V_max + R_a |I|).
     When the back-EMF alone exceeds V_max (over-speed) the window is the single current at
     the nearest voltage bound."""
     bemf = k * omega                  # eq. 26 at the voltage bounds, over k

@@ -10,15 +10,18 @@ import math
 
 from scipy.optimize import brentq
 
+from .drive import current_window
 from .params import G, Terrain, Vehicle, checked_number
 
 
 def available_torque(vehicle: Vehicle, omega: float) -> float:
-    """Largest torque [N m] of one side at wheel speed omega >= 0 [rad/s] (eqs. 26, 27 and
-    the continuous current limit)."""
+    """Largest torque [N m] of one side at wheel speed omega >= 0 [rad/s]: k times the top
+    of the current window (eq. 27 and the continuous current limit,
+    :func:`dynamics.drive.current_window`; past the no-load speed it is negative)."""
     v = vehicle
     omega = checked_number("omega", omega, "a number in [0, inf] rad/s", 0.0)
-    return min(v.continuous_torque, v.torque_constant * (v.v_max - v.torque_constant * omega) / v.armature_resistance)
+    k = v.torque_constant
+    return k * current_window(omega, v.v_max, k, v.armature_resistance, v.current_limit)[1]
 
 
 def required_torque(vehicle: Vehicle, terrain: Terrain, grade: float, omega: float) -> float:

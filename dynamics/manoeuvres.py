@@ -49,7 +49,7 @@ def lemniscate_path(t):
 
 def lemniscate_reference(t):
     """Desired linear speed v [m/s], curvature [1/m] and heading [rad] along eqs. 29, 30 at
-    times t [s] (analytic derivatives by central differences of 1 ms)."""
+    times t [s] (the derivatives of eqs. 29, 30 by central differences of 1 ms)."""
     h = 1e-3
     x0, y0 = lemniscate_path(t - h)
     x1, y1 = lemniscate_path(t)

@@ -186,6 +186,38 @@ def test_closed_loop_predicts_far_better_than_open_loop():
     assert err_open > 10 * err_closed
 
 
+def test_eqs_29_30_at_reference_points_worked_by_hand():
+    """Eqs. 29, 30 pinned by numbers worked from the paper's formulas, not by the code:
+    X(0) = 9, Y(0) = 0, dY/dt(0) = 27/50 = 0.54 m/s heading +y; at t = 25 pi s (t/50 =
+    pi/2) the crossing (0, 0); at t = 12.5 pi s X = 9 (sqrt2/2) / 1.5 = 4.2426 m and
+    Y = 27 (1/2) / 1.5 = 9 m. (The lemniscate test below drives the path the same
+    functions give, so it cannot see a wrong constant in them.)"""
+    from dynamics.manoeuvres import lemniscate_path, lemniscate_reference
+    X, Y = lemniscate_path(np.array([0.0, 25.0 * math.pi, 12.5 * math.pi]))
+    assert X == pytest.approx([9.0, 0.0, 4.242640687], abs=1e-9)
+    assert Y == pytest.approx([0.0, 0.0, 9.0], abs=1e-9)
+    v, kappa, head = lemniscate_reference(np.array([0.0]))
+    assert v[0] == pytest.approx(0.54, rel=1e-6) and head[0] == pytest.approx(math.pi / 2, abs=1e-9)
+
+
+def test_eq5_mass_matrix_by_hand_and_its_yaw_inertia_by_newton():
+    """Eq. 5 with the P3-AT's numbers typed in (m 31 kg, I 0.67 kg m^2, r 0.11 m, B 0.4 m,
+    alpha 1.5): M11 = m r^2/4 + r^2 I/(alpha B^2) = 0.127554, M12 = 0.059996. Equal and
+    opposite wheel torques +-tau give the yaw acceleration Newton's law gives, the ground
+    forces' moment over the yaw inertia, tau B / (r I), whatever alpha (the alpha of eq. 5
+    cancels against eq. 1's); equal torques give the acceleration 2 tau / (m r). (The other
+    tests use M11 + M12 only, where I cancels: alpha squared or 10 I passed them.)"""
+    from dynamics.body import mass_matrix, wheel_accelerations
+    m, inertia, r, width, alpha = 31.0, 0.67, 0.11, 0.4, 1.5
+    m11, m12 = mass_matrix(m, inertia, r, width, alpha)
+    assert (m11, m12) == (pytest.approx(0.127554167, abs=1e-8), pytest.approx(0.059995833, abs=1e-8))
+    tau = 2.0
+    al, ar = wheel_accelerations(m11, m12, -tau, tau, 0.0, 0.0, 0.0)
+    assert r * (ar - al) / (alpha * width) == pytest.approx(tau * width / (r * inertia), rel=1e-9)
+    al, ar = wheel_accelerations(m11, m12, tau, tau, 0.0, 0.0, 0.0)
+    assert r * al == pytest.approx(2.0 * tau / (m * r), rel=1e-9) and al == pytest.approx(ar)
+
+
 def test_lemniscate_follows_eqs_29_30():
     """Paper Section V-C: the wheel speeds of eqs. 29, 30 through the inverse alpha model
     (Fig. 8), driven by the closed loop on the lemniscate's vinyl: the path driven is the
@@ -302,7 +334,7 @@ def test_no_nan_or_inf_over_random_commands_grades_and_terrains(wl, wr, pitch, t
 
 def test_implicit_step_reduces_to_eq25_and_drive_window_to_eqs26_27(p3at):
     from dynamics.body import mass_matrix, newton_step, wheel_accelerations
-    from dynamics.drive import current_window, max_motor_voltage, motor_torque
+    from dynamics.drive import current_window, motor_torque
     m11, m12 = mass_matrix(p3at.mass, p3at.inertia, p3at.wheel_radius, p3at.width, 1.5)
     al, ar = wheel_accelerations(m11, m12, 3.0, -1.0, 0.5, 0.2, 0.4)
     # the residual of M (w - w0) - dt (tau - C - G) at w0, and its correction with J = 0
@@ -315,7 +347,9 @@ def test_implicit_step_reduces_to_eq25_and_drive_window_to_eqs26_27(p3at):
     k, ra, vmax = p3at.torque_constant, p3at.armature_resistance, p3at.v_max
     lo, hi = current_window(7.0, vmax, k, ra, p3at.current_limit)      # voltage-bound at 7 rad/s
     assert hi == pytest.approx(motor_torque(vmax, 7.0, k, ra) / k) and hi < p3at.current_limit
-    assert k * 7.0 == pytest.approx(max_motor_voltage(vmax, ra, hi))   # eq. 27: back-EMF at the limit
+    assert k * 7.0 + ra * hi == pytest.approx(vmax)     # eq. 27: back-EMF plus armature drop at the limit
+    lo, hi = current_window(5.0, vmax, k, 2.0, 100.0)                 # braking holds a larger back-EMF
+    assert k * 5.0 + 2.0 * lo == pytest.approx(-vmax) and k * 5.0 < vmax + 2.0 * abs(lo)
     assert current_window(0.0, vmax, k, ra, p3at.current_limit) == (-p3at.current_limit, p3at.current_limit)
     lo, hi = current_window(10.0, vmax, k, ra, p3at.current_limit)     # braking window below over-speed
     assert (lo, hi) == (-p3at.current_limit, pytest.approx((vmax - k * 10.0) / ra))
