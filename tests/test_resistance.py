@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings, strategies as st
 from scipy.integrate import dblquad
 
 from dynamics import load_terrain, load_vehicle
@@ -33,6 +34,42 @@ def test_quadrature_matches_adaptive_integration_of_eq17():
     front = dblquad(integrand, -b / 2, b / 2, C / 2, L / 2, args=(L / 2,), epsabs=1e-12)[0]
     rear = dblquad(integrand, -b / 2, b / 2, -L / 2, -C / 2, args=(-C / 2,), epsabs=1e-12)[0]
     assert float(unit_friction_right(wl, wr, V, VINYL)) == pytest.approx(front + rear, rel=1e-5)
+
+
+@settings(max_examples=40, deadline=None)
+@given(wl=st.floats(-8.0, 8.0), wr=st.floats(-8.0, 8.0), front=st.booleans(), x=st.floats(-0.025, 0.025),
+       frac=st.floats(0.0, 1.0), alpha=st.floats(1.0, 3.0))
+def test_shear_displacement_of_eqs_12_16_is_the_integral_of_the_sliding_velocity(wl, wr, front, x, frac, alpha):
+    """Eqs. 12-16 in closed form against their definition, integrated numerically: a
+    tread particle of the right side enters its patch at y0 (L/2 front, -C/2 rear) and
+    moves back at the rim speed, y(tau) = y0 - r w tau (eq. 8); its sliding velocity in
+    the body frame is eq. 9's (-y yaw_rate, v + xw yaw_rate - r w), and the body has
+    turned by yaw_rate tau since (eq. 11); j is the integral of that velocity in the
+    ground frame over the contact time. Any rotation angle (the closed forms are exact at
+    constant rates); the quadrature test above reuses the closed forms, this one does not."""
+    from scipy.integrate import quad
+    r, B, L, C = V.wheel_radius, V.width, V.patch_outer, V.patch_inner
+    rw = r * wr
+    assume(abs(rw) > 0.02)
+    v = r * (wl + wr) / 2.0
+    yaw_rate = r * (wr - wl) / (alpha * B)
+    lo, hi = (C / 2, L / 2) if front else (-L / 2, -C / 2)
+    y0 = hi if rw > 0 else lo          # the edge the tread enters at (a reversing wheel: the other)
+    y = lo + frac * (hi - lo)
+    xw = B / 2 + x
+    t = (y0 - y) / rw
+    assume(t >= 0.0)
+
+    def ground(tau, axis):
+        yy = y0 - rw * tau
+        vx, vy = -yy * yaw_rate, v + xw * yaw_rate - rw
+        ph = yaw_rate * tau
+        return vx * np.cos(ph) - vy * np.sin(ph) if axis == 0 else vx * np.sin(ph) + vy * np.cos(ph)
+
+    jx = quad(ground, 0.0, t, args=(0,), epsabs=1e-13, epsrel=1e-12)[0]
+    jy = quad(ground, 0.0, t, args=(1,), epsabs=1e-13, epsrel=1e-12)[0]
+    cx, cy = shear_displacement(xw, y, y0, v, t, yaw_rate)
+    assert float(cx) == pytest.approx(jx, abs=1e-10) and float(cy) == pytest.approx(jy, abs=1e-10)
 
 
 def test_outer_wheel_torque_of_the_tightest_vinyl_circle():
