@@ -25,13 +25,36 @@ PAPER_RADII = np.concatenate([
     10.0 ** np.arange(1.2, 2.01, 0.2), 10.0 ** np.arange(2.2, 3.21, 0.2), [10.0 ** 3.6, 1e4]])
 
 
-def circle_torques(vehicle: Vehicle, terrain: Terrain, radii, speed: float = 0.2, **quad):
+def circle_torques(vehicle: Vehicle, terrain: Terrain, radii, speed: float = 0.2, check: bool = True, **quad):
     """Steady-state (left, right) torques [N m] on counter-clockwise circles of commanded
     radii [m] at desired speed [m/s] (eq. 22 at the commanded wheel speeds: in steady state
-    the PID's integral makes the wheels turn exactly as commanded)."""
+    the PID's integral makes the wheels turn exactly as commanded, which it can only where
+    the drive delivers the torque). ``check``: a ParameterError naming the radii whose
+    torque lies outside the drive's window at its wheel speed (eq. 27 and the current
+    limit: at 0.2 m/s the outer side of a 0.2-3 m circle on asphalt asks 6.5-10.1 N m of
+    the P3-AT's 5 N m, of a 0.2-1 m circle on the lemniscate's vinyl 5.3-6.4 N m; on the
+    paper's vinyl every radius holds, 4.72 N m at 0.2 m), where the steady state eq. 28 compares with does not exist."""
+    from .drive import current_window
+    from .params import ParameterError
     radii = np.asarray(radii, float)
     wl, wr = wheel_speeds(speed, 1.0 / radii, vehicle.wheel_radius, vehicle.width, 1.0)
-    return steady_resistance(wl, wr, vehicle, terrain, **quad)
+    tl, tr = steady_resistance(wl, wr, vehicle, terrain, **quad)
+    if check:
+        k = vehicle.torque_constant
+        bad = np.zeros(radii.shape, bool)
+        for w, tau in ((wl, tl), (wr, tr)):
+            for i, (wi, ti) in enumerate(zip(np.ravel(w), np.ravel(tau))):
+                lo, hi = current_window(float(wi), vehicle.v_max, k, vehicle.armature_resistance, vehicle.current_limit)
+                if not k * lo - 1e-9 <= ti <= k * hi + 1e-9:
+                    bad.flat[i] = True
+        if bad.any():
+            worst = float(np.max(np.abs(np.concatenate([np.ravel(tl)[bad.ravel()], np.ravel(tr)[bad.ravel()]]))))
+            raise ParameterError(
+                f"radii: the drive cannot hold {int(bad.sum())} of the circles at {speed:g} m/s (radii "
+                f"{', '.join(f'{x:g}' for x in radii[bad][:6])}{' ...' if bad.sum() > 6 else ''} m ask steady torques "
+                f"up to {worst:.3g} N m; it delivers {vehicle.continuous_torque:.3g} N m at most, eq. 27): no "
+                "steady state exists there to compare with; drop those radii or lower the speed")
+    return tl, tr
 
 
 @dataclass(frozen=True)
@@ -68,7 +91,7 @@ def fit_terrain(vehicle: Vehicle, terrain: Terrain, radii, tau_l, tau_r, speed: 
 
     def residual(p):
         ter = terrain.replace(shear_modulus=p[0] * 1e-3, mu_sa=p[1], mu_op=p[2])
-        tl, tr = circle_torques(vehicle, ter, radii, speed, **quad)
+        tl, tr = circle_torques(vehicle, ter, radii, speed, check=False, **quad)
         return np.concatenate([tl, tr]) - meas
 
     x0 = np.array([guess[0] * 1e3, guess[1], guess[2]])
