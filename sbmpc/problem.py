@@ -75,7 +75,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     else:
         batch = SS.expand_batch
     return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
-                   dims, res, ps.branching, rotate=ps.samples == "rotating", hold=ps.hold,
+                   dims, res, ps.branching, rotate=ps.samples == "rotating", hold=(2 if ps.hold_periods > 1 else 1) if ps.hold else 0,
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine, expand_batch=batch)
 

@@ -52,6 +52,8 @@ class PlannerSettings:
     expansion) or 'rotating' (each node its own window of the sequence, by node number);
     hold: one of the sampled controls is the one that reached the node (a control held
     for several periods: a long gentle arc, a steady speed; docs/planner.md#controls);
+    hold_periods: with hold, that control is one edge held this many periods (1: one
+    period, as every other control);
     tip_over_deg: pitch or roll at which an edge is rejected; time_weight, energy_weight:
     w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
@@ -89,6 +91,7 @@ class PlannerSettings:
     wheel_speeds: tuple | None = None
     samples: str = "rotating"
     hold: bool = True
+    hold_periods: int = 1
     tip_over_deg: float = 30.0
     time_weight: float = 1.1
     energy_weight: float = 1.1
@@ -159,6 +162,7 @@ _SETTING_RANGES = {
     "tip_over_deg": (float, 1.0, 89.0),
     "time_weight": (float, 1.0, 10.0),
     "refine": (float, 0.0, 100.0),
+    "hold_periods": (int, 1, 8),
     "energy_weight": (float, 1.0, 10.0),
     "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),

@@ -151,7 +151,12 @@ def control_set(world: World) -> np.ndarray:
     m = nh * (64 if ps.samples == "rotating" else 1)
     pts = qmc.Halton(d=2, scramble=True, seed=ps.seed).random(m)
     fixed = hi * np.array(FIXED_CONTROLS)
-    return np.ascontiguousarray(np.vstack([fixed, lo + (hi - lo) * pts]))
+    rows = np.vstack([fixed, lo + (hi - lo) * pts])
+    rows = np.column_stack([rows, np.ones(len(rows))])
+    if ps.hold and ps.hold_periods > 1:
+        # the held control's variant, held for hold_periods periods (Problem.hold == 2)
+        rows = np.vstack([rows, np.column_stack([rows[:, :2], np.full(len(rows), float(ps.hold_periods))])])
+    return np.ascontiguousarray(rows)
 
 
 def start_state(world: World) -> np.ndarray:

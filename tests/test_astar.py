@@ -448,6 +448,20 @@ def test_a_held_control_takes_the_last_row_of_the_window(n, reached_by, nbranch,
         assert np.array_equal(rows[True][:-1], rows[False][:-1])
     else:
         assert np.array_equal(rows[True], rows[False])
+    # hold 2: the table's second half holds each row's variant over several periods; the
+    # window samples the first half alone, and the held control is the variant of the
+    # row that reached n, whichever half that row is in, fixed rows too
+    table = np.vstack([controls, controls + 1000.0])
+    CTL[n] = reached_by if reached_by < 0 else reached_by + (60 if reached_by % 2 else 0)
+    U = np.zeros((nbranch, 2))
+    crow = np.zeros(nbranch, np.int64)
+    _pick(table, nbranch, nfixed, rotate, 2, n, CTL, U, crow, 0)
+    assert np.array_equal(U, table[crow])
+    if reached_by >= 0:
+        assert crow[-1] == reached_by + 60
+        assert np.array_equal(crow[:-1], rows[False][:-1]) and np.all(crow[:-1] < 60)
+    else:
+        assert np.array_equal(crow, rows[False])
 
 
 @njit(HEURISTIC.signature, cache=True)

@@ -279,3 +279,33 @@ def test_auto_threads_give_the_serial_plan():
     plans = [PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, threads=t))), "time") for t in (1, 0)]
     assert plans[0].found and plans[0].controls == plans[1].controls
     assert PB.search_threads(replace(scn.planner, threads=0)) in ("auto", 1)
+
+
+def test_a_held_control_over_two_periods_is_one_edge_and_the_plan_holds():
+    """planner.hold_periods: 2 (docs/planner.md#controls): the control table gains each
+    row's two-period variant; a plan of hill_tradeoff (time) then has controls of 2 s,
+    each the wheel speeds that reached its node (the control before it) or a fixed row,
+    every other control one period, and the plan is found and checked at 1 kHz like any
+    other: its controls replay to the reported travel time."""
+    scn = SC.load(SCEN / "hill_tradeoff.yaml")
+    from dataclasses import replace
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, hold_periods=2)))
+    C = WO.control_set(world)
+    m = len(C) // 2
+    assert C.shape == (2 * m, 3) and np.array_equal(C[m:, :2], C[:m, :2])
+    assert np.all(C[:m, 2] == 1.0) and np.all(C[m:, 2] == 2.0)
+    p = PL.search_plan(world, "time")
+    assert p.found and p.check.reached
+    durations = np.array([c[2] for c in p.controls])
+    body = durations[:-1]          # the last is cut where it enters the goal disc
+    assert np.any(np.isclose(body, 2.0)) and np.all(np.isclose(body, 1.0) | np.isclose(body, 2.0))
+    assert 0.0 < durations[-1] <= 2.0 + 1e-9
+    fixed = {tuple(np.round(r, 9)) for r in C[:len(WO.FIXED_CONTROLS), :2]}
+    for i in np.flatnonzero(np.isclose(durations[:-1], 2.0)):
+        row = tuple(np.round(p.controls[i][:2], 9))
+        assert row in fixed or (i > 0 and row == tuple(np.round(p.controls[i - 1][:2], 9)))
+    assert p.travel_time_s == pytest.approx(sum(durations), abs=1e-6)
+    # the setting's range
+    with pytest.raises(SC.InputError, match="hold_periods"):
+        SC.parse({"map": {"generate": {"size": [5, 5]}}, "start": {"x": 1, "y": 1}, "goal": {"x": 3, "y": 3},
+                  "planner": {"hold_periods": 0}})

@@ -178,7 +178,10 @@ def edge_cost(params, data, state, control, out, rec, rows, O):
     a negative invalid code (``rec``, ``rows``, ``O``: as :func:`edge`; no allocation)."""
     for d in range(out.shape[0]):
         out[d] = state[d]
-    end, _ = edge(params, data, out, control[0], control[1], int(params[Q_NSTEP]), rec, rows, O)
+    n = int(params[Q_NSTEP])
+    if control.shape[0] > 2:            # (wl, wr, periods): a control held over several periods
+        n = int(round(n * control[2]))
+    end, _ = edge(params, data, out, control[0], control[1], n, rec, rows, O)
     if end < 0:
         return float(end)
     if params[Q_COST] == COST_TIME:

@@ -152,7 +152,7 @@ class Problem:
     branching: int
     rotate: bool = False
     fixed_controls: int = 0
-    hold: bool = False
+    hold: int = 0
     snap: bool = False
     max_depth: int = 1 << 30
     settle_depth: int = 0
@@ -299,7 +299,7 @@ class Search:
         t0 = time.perf_counter()
         while True:
             st = self._run(self._fa, float(p.weight), p.params, p.data, self.work, p.start, p.controls,
-                            int(p.branching), int(p.fixed_controls), bool(p.rotate), bool(p.hold), p.dims, p.res, bool(p.snap),
+                            int(p.branching), int(p.fixed_controls), bool(p.rotate), int(p.hold), p.dims, p.res, bool(p.snap),
                             int(p.max_depth), int(p.settle_depth), int(max_iterations), float(p.refine), int(chunk), self.X, self.G, self.PAR, self.CTL, self.DEP,
                             self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best)
             if st == GROW:
@@ -367,7 +367,7 @@ class Search:
 
         def call(pending, chunk, size=size):         # one round (the arrays as they are now: _grow replaces them)
             return run(self._fa, float(p.weight), p.params, p.data, p.start, p.controls, nb, int(p.fixed_controls),
-                       bool(p.rotate), bool(p.hold), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
+                       bool(p.rotate), int(p.hold), p.dims, p.res, bool(p.snap), int(p.max_depth), int(p.settle_depth),
                        int(max_iterations), float(p.refine), size, pending, int(chunk), self.X, self.G, self.PAR,
                        self.CTL, self.DEP, self.CLO, self.KEYS, self.table, self.H, self.cnt, self.best,
                        BN, BP, BO, BU, BR, CH, CO, SN, SX, self.SL, SCH, SCO, SCR, sc, cand)

@@ -38,7 +38,7 @@ GOAL = types.FunctionType(types.boolean(_ARR, _ARR, _ARR))
 # sbmpc.search.astar._addresses), so the compiled search is the same (and cached on disk) whatever the problem
 _F1, _F2, _I1, _I2 = types.float64[::1], types.float64[:, ::1], types.int64[::1], types.int64[:, ::1]
 _RUN_SIG = types.int64(_I1, types.float64, _F1, _F1, _F1, _F1, _F2, types.int64, types.int64,
-                       types.boolean, types.boolean, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
+                       types.boolean, types.int64, _I1, _F1, types.boolean, types.int64, types.int64, types.int64, types.float64,
                        types.int64, _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1)
 
 
@@ -175,10 +175,17 @@ def _pick(controls, nbranch, nfixed, rotate, hold, n, CTL, U, crow, off):
     that a node's edges are known before it is taken (the batched search simulates
     them ahead). With ``hold`` the last of them is the row that reached n (CTL[n], its
     parent's edge) where that is not a fixed row, tried anyway: a control can be held
-    over several periods."""
+    over several periods. With ``hold`` 2 the table's second half holds each row's
+    variant over several periods: the window samples the first half, and the last row
+    is the variant of the row that reached n (fixed rows too)."""
     m = controls.shape[0]
-    base = n * (nbranch - nfixed) if rotate else 0
     held = CTL[n] if hold else -1
+    if hold == 2:
+        # the table's second half holds each row's variant held over several periods:
+        # the samples come from the first half, the held control is its variant
+        m = m // 2
+        held = held % m + m if held >= 0 else -1
+    base = n * (nbranch - nfixed) if rotate else 0
     for b in range(nbranch):
         c = b if b < nfixed else nfixed + (base + b - nfixed) % (m - nfixed)
         if b == nbranch - 1 and held >= nfixed:
@@ -359,7 +366,7 @@ def _ahead(fa, params, data, max_depth, X, DEP, CLO, H, cnt, SN, SX, SL, BN, k, 
 
 
 _BATCH_SIG = types.UniTuple(types.int64, 2)(
-    _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, types.boolean, _I1, _F1, types.boolean,
+    _I1, types.float64, _F1, _F1, _F1, _F2, types.int64, types.int64, types.boolean, types.int64, _I1, _F1, types.boolean,
     types.int64, types.int64, types.int64, types.float64, types.int64, types.int64, types.int64,
     _F2, _F1, _I1, _I1, _I1, types.uint8[::1], _I2, _I1, _I1, _I1, _F1,
     _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _I1, _F2, _F1, _I1, _I1, _I1)
