@@ -33,7 +33,8 @@ def circle_torques(vehicle: Vehicle, terrain: Terrain, radii, speed: float = 0.2
     torque lies outside the drive's window at its wheel speed (eq. 27 and the current
     limit: at 0.2 m/s the outer side of a 0.2-3 m circle on asphalt asks 6.5-10.1 N m of
     the P3-AT's 5 N m, of a 0.2-1 m circle on the lemniscate's vinyl 5.3-6.4 N m; on the
-    paper's vinyl every radius holds, 4.72 N m at 0.2 m), where the steady state eq. 28 compares with does not exist."""
+    paper's vinyl every radius holds, 4.72 N m at 0.2 m), where the steady state eq. 28
+    compares with does not exist."""
     from .drive import current_window
     from .params import ParameterError
     radii = np.asarray(radii, float)

@@ -141,10 +141,13 @@ FIXED_CONTROLS = ((1.0, 1.0), (1.0, 0.85), (0.85, 1.0))   # x the top of the ran
 
 
 def control_set(world: World) -> np.ndarray:
-    """Desired wheel speeds (m, 2) [rad/s]: first the fixed rows (top speed straight and
-    two gentle turns at top speed, tried at every expansion: a uniform sample of the
-    square almost never has both wheels at full speed), then a scrambled Halton sequence
-    over the sampled range (seeded: the same seed gives the same plan)."""
+    """Controls (m, 3): desired wheel speeds [rad/s] and the periods each is held [-]
+    (1): first the fixed rows (top speed straight and two gentle turns at top speed,
+    tried at every expansion: a uniform sample of the square almost never has both wheels
+    at full speed), then a scrambled Halton sequence over the sampled range (seeded: the
+    same seed gives the same plan). With ``planner.hold_periods`` N > 1 the table's
+    second half repeats every row held N periods (the held control's variant:
+    :func:`sbmpc.search.loop._pick` with hold 2)."""
     ps = world.scenario.planner
     lo, hi = wheel_speed_range(world)
     nh = ps.branching - len(FIXED_CONTROLS)
