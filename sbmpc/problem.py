@@ -13,7 +13,7 @@ from dynamics.resistance import friction_table
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
 from .problems import skidsteer as SS
 from .search.astar import Problem
-from .world import FIXED_CONTROLS, World, _start, control_set
+from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode
 
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
@@ -75,7 +75,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     else:
         batch = SS.expand_batch
     return Problem(SS.expand, SS.heuristic, SS.is_goal, Q, data, X0, control_set(world),
-                   dims, res, ps.branching, rotate=ps.samples == "rotating", hold=(2 if ps.hold_periods > 1 else 1) if ps.hold else 0,
+                   dims, res, ps.branching, rotate=ps.samples == "rotating", hold=hold_mode(ps),
                    fixed_controls=len(FIXED_CONTROLS), snap=False, codes=SS.CODES, settle_depth=SETTLE_DEPTH,
                    weight=ps.weight(cost), refine=ps.refine, expand_batch=batch)
 

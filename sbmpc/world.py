@@ -120,9 +120,7 @@ def resolve(scn: Scenario, given: dict | None = None) -> World:
         problems.append(f"{label('start')}: expected a start outside the goal disc (centre ({g['x']:g}, {g['y']:g}), radius "
                         f"{g['radius']:g} m), found ({s['x']:g}, {s['y']:g}) inside it: nothing to plan")
     if scn.cost == "energy" and vehicle is not None and vehicle.regen:
-        problems.append(f"{label('cost')}: energy needs a planning vehicle without regeneration (regen: false), "
-                        f"found {label('vehicle')} {vehicle.name!r} with regen: true (the energy search counts no "
-                        "energy won back; plan it for time)")
+        problems.append(_regen_refused(label("cost"), label("vehicle"), vehicle))
     if problems:
         raise InputError(f"{src}: " + "; ".join(problems))
     return world
@@ -156,10 +154,19 @@ def control_set(world: World) -> np.ndarray:
     fixed = hi * np.array(FIXED_CONTROLS)
     rows = np.vstack([fixed, lo + (hi - lo) * pts])
     rows = np.column_stack([rows, np.ones(len(rows))])
-    if ps.hold and ps.hold_periods > 1:
+    if hold_mode(ps) == 2:
         # the held control's variant, held for hold_periods periods (Problem.hold == 2)
         rows = np.vstack([rows, np.column_stack([rows[:, :2], np.full(len(rows), float(ps.hold_periods))])])
     return np.ascontiguousarray(rows)
+
+
+def hold_mode(ps) -> int:
+    """The search's ``Problem.hold`` for planner settings ``ps``: 0 without hold, 1 the
+    held control one period, 2 held ``hold_periods`` periods (:func:`control_set`'s
+    second half)."""
+    if not ps.hold:
+        return 0
+    return 2 if ps.hold_periods > 1 else 1
 
 
 def start_state(world: World) -> np.ndarray:
@@ -205,10 +212,15 @@ def checked_cost(world: World, cost) -> str:
     cost = SC.checked_cost(world.scenario.cost if cost is None else cost)
     if cost == "energy" and world.vehicle.regen:
         scn = world.scenario
-        raise InputError(f"{scn.path or scn.name}: cost energy needs a planning vehicle without regeneration "
-                         f"(regen: false), found vehicle {world.vehicle.name!r} with regen: true (the energy search "
-                         "counts no energy won back; plan it for time)")
+        raise InputError(f"{scn.path or scn.name}: {_regen_refused('cost', 'vehicle', world.vehicle)}")
     return cost
+
+
+def _regen_refused(cost_label: str, vehicle_label: str, vehicle) -> str:
+    """The one message for an energy plan asked of a regenerating planning vehicle."""
+    return (f"{cost_label}: energy needs a planning vehicle without regeneration (regen: false), found "
+            f"{vehicle_label} {vehicle.name!r} with regen: true (the energy search counts no energy won back; "
+            "plan it for time)")
 
 
 MAX_REPLAY_STEPS = 10_000_000   # steps of one replay (about 1.5 GB of records): 2.8 h at the 1 kHz rate
