@@ -101,9 +101,10 @@ def _clip(x, lo, hi):
 
 
 @jit_inline
-def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr):
+def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r):
     """Resistance torques C (eqs. 17-22, with rolling and the viscous extension) [N m] of
-    both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine cp, from the unit
+    both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine cp with gravity
+    torques (g_l, g_r) [N m] (eq. 24; they enter eq. 22's choice of coefficient), from the unit
     frictions (fl, fr) and their slopes there (:func:`unit_friction_fast`), and their
     Jacobian dC/dw [N m s/rad]. ``a_shear`` < 1 blends the friction with its lagged value
     in S (shear-lag extension). Returns (res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr),
@@ -126,15 +127,17 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr):
     roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
     droll_l = roll * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
     droll_r = roll * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
-    F_l, dF_l, dR_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press, P[P_MUSA], P[P_MUOP])
-    F_r, dF_r, dR_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press, P[P_MUSA], P[P_MUOP])
     visc = P[P_VISC]
+    F_l, dF_l, dR_l, dG_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press,
+                                       P[P_MUSA], P[P_MUOP], (visc * wl + g_l) / (r * scl))
+    F_r, dF_r, dR_r, dG_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press,
+                                       P[P_MUSA], P[P_MUOP], (visc * wr + g_r) / (r * scr))
     res_l = r * scl * F_l + visc * wl
     res_r = r * scr * F_r + visc * wr
-    j_ll = r * scl * (dF_l * dll + dR_l * droll_l) + visc
+    j_ll = r * scl * (dF_l * dll + dR_l * droll_l) + visc * (1.0 + dG_l)
     j_lr = r * scl * dF_l * dlr
     j_rl = r * scr * dF_r * drl
-    j_rr = r * scr * (dF_r * drr + dR_r * droll_r) + visc
+    j_rr = r * scr * (dF_r * drr + dR_r * droll_r) + visc * (1.0 + dG_r)
     return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
 
 
@@ -251,7 +254,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
             il, ir = _lagged(S, il, ir, a_lag)
             dil *= a_lag
             dir_ *= a_lag
-        res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
+        res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5], g_l, g_r)
         if it == NEWTON_ITERATIONS - 1:
             break
         rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (k * il - res_l - g_l)
@@ -287,7 +290,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
             u = _extrapolated_friction(u, P[P_SCL] * stl, P[P_SCR] * str_)
             if lag > 0.0:
                 il, ir = _lagged(S, il, ir, a_lag)
-            res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5])
+            res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5], g_l, g_r)
             break
     return wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u
 

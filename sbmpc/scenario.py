@@ -52,8 +52,11 @@ class PlannerSettings:
     expansion) or 'rotating' (each node its own window of the sequence, by node number);
     hold: one of the sampled controls is the one that reached the node (a control held
     for several periods: a long gentle arc, a steady speed; docs/planner.md#controls);
-    hold_periods: with hold, that control is one edge held this many periods (1: one
-    period, as every other control);
+    hold_periods: controls that last this many periods join the one-period ones (1:
+    every control one period); long_controls: where they enter, 'held' (the held
+    control becomes one edge of hold_periods periods, new controls stay one period) or
+    'sampled' (the sampled rows are drawn from both lengths, a node's window by its
+    number, and a held control keeps its own length; docs/planner.md#controls);
     tip_over_deg: pitch or roll at which an edge is rejected; time_weight, energy_weight:
     w of weighted A* for each cost (1: optimal over the grid; w > 1: at most w times the
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
@@ -92,6 +95,7 @@ class PlannerSettings:
     samples: str = "rotating"
     hold: bool = True
     hold_periods: int = 1
+    long_controls: str = "held"
     tip_over_deg: float = 30.0
     time_weight: float = 1.1
     energy_weight: float = 1.1
@@ -167,6 +171,9 @@ _SETTING_RANGES = {
     "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),
 }
+# the settings that take one of a few words
+_SETTING_CHOICES = {"samples": ("fixed", "rotating"), "device": ("cpu", "cuda"),
+                    "long_controls": ("held", "sampled")}
 
 
 @dataclass(frozen=True)
@@ -373,16 +380,12 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
             probs.add("planner.wheel_speeds", "[low, high] desired wheel speeds in rad/s with low < high", v)
         else:
             kw["wheel_speeds"] = (float(v[0]), float(v[1]))
-    if "samples" in spec:
-        if spec["samples"] not in ("fixed", "rotating"):
-            probs.add("planner.samples", "'fixed' or 'rotating'", spec["samples"])
-        else:
-            kw["samples"] = spec["samples"]
-    if "device" in spec:
-        if spec["device"] not in ("cpu", "cuda"):
-            probs.add("planner.device", "'cpu' or 'cuda'", spec["device"])
-        else:
-            kw["device"] = spec["device"]
+    for key, choices in _SETTING_CHOICES.items():
+        if key in spec:
+            if spec[key] not in choices:
+                probs.add(f"planner.{key}", " or ".join(f"'{c}'" for c in choices), spec[key])
+            else:
+                kw[key] = spec[key]
     for key in ("hold", "polish_time", "polish_energy", "energy_vs_time"):
         if key in spec:
             if not isinstance(spec[key], bool):

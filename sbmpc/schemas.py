@@ -28,7 +28,7 @@ def _ranges(table: dict) -> dict:
 
 
 def scenario() -> dict:
-    from .scenario import _RUN_RANGES, _SETTING_RANGES, TRIGGERS
+    from .scenario import _RUN_RANGES, _SETTING_CHOICES, _SETTING_RANGES, TRIGGERS
     point = {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2}
     region = _obj({"terrain": {"type": "string"},
                    "rect": {"type": "array", "items": NUM, "minItems": 4, "maxItems": 4},
@@ -36,9 +36,9 @@ def scenario() -> dict:
                    "polygon": {"type": "array", "items": point, "minItems": 3}}, ("terrain",), extra=False)
     planner = _ranges(_SETTING_RANGES)
     planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
-                    "samples": {"enum": ["fixed", "rotating"]}, "device": {"enum": ["cpu", "cuda"]},
                     "hold": {"type": "boolean"},
                     "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"}})
+    planner.update({key: {"enum": list(choices)} for key, choices in _SETTING_CHOICES.items()})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}
     return {

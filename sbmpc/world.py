@@ -144,8 +144,9 @@ def control_set(world: World) -> np.ndarray:
     tried at every expansion: a uniform sample of the square almost never has both wheels
     at full speed), then a scrambled Halton sequence over the sampled range (seeded: the
     same seed gives the same plan). With ``planner.hold_periods`` N > 1 the table's
-    second half repeats every row held N periods (the held control's variant:
-    :func:`sbmpc.search.loop._pick` with hold 2)."""
+    second half repeats every row held N periods: the held control's variant
+    (``long_controls: held``, :func:`sbmpc.search.loop._pick` with hold 2) or rows
+    sampled like the others (``sampled``, hold 1 over the whole table)."""
     ps = world.scenario.planner
     lo, hi = wheel_speed_range(world)
     nh = ps.branching - len(FIXED_CONTROLS)
@@ -154,19 +155,19 @@ def control_set(world: World) -> np.ndarray:
     fixed = hi * np.array(FIXED_CONTROLS)
     rows = np.vstack([fixed, lo + (hi - lo) * pts])
     rows = np.column_stack([rows, np.ones(len(rows))])
-    if hold_mode(ps) == 2:
-        # the held control's variant, held for hold_periods periods (Problem.hold == 2)
+    if ps.hold_periods > 1:
+        # every row again, held for hold_periods periods
         rows = np.vstack([rows, np.column_stack([rows[:, :2], np.full(len(rows), float(ps.hold_periods))])])
     return np.ascontiguousarray(rows)
 
 
 def hold_mode(ps) -> int:
     """The search's ``Problem.hold`` for planner settings ``ps``: 0 without hold, 1 the
-    held control one period, 2 held ``hold_periods`` periods (:func:`control_set`'s
-    second half)."""
+    held control as it came (its own length), 2 its variant held ``hold_periods``
+    periods (:func:`control_set`'s second half; ``long_controls: held``)."""
     if not ps.hold:
         return 0
-    return 2 if ps.hold_periods > 1 else 1
+    return 2 if ps.hold_periods > 1 and ps.long_controls == "held" else 1
 
 
 def start_state(world: World) -> np.ndarray:

@@ -309,3 +309,28 @@ def test_a_held_control_over_two_periods_is_one_edge_and_the_plan_holds():
     with pytest.raises(SC.InputError, match="hold_periods"):
         SC.parse({"map": {"generate": {"size": [5, 5]}}, "start": {"x": 1, "y": 1}, "goal": {"x": 3, "y": 3},
                   "planner": {"hold_periods": 0}})
+
+
+def test_sampled_long_controls_come_from_both_lengths_and_the_plan_holds():
+    """planner.long_controls: sampled: the two-period rows are sampled like the others
+    (a node's window over the whole table) and a held control keeps its own length; the
+    plan's every control is a row of the table (its length included, the last cut at
+    the goal) and it replays at 1 kHz to the reported time. A word outside the two is
+    refused, naming the key."""
+    from dataclasses import replace
+    scn = SC.load(SCEN / "hill_tradeoff.yaml")
+    ps = replace(scn.planner, hold_periods=2, long_controls="sampled")
+    assert WO.hold_mode(ps) == 1 and WO.hold_mode(replace(ps, long_controls="held")) == 2
+    world = WO.resolve(replace(scn, planner=ps))
+    C = WO.control_set(world)
+    p = PL.search_plan(world, "time")
+    assert p.found and p.check.reached
+    rows = {tuple(np.round(r, 9)) for r in C}
+    for c in p.controls[:-1]:
+        assert tuple(np.round(c, 9)) in rows
+    durations = np.array([c[2] for c in p.controls])
+    assert np.any(np.isclose(durations[:-1], 2.0)) and np.any(np.isclose(durations[:-1], 1.0))
+    assert p.travel_time_s == pytest.approx(sum(durations), abs=1e-6)
+    with pytest.raises(SC.InputError, match="planner.long_controls.*'held' or 'sampled'"):
+        SC.parse({"map": {"generate": {"size": [5, 5]}}, "start": {"x": 1, "y": 1}, "goal": {"x": 3, "y": 3},
+                  "planner": {"long_controls": "both"}})
