@@ -424,7 +424,8 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     more there than the searched ones: the polish is judged where every plan is. ``missed``: (polish, drive) when the drive
     misses the goal (or only passes it) at the controller rate, for :func:`plan` to
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
-    disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, the disc): a cheapest
+    disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, none gains there or it
+    is no cheaper at the controller rate, the disc): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
     may pass just outside it at 1 kHz. Where the polished controls tip the vehicle over
     at 1 kHz, they are polished again from the searched ones with the tip-over limit
@@ -436,34 +437,36 @@ def _polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, 
     lo, hi = wheel_speed_range(world)
     r = world.scenario.goal["radius"]
     missed = None
-    for tip_margin in (0.0, math.radians(POLISH_TIP_MARGIN_DEG)):
-        params = prob.params.copy()
-        params[SS.Q_TIP] -= tip_margin
-        for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it
+    searched = None
+    for margin in (min(POLISH_GOAL_MARGIN, 0.5 * r), 0.0):     # no margin: where none reaches it or gains
+        if margin == 0.0 and time.perf_counter() > deadline:
+            break
+        for tip_margin in (0.0, math.radians(POLISH_TIP_MARGIN_DEG)):
+            params = prob.params.copy()
+            params[SS.Q_TIP] -= tip_margin
             params[SS.Q_GR] = r - margin
             # the polish's trials: on planner.threads, or one where the search found one faster (threads auto)
             with numba_threads(threads or world.scenario.planner.threads or None):
                 pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
-            if pol is not None:
+            if pol is None or pol.gain <= 0.0:
+                break                                  # nothing gained at this margin
+            drive = controller_rate(world, cost, pol.controls, X0)
+            new = drive[0]
+            if not new.reached:
+                missed = (pol, drive)
+                if new.end != -SS.TIP or time.perf_counter() > deadline:
+                    break
+                continue                               # tipped at 1 kHz: again, further from the limit
+            if searched is None:
+                searched = controller_rate(world, cost, controls, X0)
+            old = searched[0]
+            if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
+                missed = missed or (pol, drive)        # only passes the disc where the searched entered it
                 break
-        if pol is None or pol.gain <= 0.0:
-            return None, None, missed
-        drive = controller_rate(world, cost, pol.controls, X0)
-        new = drive[0]
-        if new.reached:
-            break
-        missed = (pol, drive)
-        if new.end != -SS.TIP or time.perf_counter() > deadline:
-            return None, None, missed
-    else:
-        return None, None, missed
-    searched = controller_rate(world, cost, controls, X0)
-    old = searched[0]
-    if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
-        return None, searched, (pol, drive)
-    if old.reached and check_cost(old, cost) <= check_cost(new, cost):
-        return None, searched, missed          # (a first polish that tipped, to repair)
-    return pol, drive, None
+            if old.reached and check_cost(old, cost) <= check_cost(new, cost):
+                break                                  # no cheaper at 1 kHz (aimed inside the disc, a detour)
+            return pol, drive, None
+    return None, searched, missed
 
 
 def _checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,

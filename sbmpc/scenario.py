@@ -94,7 +94,7 @@ class PlannerSettings:
     wheel_speeds: tuple | None = None
     samples: str = "rotating"
     hold: bool = True
-    hold_periods: int = 1
+    hold_periods: int = 2
     long_controls: str = "held"
     tip_over_deg: float = 30.0
     time_weight: float = 1.1
