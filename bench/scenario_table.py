@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 SHOWS = {
     "flat": "sanity: level vinyl, 15 m",
-    "hill_tradeoff": "crosses the hill (time) vs goes around (energy)",
+    "hill_tradeoff": "crosses the hill (time) vs skirts it on its lower flank (energy)",
     "steep_hill": "a 26° hill (13.9° is the limit): every plan goes around",
     "runup_ramp": "a 20.6° ramp crossed only with momentum (0.7 m/s stalls)",
     "mixed_terrain": "a road around, a rough field across",

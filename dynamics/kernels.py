@@ -128,16 +128,19 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r)
     droll_l = roll * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
     droll_r = roll * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
     visc = P[P_VISC]
+    rim_l = r * scl
+    rim_r = r * scr
     F_l, dF_l, dR_l, dG_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press,
-                                       P[P_MUSA], P[P_MUOP], (visc * wl + g_l) / (r * scl))
+                                       P[P_MUSA], P[P_MUOP], visc * wl + g_l, rim_l)
     F_r, dF_r, dR_r, dG_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press,
-                                       P[P_MUSA], P[P_MUOP], (visc * wr + g_r) / (r * scr))
-    res_l = r * scl * F_l + visc * wl
-    res_r = r * scr * F_r + visc * wr
-    j_ll = r * scl * (dF_l * dll + dR_l * droll_l) + visc * (1.0 + dG_l)
-    j_lr = r * scl * dF_l * dlr
-    j_rl = r * scr * dF_r * drl
-    j_rr = r * scr * (dF_r * drr + dR_r * droll_r) + visc * (1.0 + dG_r)
+                                       P[P_MUSA], P[P_MUOP], visc * wr + g_r, rim_r)
+    res_l = rim_l * F_l + visc * wl
+    res_r = rim_r * F_r + visc * wr
+    # (in eq. 22's band the motor holds no torque: res = -g, its slope in w zero)
+    j_ll = rim_l * (dF_l * dll + dR_l * droll_l + dG_l * visc) + visc
+    j_lr = rim_l * dF_l * dlr
+    j_rl = rim_r * dF_r * drl
+    j_rr = rim_r * (dF_r * drr + dR_r * droll_r + dG_r * visc) + visc
     return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
 
 

@@ -186,37 +186,37 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
 
 
 @jit_inline
-def side_force(unit, roll, w, press, mu_sa, mu_op, load):
+def side_force(unit, roll, w, press, mu_sa, mu_op, load, rim):
     """Eq. 22's choice of friction coefficient for one side, as a ground force [N].
 
     The side's longitudinal ground force is F(mu) = press mu unit + roll (eqs. 17/20 per
     unit p mu times p mu, plus the signed rolling resistance ``roll`` [N]); its resistance
-    torque is r F (eqs. 18, 21). At steady speed the motor supplies r (F + load), where
-    ``load`` [N] is the rest of what it holds, as a force at the rim: gravity (eq. 24)
-    and the viscous extension, (G + c w) / r. The coefficient is mu_sa where the side's
-    motor *drives* (torque and wheel speed of one sign: (F(mu_sa) + load) w > 0) and
-    mu_op where it *brakes* ((F(mu_op) + load) w < 0). On a climb the inner wheel of a
+    torque is ``rim`` F (eqs. 18, 21; ``rim`` the rolling radius r [m]). At steady speed
+    the motor supplies rim F + load, where ``load`` [N m] is the rest of what it holds:
+    gravity (eq. 24) and the viscous extension, G + c w. The coefficient is mu_sa where
+    the side's motor *drives* (torque and wheel speed of one sign: (rim F(mu_sa) + load)
+    w > 0) and mu_op where it *brakes* ((rim F(mu_op) + load) w < 0). On a climb the inner wheel of a
     turn is pushed back by the ground and still driven by its motor: mu_sa. With
     mu_sa >= mu_op both tests can fail at once, in a narrow band where mu_sa would make
     the motor brake and mu_op make it drive. There the coefficient lies between the two
-    and the motor neither drives nor brakes: F = -load (on flat ground without the
-    viscous term, F = 0). So a driving torque never takes the braking coefficient, the
+    and the motor neither drives nor brakes: F = -load / rim (on flat ground without
+    the viscous term, F = 0). So a driving torque never takes the braking coefficient, the
     choice depends on the state (wheel speeds, slope) alone, never on the sign of a
     current, and F is continuous in ``unit`` and ``load``. A wheel at rest holds (mu_op).
 
-    Returns (F [N], dF/d unit [N/m^2], dF/d roll [-], dF/d load [-]) for the implicit
+    Returns (F [N], dF/d unit [N/m^2], dF/d roll [-], dF/d load [1/m]) for the implicit
     integrator.
     """
     f_sa = press * mu_sa * unit + roll
-    if (f_sa + load) * w > 0.0:
+    if (f_sa * rim + load) * w > 0.0:
         return f_sa, press * mu_sa, 1.0, 0.0
     f_op = press * mu_op * unit + roll
-    if (f_op + load) * w < 0.0 or w == 0.0:
+    if (f_op * rim + load) * w < 0.0 or w == 0.0:
         return f_op, press * mu_op, 1.0, 0.0
-    return -load, 0.0, 0.0, -1.0
+    return -load / rim, 0.0, 0.0, -1.0 / rim
 
 
-_side_force_array = np.vectorize(lambda u, roll, w, p, sa, op, load: side_force(u, roll, w, p, sa, op, load)[0],
+_side_force_array = np.vectorize(lambda u, roll, w, p, sa, op, load, rim: side_force(u, roll, w, p, sa, op, load, rim)[0],
                                  otypes=[float])
 
 
@@ -231,8 +231,8 @@ def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pi
     out = []
     for unit, w in ((unit_l, wl), (unit_r, wr)):
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
-        load = (grav + vehicle.viscous * np.asarray(w, float)) / r
-        out.append(r * _side_force_array(unit, roll, w, p, terrain.mu_sa, terrain.mu_op, load))
+        load = grav + vehicle.viscous * np.asarray(w, float)
+        out.append(r * _side_force_array(unit, roll, w, p, terrain.mu_sa, terrain.mu_op, load, r))
     return out[0], out[1]
 
 

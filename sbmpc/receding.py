@@ -240,6 +240,20 @@ def _weaker(stalls: list, name: str) -> str:
             f"with a model of this vehicle (sbmpc diagnose on a run of it writes one)")
 
 
+
+def per_period(controls, period_s: float) -> list:
+    """A plan's controls [(wl, wr, duration_s)] as the run executes them: one planning
+    period at a time, a control held over several periods (``planner.hold_periods``)
+    split into periods of the same command (the drive is the same; the run measures
+    and may re-plan after each period), the last piece the remainder."""
+    out = []
+    for wl, wr, d in controls:
+        while d > period_s * (1.0 + 1e-9):
+            out.append((wl, wr, period_s))
+            d = round(d - period_s, 9)
+        out.append((wl, wr, d))
+    return out
+
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
     """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
@@ -262,7 +276,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     every = max(1, round(TR.RECORD_EVERY / real.dt))
     tol_yaw = math.radians(rs.tol_yaw_deg)
     why = "start"
-    current, k, P, since = None, 0, None, 0
+    current, steps, k, P, since = None, [], 0, None, 0
     t_limit = math.inf
     stalls = []
 
@@ -279,7 +293,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 return finish("failed", f"re-plan limit of {rs.max_replans} reached ({why} at "
                                         f"t = {X[K.S_T]:.1f} s)")
             first = not out.plans
-            tail = current.controls[k:] if (current is not None and warm) else None
+            tail = steps[k:] if (current is not None and warm) else None
             label = "first plan" if first else f"re-plan {len(out.plans)}"
             budget = None if first else rs.replan_time_budget_s
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
@@ -307,7 +321,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
                 current, k, P, since, why = p, 0, X.copy(), 0, None
-            elif current is not None and k < len(current.controls) and not why.startswith("stalled"):
+                steps = per_period(p.controls, ps.period_s)
+            elif current is not None and k < len(steps) and not why.startswith("stalled"):
                 # like any MPC: when a re-plan fails, keep driving the previous plan and try
                 # again after the next period
                 why = None
@@ -316,8 +331,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 weaker = f"; {_weaker(stalls, world.vehicle.name)}" if stalls else ""
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
-        control = current.controls[k]
-        if k == len(current.controls) - 1:
+        control = steps[k]
+        if k == len(steps) - 1:
             # the last control was cut where the prediction entered the goal: hold it
             # for a full period (the rollout stops in the goal)
             control = (control[0], control[1], max(control[2], ps.period_s))
@@ -352,7 +367,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                         f"run of it writes one)")
             return finish("failed", f"took longer than {t_limit:.0f} s ({rs.max_time_factor:g} x the first "
                                     f"plan's travel time + 30 s) without reaching the goal{tail}")
-        elif k >= len(current.controls):
+        elif k >= len(steps):
             why = "the plan ended short of the goal"
         elif rs.trigger == "every":
             if since >= rs.execute_periods:

@@ -293,3 +293,20 @@ def test_a_delayed_vehicle_that_starts_at_speed_keeps_it_until_the_first_command
     res = R.run(w, "time", w.vehicle.replace(delay=0.3), settings=replace(w.scenario.run, max_replans=2))
     t, v = res.trajectory["t"], res.trajectory["v"]
     assert np.allclose(v[t <= 0.3], 0.8, atol=0.01)
+
+
+def test_a_control_held_over_periods_is_executed_period_by_period(flat):
+    """A plan's two-period controls (planner.hold_periods: 2) are driven one period at a
+    time, so the run measures, and may re-plan, after every period as an MPC does: with a
+    perfect model flat.yaml's time plan (controls of 1 and 2 s, the last cut at the
+    goal) takes ceil(travel time / period) periods and arrives when the plan said.
+    per_period splits each control into periods of the same command, the remainder
+    last, and keeps the total duration."""
+    assert R.per_period([(1.0, 2.0, 2.0), (3.0, 3.0, 1.0), (4.0, 5.0, 1.727)], 1.0) == [
+        (1.0, 2.0, 1.0), (1.0, 2.0, 1.0), (3.0, 3.0, 1.0), (4.0, 5.0, 1.0), (4.0, 5.0, 0.727)]
+    res = R.run(flat, "time")
+    plan = res.plans[0].plan
+    assert any(c[2] > 1.5 for c in plan.controls)
+    assert res.status == "reached" and res.replans == 0
+    assert res.periods == math.ceil(plan.travel_time_s)
+    assert res.travel_time_s == pytest.approx(plan.travel_time_s, abs=1e-9)
