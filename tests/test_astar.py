@@ -95,7 +95,7 @@ def test_budget_ends_the_search_with_the_reason():
     assert res.iterations == 300 and "budget of 300 expansions" in res.reason and res.ended == "node_budget"
     assert "blocked" in res.reason            # the invalid edges are named
     res = search(grid_problem(blocked, (29, 29)), 100_000)
-    assert res.status == "no_path" and "every reachable state" in res.reason and res.ended == "exhausted"
+    assert res.status == "no_path" and "every state the search could reach" in res.reason and res.ended == "exhausted"
     assert res.iterations == 30 * 15          # the whole reachable half, each cell once
 
 

@@ -39,19 +39,30 @@ def _rel(a, b):
 @pytest.mark.parametrize("cost", ["time", "energy"])
 def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost):
     """The truth is driven at the controller rate, as the plan was checked: with a
-    perfect model the run is the first plan, sample for sample. (A plan whose 1 kHz
-    replay passes within the open-loop drift allowance of the goal disc but not into it
-    gets one last short re-plan.)"""
+    perfect model the run is the first plan, sample for sample, to round-off until the
+    first control held over two periods, which the run executes period by period
+    (:func:`sbmpc.receding.per_period`): there the map's grade is no longer extrapolated
+    to the step's midpoint for the first step of the second period (an edge starts from
+    the grade at its start), and the two drives part by at most a few micro-metres per
+    second, 1e-6 m and 1e-4 J by the end of runup_ramp's energy plan. (A plan whose
+    1 kHz replay passes within the open-loop drift allowance of the goal disc but not
+    into it gets one last short re-plan.)"""
     res = R.run(runup, cost)
     first = res.plans[0].plan
     short = first.check.miss_m > 0
     assert res.status == "reached" and res.replans == int(short) and res.stalls == 0
     n = len(first.trajectory["t"])
+    t = np.asarray(first.trajectory["t"])
+    ends = np.cumsum([c[2] for c in first.controls])
+    split = min([e - c[2] + 1.0 for e, c in zip(ends, first.controls) if c[2] > 1.0 + 1e-9] + [np.inf])
+    same = t <= split + 1e-9
     for k in ("t", "x", "y", "v", "energy_J"):
-        np.testing.assert_allclose(res.trajectory[k][:n], first.trajectory[k], atol=1e-9)
+        a = np.asarray(res.trajectory[k][:n])
+        np.testing.assert_allclose(a[same], np.asarray(first.trajectory[k])[same], atol=1e-9)
+        np.testing.assert_allclose(a, first.trajectory[k], atol={"v": 1e-5, "energy_J": 1e-3}.get(k, 1e-5))
     if not short:
         assert res.travel_time_s == pytest.approx(first.travel_time_s, abs=1e-9)
-        assert res.energy_J == pytest.approx(first.energy_J, abs=1e-6)
+        assert res.energy_J == pytest.approx(first.energy_J, abs=1e-3)
     # an energy run's first plan is checked against the time plan (sbmpc plan's), re-plans not
     rows = res.to_json()["plans"]
     if cost == "energy":

@@ -168,7 +168,7 @@ class SearchResult:
     """Outcome of a search: ``status`` is 'found' or 'no_path' (with ``reason``);
     ``path`` the node ids from start to goal, ``states`` (len(path), state_dim),
     ``controls`` the row of ``problem.controls`` of each edge (len(path) - 1), ``cost``
-    the goal node's g; ``exhausted``: no path because every reachable state was
+    the goal node's g; ``exhausted``: no path because every state reachable on the grid was
     explored (not because a budget ran out); ``edges``: the edges of the expanded
     nodes, ``edges_simulated``: the edges simulated (a batched search also simulates
     the edges of open nodes it then does not expand); ``ended``: how it ended, one
@@ -422,7 +422,7 @@ class Search:
             return SearchResult("found", None, float(self.G[path[-1]]), path, self.X[path].copy(),
                                 self.CTL[path[1:]].copy(), **common)
         if st == EXHAUSTED:
-            why, ended = "every reachable state was explored without reaching the goal", "exhausted"
+            why, ended = "every state the search could reach on its grid was explored without reaching the goal", "exhausted"
         elif st == ITERATIONS:
             why, ended = f"node budget of {max_iterations} expansions used up", "node_budget"
         else:
