@@ -240,7 +240,6 @@ def _weaker(stalls: list, name: str) -> str:
             f"with a model of this vehicle (sbmpc diagnose on a run of it writes one)")
 
 
-
 def per_period(controls, period_s: float) -> list:
     """A plan's controls [(wl, wr, duration_s)] as the run executes them: one planning
     period at a time, a control held over several periods (``planner.hold_periods``)
@@ -253,6 +252,7 @@ def per_period(controls, period_s: float) -> list:
             d = round(d - period_s, 9)
         out.append((wl, wr, d))
     return out
+
 
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
