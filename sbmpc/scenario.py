@@ -43,8 +43,8 @@ def checked_cost(cost) -> str:
 class PlannerSettings:
     """Settings of the SBMPC search (scenario key ``planner``).
 
-    branching: controls tried per expansion; period_s: how long each control is held
-    [s]; dt: integration step of the edge rollouts [s]; cell_xy [m], cell_yaw_deg [deg],
+    branching: controls tried per expansion; period_s: how long each new control is
+    held [s] (a held one hold_periods times as long); dt: integration step of the edge rollouts [s]; cell_xy [m], cell_yaw_deg [deg],
     cell_v [m/s]: the implicit grid; max_expansions and time_budget_s: budgets after
     which the search gives up with the reason; seed: scrambles the Halton sequence;
     wheel_speeds: [low, high] range of desired wheel speeds sampled [rad/s] (default
@@ -62,7 +62,7 @@ class PlannerSettings:
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
     suffices; for energy 1.1 too, since its heuristic counts the copper loss: over
     Halton seeds the energy plans of hill_tradeoff, steep_hill and mixed_terrain spread
-    by 2.2-3.1 % at 1.1 (3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
+    by 2.0-4.8 % at 1.1 (2.2-3.1 % with one-period controls, 3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
     24 %, bench/bench_energy_plans.py); refine:
     after the first solution, go on (anytime weighted A*, pruning with the unweighted
     bound) for refine times the expansions it took, keeping the best plan (0: stop at

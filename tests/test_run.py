@@ -182,7 +182,7 @@ def test_replans_aim_inside_the_goal_disc_and_fall_back_to_it(flat, monkeypatch)
     disc, the two sharing the re-plan's time budget, and both count in its planning time.
     (With one-period controls, as measured: with the default two-period held controls
     the last approach is a 4.9 s plan whose drift with the smaller tyre exceeds the
-    margin, and one more plan follows, 23.4 s: docs/commands.md#run.)"""
+    margin, and one more plan follows, 23.4 s: docs/commands.md#sbmpc-run-receding-horizon-execution.)"""
     scn = flat.scenario
     flat = WO.resolve(replace(scn, planner=replace(scn.planner, hold_periods=1)))
     truth = flat.vehicle.replace(radius_scale_right=0.92)

@@ -5,8 +5,9 @@ references and integrals, currents, pose, time, energy, stall timer) plus two en
 for the grid, the wrapped heading and the speed at the end of the edge. So a child
 carries its speed and controller state: the entry speed into a hill matters.
 
-An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period,
-stepping ``dynamics.kernels.step_slope`` every ``dt`` with the slope under the vehicle from
+An edge holds a pair of desired wheel speeds (wl, wr) [rad/s] for one planning period
+(a control's third column, where there is one, holds it that many periods: a held
+control, ``planner.hold_periods``), stepping ``dynamics.kernels.step_slope`` every ``dt`` with the slope under the vehicle from
 ``maps.slope_grades_at`` and the terrain under its centre from the map's terrain layer.
 Each step integrates against the grade at its midpoint, extrapolated linearly from the
 grades at its start and at the last step's start (the first step of an edge takes its
@@ -18,7 +19,7 @@ tip-over limit, or stalls (drive saturated, commanded motion not achieved for
 ``STALL_TIME``). An edge that enters the goal disc ends there, so the last control of a
 plan may be shorter than the period.
 
-Edge cost: the period's travel time [s] or battery energy [J] (no regeneration).
+Edge cost: the edge's travel time [s] or battery energy [J] (no regeneration).
 Heuristics, both lower bounds of the cost to go over the remaining straight-line
 distance d to the goal disc:
 
