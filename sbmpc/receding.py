@@ -351,6 +351,14 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 return finish("failed", _weaker(stalls, world.vehicle.name))
             X[K.S_STALLT] = 0.0
             X[K.S_STALLED] = 0.0
+            # the stalled drive is restarted from where its wheels are, as a stall
+            # protection would: its references set to the measured speeds, commands
+            # still in the pipe dropped. Left at the commands that stalled, the rate
+            # limit (ref_accel) keeps the drive saturated for a second or more whatever
+            # the next plan commands, and every control of a re-plan stalls again.
+            X[K.S_REFL] = X[K.S_WL]
+            X[K.S_REFR] = X[K.S_WR]
+            real.pipe = None
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "

@@ -321,3 +321,20 @@ def test_a_control_held_over_periods_is_executed_period_by_period(flat):
     assert res.status == "reached" and res.replans == 0
     assert res.periods == math.ceil(plan.travel_time_s)
     assert res.travel_time_s == pytest.approx(plan.travel_time_s, abs=1e-9)
+
+
+def test_after_a_stall_the_drive_restarts_and_the_re_plans_get_away(runup):
+    """A stall leaves the wheel loops' references at the commands that stalled; with
+    the reference rate limit the drive then stays saturated for a second or more, so
+    every control of a re-plan stalled again and the run ended at the first stall
+    blaming the map ("no path ... every state the search could reach"). The run now
+    restarts a stalled drive from its measured wheel speeds: on runup_ramp with a truth
+    of 90 % of the current limit, each re-plan after a stall finds a plan (back off,
+    run up again), and the run ends on its stall limit with the true cause: the
+    vehicle is weaker than the planning model."""
+    truth = runup.vehicle.replace(current_limit=0.9 * runup.vehicle.current_limit)
+    res = R.run(runup, "time", truth)
+    assert res.status == "failed" and "weaker" in res.reason
+    assert res.stalls == runup.scenario.run.max_stalls + 1
+    after = [r for r in res.plans if r.why.startswith("stalled")]
+    assert len(after) == runup.scenario.run.max_stalls and all(r.plan.found for r in after)
