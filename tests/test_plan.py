@@ -77,7 +77,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     The plan reported is spliced from a re-plan where the two parted, and that one holds
     at 1 kHz; without repairs the same search is not reported as found."""
     from dataclasses import replace
-    import sbmpc.plan as mod
+    import sbmpc.repair as mod
     scn = SC.load(SCEN / "hills_field.yaml")
     world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0)))
     p = PL.search_plan(world, "energy")     # the energy search's own (plan() would take the time plan)

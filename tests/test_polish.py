@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dynamics import kernels as K
-from sbmpc import check as CK, plan as PL, problem as PB
+from sbmpc import check as CK, plan as PL, problem as PB, repair as RP
 from sbmpc.problems import skidsteer as SS
 from sbmpc import polish as PO
 from sbmpc import scenario as SC
@@ -150,10 +150,10 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     short = [tuple(c) for c in p.controls[:-2]]
     assert not CK.controller_rate(w, "energy", short, X0)[0].reached
     fake = PO.Polished(short, 0.0, None, 0, 0.0)
-    monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake, None)))
+    monkeypatch.setattr(PL, "polished", lambda *a, **k: (None, None, (fake, None)))
     r = PL.search_plan(w, "energy")
     assert r.found and r.polish is fake and r.repairs >= 1
-    n = len(short) - PL.APPROACH_CONTROLS
+    n = len(short) - RP.APPROACH_CONTROLS
     assert r.controls[:n] == short[:n]
     chk = CK.controller_rate(w, "energy", r.controls, X0)[0]
     assert chk.reached and chk.miss_m == 0.0
@@ -162,7 +162,7 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     spin = [tuple(c) for c in q.controls[:3]] + [(-8.0, 8.0, 1.0), (8.0, -8.0, 1.0)] + [tuple(c) for c in q.controls[3:-2]]
     assert not CK.controller_rate(w, "energy", spin, X0)[0].reached
     fake2 = PO.Polished(spin, 0.0, None, 0, 0.0)
-    monkeypatch.setattr(PL, "_polished", lambda *a, **k: (None, None, (fake2, None)))
+    monkeypatch.setattr(PL, "polished", lambda *a, **k: (None, None, (fake2, None)))
     r2 = PL.search_plan(w, "energy")
     assert r2.found and r2.polish is None and r2.controls == q.controls and r2.energy_J == q.energy_J
 
@@ -173,13 +173,13 @@ def test_the_polish_runs_on_the_planners_threads(monkeypatch):
     count is restored after."""
     import numba
     seen = []
-    real = PL.polish
+    real = RP.polish
 
     def spy(*a, **k):
         seen.append(numba.get_num_threads())
         return real(*a, **k)
 
-    monkeypatch.setattr(PL, "polish", spy)
+    monkeypatch.setattr(RP, "polish", spy)
     before = numba.get_num_threads()
     for threads in (1, 0):
         p = PL.search_plan(_world(threads=threads), "energy")
@@ -209,7 +209,7 @@ def test_a_polish_that_tips_over_at_1khz_is_polished_again_within_a_margin(monke
     chk = CK.controller_rate(w, "energy", over, X0)[0]
     assert not chk.reached and chk.reason.startswith("the vehicle tipped over")
     limits = []
-    real = PL.polish
+    real = RP.polish
 
     def spy(params, *a, **k):
         limits.append(float(np.degrees(params[SS.Q_TIP])))
@@ -217,11 +217,11 @@ def test_a_polish_that_tips_over_at_1khz_is_polished_again_within_a_margin(monke
             return PO.Polished(over, 1.0, 2.0, 0, 0.0)
         return real(params, *a, **k)
 
-    monkeypatch.setattr(PL, "polish", spy)
+    monkeypatch.setattr(RP, "polish", spy)
     prob = PB.problem(w, "energy", X0)
-    pol, drive, missed = PL._polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], np.inf)
+    pol, drive, missed = RP.polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], np.inf)
     tip = w.scenario.planner.tip_over_deg
-    assert limits[0] == pytest.approx(tip) and limits[1] == pytest.approx(tip - PL.POLISH_TIP_MARGIN_DEG)
+    assert limits[0] == pytest.approx(tip) and limits[1] == pytest.approx(tip - RP.POLISH_TIP_MARGIN_DEG)
     assert pol is not None and pol.controls != over and missed is None
     new = CK.controller_rate(w, "energy", pol.controls, X0)[0]
     assert new.reached and drive[0].energy_J == new.energy_J
@@ -229,12 +229,12 @@ def test_a_polish_that_tips_over_at_1khz_is_polished_again_within_a_margin(monke
     # the second polish tips over too: nothing is polished, and the second is handed
     # back to be repaired (plan._checked); past the deadline, no second polish
     lat = [(top, top, 1.0)] * 17
-    monkeypatch.setattr(PL, "polish", lambda params, *a, **k: PO.Polished(
+    monkeypatch.setattr(RP, "polish", lambda params, *a, **k: PO.Polished(
         over if params[SS.Q_TIP] == pytest.approx(np.radians(tip)) else lat, 1.0, 2.0, 0, 0.0))
-    pol, drive, missed = PL._polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], np.inf)
+    pol, drive, missed = RP.polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], np.inf)
     assert pol is None and drive is None and missed[0].controls == lat
     assert missed[1][0].reason.startswith("the vehicle tipped over")
     limits.clear()
-    monkeypatch.setattr(PL, "polish", spy)
-    pol, drive, missed = PL._polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], 0.0)
+    monkeypatch.setattr(RP, "polish", spy)
+    pol, drive, missed = RP.polished(w, "energy", prob, X0, [tuple(c) for c in q.controls], 0.0)
     assert len(limits) == 1 and pol is None and missed[0].controls == over
