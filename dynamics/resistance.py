@@ -195,14 +195,17 @@ def side_force(unit, roll, w, press, mu_sa, mu_op, load, rim):
     the motor supplies rim F + load, where ``load`` [N m] is the rest of what it holds:
     gravity (eq. 24) and the viscous extension, G + c w. The coefficient is mu_sa where
     the side's motor *drives* (torque and wheel speed of one sign: (rim F(mu_sa) + load)
-    w > 0) and mu_op where it *brakes* ((rim F(mu_op) + load) w < 0). On a climb the inner wheel of a
-    turn is pushed back by the ground and still driven by its motor: mu_sa. With
-    mu_sa >= mu_op both tests can fail at once, in a narrow band where mu_sa would make
-    the motor brake and mu_op make it drive. There the coefficient lies between the two
-    and the motor neither drives nor brakes: F = -load / rim (on flat ground without
-    the viscous term, F = 0). So a driving torque never takes the braking coefficient, the
-    choice depends on the state (wheel speeds, slope) alone, never on the sign of a
-    current, and F is continuous in ``unit`` and ``load``. A wheel at rest holds (mu_op).
+    w > 0) and mu_op where it *brakes* ((rim F(mu_op) + load) w < 0). A climb's inner
+    wheel can be pushed back by the ground and still driven by its motor: mu_sa. With
+    mu_sa >= mu_op both tests can fail at once where the ground pushes the side back,
+    in a narrow band where mu_sa would make the motor brake and mu_op make it drive.
+    There the coefficient lies between the two and the motor neither drives nor brakes:
+    F = -load / rim (on flat ground without the viscous term, F = 0), continuous across
+    the band. Where the ground pushes the side forward on a descent both tests can
+    pass: mu_sa is taken, and F jumps to the mu_op value where rim F(mu_sa) + load
+    reaches zero (docs/model.md). So a driving torque never takes the braking
+    coefficient, and the choice depends on the state (wheel speeds, slope) alone,
+    never on the sign of a current. A wheel at rest holds (mu_op).
 
     Returns (F [N], dF/d unit [N/m^2], dF/d roll [-], dF/d load [1/m]) for the implicit
     integrator.

@@ -85,8 +85,8 @@ def test_on_a_climb_eq22_takes_the_motors_torque_with_gravity(R, rule):
     side below its current limit): the inner (left) side is pushed back by the ground
     (its sliding friction brakes) yet its motor drives against gravity, so it takes
     mu_sa (R = 7 m); where mu_sa would make the motor brake and mu_op drive, the motor
-    neither drives nor brakes (R = 4 m: its torque is 0, the ground holds the side
-    against gravity). On level ground the same side brakes with mu_op. The closed loop
+    neither drives nor brakes (R = 4 m: its torque is 0, the ground force on the side
+    cancels gravity's torque). On level ground the same side brakes with mu_op. The closed loop
     at the controller rate and the steady form agree; a rule on the friction alone
     (mu_op on the climb) misses by 0.39 and 0.51 N m."""
     from dynamics.resistance import patch_pressure, rolling_resistance, steady_resistance, unit_friction_right
@@ -117,6 +117,42 @@ def test_on_a_climb_eq22_takes_the_motors_torque_with_gravity(R, rule):
     flat_l, _ = steady_resistance(wl, wr, v, ter, 0.0)
     assert float(flat_l) == pytest.approx(v.wheel_radius * (patch_pressure(v, 0.0) * ter.mu_op * unit
                                                             + rolling_resistance(ter.mu_roll, v.mass, 0.0, wl)), rel=1e-9)
+
+
+@pytest.mark.parametrize("R, rule", [(10.0, "brakes"), (8.0, "both")])
+def test_down_a_slope_the_outer_side_brakes_against_gravity_with_mu_op(R, rule):
+    """Eq. 22 on a descent: a vinyl circle at 0.5 m/s on a constant 7 degree descent.
+    The ground pushes the outer (right) side forward (its sliding friction drives) while
+    gravity pulls the vehicle down: at R = 10 m its motor brakes (r F(mu_sa) + G < 0
+    already), so it takes mu_op, the paper's braking coefficient, where a rule on F alone
+    took mu_sa. At R = 8 m both coefficients are consistent (r F(mu_sa) + G > 0 >
+    r F(mu_op) + G): the rule takes mu_sa and the motor drives a little. Between the two
+    the steady torque jumps by r p (mu_sa - mu_op) times the unit friction (0.02 N m at
+    R = 8.2 m, -0.43 N m at 8.4 m; docs/model.md), without chatter at 1 kHz."""
+    from dynamics.resistance import patch_pressure, rolling_resistance, unit_friction_right
+    from dynamics.params import G
+    m = Model.load("p3at", "vinyl")
+    v, ter = m.vehicle, m.terrain
+    pitch = math.radians(-7.0)
+    tr = simulate(m, *circle(m, 0.5, R, 12.0), pitch=pitch)
+    wl, wr = tr.wl[-1], tr.wr[-1]
+    unit = float(unit_friction_right(wl, wr, v, ter))
+    p = patch_pressure(v, pitch)
+    roll = rolling_resistance(ter.mu_roll, v.mass, pitch, wr)
+    f_sa = v.wheel_radius * (p * ter.mu_sa * unit + roll)
+    f_op = v.wheel_radius * (p * ter.mu_op * unit + roll)
+    g = v.mass * G * v.wheel_radius * math.sin(pitch) / 2.0
+    assert f_sa > f_op > 0.0                               # the ground pushes the outer side forward
+    motor = tr.tau_r[-1]
+    late = tr.t > 7.0
+    assert np.count_nonzero(np.diff(np.sign(tr.i_r[late])) != 0) == 0 and np.ptp(tr.tau_r[late]) < 0.01
+    if rule == "brakes":
+        assert f_sa + g < 0.0
+        assert motor == pytest.approx(f_op + g, abs=0.01)
+        assert abs(motor - (f_sa + g)) > 0.3               # what the rule on F alone gave
+    else:
+        assert f_sa + g > 0.0 > f_op + g
+        assert motor == pytest.approx(f_sa + g, abs=0.01)
 
 
 def test_mirror_symmetry_of_a_rollout(vinyl):
