@@ -175,13 +175,18 @@ def steady_resistance(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0, **q
 
     The friction coefficient of each side is mu_sa where its motor drives (torque and
     speed of one sign) and mu_op where it brakes, by the one rule of :func:`side_force`.
+    With the radius-scale extension each side rolls on r times its scale, as in the
+    compiled step: the patches see the scaled rim speeds, and each side's torques (its
+    friction's and eq. 24's gravity) scale with it.
     """
     wl = np.asarray(wl, float)
     wr = np.asarray(wr, float)
-    scale = np.clip((np.abs(wl) + np.abs(wr)) / OMEGA_EPS, 0.0, 1.0)
+    el = vehicle.radius_scale_left * wl
+    er = vehicle.radius_scale_right * wr
+    scale = np.clip((np.abs(el) + np.abs(er)) / OMEGA_EPS, 0.0, 1.0)
     with np.errstate(invalid="ignore", divide="ignore"):     # (at rest the patch integrals are 0/0)
-        left = np.where(scale > 0.0, unit_friction_right(wr, wl, vehicle, terrain, **quad) * scale, 0.0)
-        right = np.where(scale > 0.0, unit_friction_right(wl, wr, vehicle, terrain, **quad) * scale, 0.0)
+        left = np.where(scale > 0.0, unit_friction_right(er, el, vehicle, terrain, **quad) * scale, 0.0)
+        right = np.where(scale > 0.0, unit_friction_right(el, er, vehicle, terrain, **quad) * scale, 0.0)
     return _side_torques(left, right, wl, wr, vehicle, terrain, pitch)
 
 
@@ -232,10 +237,10 @@ def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pi
     p = patch_pressure(vehicle, pitch)
     grav = vehicle.mass * G * r * np.sin(pitch) / 2.0          # eq. 24, per side [N m]
     out = []
-    for unit, w in ((unit_l, wl), (unit_r, wr)):
+    for unit, w, sc in ((unit_l, wl, vehicle.radius_scale_left), (unit_r, wr, vehicle.radius_scale_right)):
         roll = rolling_resistance(terrain.mu_roll, vehicle.mass, pitch, w)
-        load = grav + vehicle.viscous * np.asarray(w, float)
-        out.append(r * _side_force_array(unit, roll, w, p, terrain.mu_sa, terrain.mu_op, load, r))
+        load = sc * grav + vehicle.viscous * np.asarray(w, float)
+        out.append(r * sc * _side_force_array(unit, roll, w, p, terrain.mu_sa, terrain.mu_op, load, r * sc))
     return out[0], out[1]
 
 
@@ -407,7 +412,8 @@ def steady_resistance_fast(wl, wr, vehicle: Vehicle, terrain: Terrain, pitch=0.0
     flat_l, flat_r = np.broadcast_arrays(wl, wr)
     fl = np.empty(flat_l.shape)
     fr = np.empty(flat_l.shape)
+    sl, sr = vehicle.radius_scale_left, vehicle.radius_scale_right
     for idx in np.ndindex(flat_l.shape):
-        res = unit_friction_fast(table, float(flat_l[idx]), float(flat_r[idx]))
+        res = unit_friction_fast(table, sl * float(flat_l[idx]), sr * float(flat_r[idx]))
         fl[idx], fr[idx] = res[0], res[1]
     return _side_torques(fl, fr, flat_l, flat_r, vehicle, terrain, pitch)

@@ -86,9 +86,9 @@ class Model:
         if steady and (wl != 0.0 or wr != 0.0):
             v = self.vehicle
             tl, tr = steady_resistance_fast(wl, wr, v, self.terrain, pitch)
-            g = gravity_torque(v.mass, G, v.wheel_radius, pitch)
-            il = (float(tl) + g + v.viscous * wl) / v.torque_constant
-            ir = (float(tr) + g + v.viscous * wr) / v.torque_constant
+            g = gravity_torque(v.mass, G, v.wheel_radius, pitch)     # (times each side's radius scale)
+            il = (float(tl) + g * v.radius_scale_left + v.viscous * wl) / v.torque_constant
+            ir = (float(tr) + g * v.radius_scale_right + v.viscous * wr) / v.torque_constant
             S[K.S_IL], S[K.S_IR] = il, ir
             if v.ki > 0:
                 S[K.S_INTL], S[K.S_INTR] = il / v.ki, ir / v.ki

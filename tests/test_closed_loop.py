@@ -574,3 +574,22 @@ def test_simulate_state_and_limits_name_a_bad_argument(vinyl):
         with pytest.raises(ParameterError, match=says):
             call()
     assert simulate(vinyl, n, n, pitch=np.zeros(200)).x[-1] == pytest.approx(simulate(vinyl, n, n).x[-1])
+
+
+@pytest.mark.parametrize("terrain, pitch_deg, wl, wr", [("vinyl", 4.0, 3.0, 5.0), ("grass", -6.0, 6.0, 4.5),
+                                                        ("asphalt", 0.0, 4.0, 4.4)])
+def test_a_steady_state_of_a_vehicle_with_scaled_radii_stays_steady(terrain, pitch_deg, wl, wr):
+    """Model.state(steady=True) for a vehicle whose right tyres are 8 % smaller and left
+    ones 3 % larger (the radius-scale extension), on a slope, turning: held at its own
+    wheel speeds at the controller rate, nothing moves (speeds within 1e-3 rad/s,
+    currents within 1e-3 A after 0.5 s). The steady form must scale each side's rim,
+    rim speeds and gravity as the compiled step does (it ignored the scales until
+    2026-12-01: currents off by up to 8 % of the side's torque)."""
+    m = Model.load("p3at", terrain)
+    m = m.with_(vehicle=m.vehicle.replace(radius_scale_left=1.03, radius_scale_right=0.92))
+    p = math.radians(pitch_deg)
+    S = m.state(wl, wr, pitch=p)
+    tr = simulate(m, hold(wl, 0.5, 0.001), hold(wr, 0.5, 0.001), state=S.copy(), pitch=p, dt=0.001)
+    assert not tr.stalled
+    assert np.max(np.abs(tr.wl - wl)) < 1e-3 and np.max(np.abs(tr.wr - wr)) < 1e-3
+    assert np.max(np.abs(tr.i_l - S[K.S_IL])) < 1e-3 and np.max(np.abs(tr.i_r - S[K.S_IR])) < 1e-3
