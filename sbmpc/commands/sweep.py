@@ -20,7 +20,7 @@ def add_parsers(sub):
     s.add_argument("--workers", type=int, default=0, help="Ray workers on this machine (default: every core)")
     s.add_argument("--address", help="address of a running Ray cluster (default: start Ray on this machine)")
     s.add_argument("--resume", action="store_true", help="skip the tasks whose rows are already in --out")
-    s.add_argument("--batch-size", type=int, default=0, help="tasks per Ray task (default: about 4 batches per worker)")
+    s.add_argument("--batch-size", type=int, default=0, help="tasks per Ray task (default: 1, or tasks / (64 x workers) where that is more)")
     s.add_argument("--serial", action="store_true", help="run the tasks one after another, without Ray")
     s.add_argument("--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=run_sweep)
