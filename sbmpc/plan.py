@@ -361,7 +361,7 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
         # is the plan when it then does better than the searched one (repair.better)
         mpol, mdrive = missed
         c2, chk2, fine2, rep2 = checked(world, cost, mpol.controls, predicted(world, cost, mpol.controls, X0),
-                                         X0, t0, budget, ps, mdrive)
+                                        X0, t0, budget, ps, mdrive)
         if better(chk2, chk, cost):
             controls, chk, fine, repairs = c2, chk2, fine2, rep2
             common["polish"] = mpol

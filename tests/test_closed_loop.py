@@ -37,6 +37,20 @@ def test_largest_acceleration_from_rest_is_current_limited():
     assert np.all(np.abs(tr.i_l) <= m.vehicle.current_limit + 1e-9)
 
 
+def _eq22_by_hand(v, ter, pitch, w_side, w_other):
+    """One side's steady torques by hand from eqs. 17/20, 21 and 24 (exact quadrature,
+    not the kernel): (r F(mu_sa), r F(mu_op), G) [N m] for the side turning at w_side
+    with the other at w_other (the left side is the right one mirrored)."""
+    from dynamics.params import G
+    from dynamics.resistance import patch_pressure, rolling_resistance, unit_friction_right
+    unit = float(unit_friction_right(w_other, w_side, v, ter))
+    p = patch_pressure(v, pitch)
+    roll = rolling_resistance(ter.mu_roll, v.mass, pitch, w_side)
+    f_sa = v.wheel_radius * (p * ter.mu_sa * unit + roll)
+    f_op = v.wheel_radius * (p * ter.mu_op * unit + roll)
+    return f_sa, f_op, v.mass * G * v.wheel_radius * math.sin(pitch) / 2.0
+
+
 @pytest.mark.parametrize("terrain, R, band", [("vinyl", 0.2, False), ("vinyl", 1.0, False), ("vinyl", 16.5, True),
                                               ("vinyl", 20.0, True), ("vinyl", 30.0, False),
                                               ("packed_dirt", 7.5, True), ("grass", 3.2, True)])
@@ -48,7 +62,6 @@ def test_steady_circle_settles_on_eq22_without_chatter(terrain, R, band):
     a second when the kernel chose mu by the sign of current times speed), and the
     inner side's torque never drives with the braking coefficient mu_op."""
     from dynamics.identify import circle_torques
-    from dynamics.resistance import patch_pressure, rolling_resistance, unit_friction_right
     m = Model.load("p3at", terrain)
     v, ter = m.vehicle, m.terrain
     tr = simulate(m, *circle(m, 0.2, R, 15.0))
@@ -60,11 +73,7 @@ def test_steady_circle_settles_on_eq22_without_chatter(terrain, R, band):
     assert np.ptp(tr.tau_l[late]) < 0.01
     # eq. 22 on the inner (left) side, by hand from eqs. 17/20 and 21
     wl = tr.wl[-1]
-    unit = float(unit_friction_right(tr.wr[-1], wl, v, ter))
-    roll = rolling_resistance(ter.mu_roll, v.mass, 0.0, wl)
-    p = patch_pressure(v, 0.0)
-    f_sa = v.wheel_radius * (p * ter.mu_sa * unit + roll)
-    f_op = v.wheel_radius * (p * ter.mu_op * unit + roll)
+    f_sa, f_op, _ = _eq22_by_hand(v, ter, 0.0, wl, tr.wr[-1])
     assert band == (f_sa * wl < 0 < f_op * wl)
     if f_sa * wl > 0:                                  # drives: mu_sa
         assert tr.tau_l[-1] == pytest.approx(f_sa, abs=0.01)
@@ -89,19 +98,13 @@ def test_on_a_climb_eq22_takes_the_motors_torque_with_gravity(R, rule):
     cancels gravity's torque). On level ground the same side brakes with mu_op. The closed loop
     at the controller rate and the steady form agree; a rule on the friction alone
     (mu_op on the climb) misses by 0.39 and 0.51 N m."""
-    from dynamics.resistance import patch_pressure, rolling_resistance, steady_resistance, unit_friction_right
-    from dynamics.params import G
+    from dynamics.resistance import steady_resistance
     m = Model.load("p3at", "vinyl")
     v, ter = m.vehicle, m.terrain
     pitch = math.radians(5.0)
     tr = simulate(m, *circle(m, 0.2, R, 10.0), pitch=pitch)
     wl, wr = tr.wl[-1], tr.wr[-1]
-    unit = float(unit_friction_right(wr, wl, v, ter))
-    p = patch_pressure(v, pitch)
-    roll = rolling_resistance(ter.mu_roll, v.mass, pitch, wl)
-    f_sa = v.wheel_radius * (p * ter.mu_sa * unit + roll)
-    f_op = v.wheel_radius * (p * ter.mu_op * unit + roll)
-    g = v.mass * G * v.wheel_radius * math.sin(pitch) / 2.0
+    f_sa, f_op, g = _eq22_by_hand(v, ter, pitch, wl, wr)
     assert f_sa < 0.0 and f_op < 0.0                     # the ground pushes the inner side back
     motor = tr.tau_l[-1]                                   # what the inner motor supplies [N m]
     if rule == "drives":                                   # at steady speed: resistance + gravity
@@ -115,8 +118,7 @@ def test_on_a_climb_eq22_takes_the_motors_torque_with_gravity(R, rule):
     tl, _ = steady_resistance(wl, wr, v, ter, pitch)
     assert float(tl) + g == pytest.approx(motor, abs=0.01)
     flat_l, _ = steady_resistance(wl, wr, v, ter, 0.0)
-    assert float(flat_l) == pytest.approx(v.wheel_radius * (patch_pressure(v, 0.0) * ter.mu_op * unit
-                                                            + rolling_resistance(ter.mu_roll, v.mass, 0.0, wl)), rel=1e-9)
+    assert float(flat_l) == pytest.approx(_eq22_by_hand(v, ter, 0.0, wl, wr)[1], rel=1e-9)
 
 
 @pytest.mark.parametrize("R, rule", [(10.0, "brakes"), (8.0, "both")])
@@ -129,19 +131,11 @@ def test_down_a_slope_the_outer_side_brakes_against_gravity_with_mu_op(R, rule):
     r F(mu_op) + G): the rule takes mu_sa and the motor drives a little. Between the two
     the steady torque jumps by r p (mu_sa - mu_op) times the unit friction (0.02 N m at
     R = 8.2 m, -0.43 N m at 8.4 m; docs/model.md), without chatter at 1 kHz."""
-    from dynamics.resistance import patch_pressure, rolling_resistance, unit_friction_right
-    from dynamics.params import G
     m = Model.load("p3at", "vinyl")
     v, ter = m.vehicle, m.terrain
     pitch = math.radians(-7.0)
     tr = simulate(m, *circle(m, 0.5, R, 12.0), pitch=pitch)
-    wl, wr = tr.wl[-1], tr.wr[-1]
-    unit = float(unit_friction_right(wl, wr, v, ter))
-    p = patch_pressure(v, pitch)
-    roll = rolling_resistance(ter.mu_roll, v.mass, pitch, wr)
-    f_sa = v.wheel_radius * (p * ter.mu_sa * unit + roll)
-    f_op = v.wheel_radius * (p * ter.mu_op * unit + roll)
-    g = v.mass * G * v.wheel_radius * math.sin(pitch) / 2.0
+    f_sa, f_op, g = _eq22_by_hand(v, ter, pitch, tr.wr[-1], tr.wl[-1])
     assert f_sa > f_op > 0.0                               # the ground pushes the outer side forward
     motor = tr.tau_r[-1]
     late = tr.t > 7.0
