@@ -316,8 +316,9 @@ def test_the_planning_functions_name_a_bad_argument():
     control durations, dt = 0, every = 0 were deep errors or skipped; a truth given by
     name or a path given to resolve were AttributeErrors."""
     from sbmpc import check, plan, receding, scenario, world
+    from sbmpc.problems import skidsteer as SS
     w = world.resolve(scenario.load(FLAT))
-    for call, says in [(lambda: check.replay(w, "time", [(5, 5, 2)], start=np.zeros(5)), "start: expected a planner state of 32"),
+    for call, says in [(lambda: check.replay(w, "time", [(5, 5, 2)], start=np.zeros(5)), f"start: expected a planner state of {SS.NX}"),
                        (lambda: plan.plan(w, "time", start=world.start_state(w)[:30]), r"found shape \(30,\)"),
                        (lambda: plan.plan(w, "TIME"), "cost: expected 'time' or 'energy', found 'TIME'"),
                        (lambda: plan.search_plan(w, 5), "cost: expected 'time' or 'energy', found 5"),

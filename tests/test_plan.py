@@ -96,23 +96,23 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     """A re-plan that finds no way on from where the 1 kHz replay parted (a dead end:
     the vehicle already on a flank, every edge tips or stalls) makes the next re-plan
     start 2 controls further back, and the plan then holds at 1 kHz (checked by an
-    independent replay). narrow_pass's time search with Halton seed 1 parts from its
-    replay past the pass (x = 15.8 m) and its re-plan from there succeeds; here that
+    independent replay). hills_field's time search with Halton seed 5 parts from its
+    replay near the goal (x = 47.6 m) and its re-plan from there succeeds; here that
     re-plan is made a dead end (its search reports every state explored), as real dead
-    ends came and went with every redraw of the plans (seed 7, then seed 2, then none
-    with 2-period controls). Before the step back, the repair gave up after a dead end
-    and the plan was refused."""
+    ends came and went with every redraw of the plans (narrow_pass seed 7, then seed 2,
+    then seed 1 until the stall test ran on fixed windows). Before the step back, the
+    repair gave up after a dead end and the plan was refused."""
     from dataclasses import replace
     from sbmpc.search.astar import Search
-    scn = SC.load(SCEN / "narrow_pass.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=1)))
+    scn = SC.load(SCEN / "hills_field.yaml")
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=5)))
     starts, run = [], Search.run
 
     def spy(self, *a, **k):
         res = run(self, *a, **k)
         x = float(self.problem.start[K.S_X])
         if len(starts) == 1:          # the first re-plan: a dead end
-            assert res.status == "found" and x > 15.0
+            assert res.status == "found" and x > 40.0
             res = replace(res, status="no_path", reason="every reachable state was explored", exhausted=True,
                           ended="exhausted")
         starts.append((x, res.status))
@@ -125,7 +125,7 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     assert CK.check_cost(chk, "time") == pytest.approx(p.travel_time_s, rel=1e-9)
     # the search, the dead end past the pass, then a re-plan from 2 controls back that succeeds
     assert [st for _, st in starts] == ["found", "no_path", "found"], starts
-    assert 12.0 < starts[2][0] < starts[1][0] - 0.5
+    assert 30.0 < starts[2][0] < starts[1][0] - 0.5
     assert p.repairs == 2
 
 
