@@ -55,10 +55,10 @@ NP = 27
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
  S_YAW, S_T, S_E, S_DIST, S_S, S_STALLT, S_STALLED,
  S_CWL, S_CWR, S_CFL, S_CFR, S_CLL, S_CLR, S_CRL, S_CRR, S_DWL, S_DWR,
- S_SWT, S_SWA, S_SWP) = range(33)
+ S_SWT, S_SWL, S_SWR) = range(33)
 NS = 33
-# S_SW*: the stall test's window (STALL_WINDOW): time into it [s], the approach to the
-# command over it so far [m/s], the progress at its start [m/s]
+# S_SW*: the stall test's window (STALL_WINDOW): time into it [s], the wheel speeds at
+# its start [rad/s]
 # S_C*: the unit friction and its slopes (fast form) at the speeds (S_CWL, S_CWR), kept
 # from the last step: the next step starts its solve there and need not look them up.
 # S_DW*: the wheel accelerations [rad/s^2] at the end of the last step (from its stages):
@@ -510,33 +510,38 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     # the approach is how fast the rim speeds close in on the command (a vehicle that
     # reverses, brakes or turns around closes in; one held by a hill does not). The test
     # runs on windows of STALL_WINDOW whatever the step (a coarser step is its own
-    # window): the approach is summed over the window and the progress read at its end,
-    # so a 1 ms step and a 20 ms step see the same windows and a timer near STALL_TIME
+    # window): the approach is taken over the whole window (from the wheel speeds at its
+    # start) and the progress read at its end, so a 1 ms step and a 20 ms step see the same windows and a timer near STALL_TIME
     # gives the same verdict. The time below the threshold is interpolated within the
     # window.
     if not open_loop:
-        cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r))
-        q = r / (2.0 * cn) if cn > 0.0 else 0.0
         if S[S_SWT] == 0.0:
-            S[S_SWP] = q * (cmd_l * wl0 + cmd_r * wr0)
-            S[S_SWA] = 0.0
-        d0 = r * math.sqrt(0.5 * ((cmd_l - wl0) ** 2 + (cmd_r - wr0) ** 2))
-        d1 = r * math.sqrt(0.5 * ((cmd_l - wl) ** 2 + (cmd_r - wr) ** 2))
-        S[S_SWA] += d0 - d1
+            S[S_SWL] = wl0
+            S[S_SWR] = wr0
         S[S_SWT] += dt
         if S[S_SWT] >= STALL_WINDOW * (1.0 - 1e-9):
-            # the window is complete: test it as one step of its length
+            # the window is complete: test it as one step of its length, from the wheel
+            # speeds at its start (the approach over it telescopes: the sum of each
+            # step's approach is the distance to the command at its start less that at
+            # its end)
             win = S[S_SWT]
             stalling = False
-            if (sat_l or sat_r) and r * cn > 0.05:
+            cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r)) if (sat_l or sat_r) else 0.0
+            if r * cn > 0.05:
+                q = r / (2.0 * cn)
                 p1 = q * (cmd_l * wl + cmd_r * wr)
-                if p1 < STALL_SPEED and S[S_SWA] < STALL_ACCEL * win:
-                    stalling = True
-                    p0 = S[S_SWP]
-                    frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
-                    S[S_STALLT] += frac * win
-                    if S[S_STALLT] >= STALL_TIME:
-                        S[S_STALLED] = 1.0
+                if p1 < STALL_SPEED:
+                    ws_l = S[S_SWL]
+                    ws_r = S[S_SWR]
+                    d0 = r * math.sqrt(0.5 * ((cmd_l - ws_l) ** 2 + (cmd_r - ws_r) ** 2))
+                    d1 = r * math.sqrt(0.5 * ((cmd_l - wl) ** 2 + (cmd_r - wr) ** 2))
+                    if d0 - d1 < STALL_ACCEL * win:
+                        stalling = True
+                        p0 = q * (cmd_l * ws_l + cmd_r * ws_r)
+                        frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
+                        S[S_STALLT] += frac * win
+                        if S[S_STALLT] >= STALL_TIME:
+                            S[S_STALLED] = 1.0
             if not stalling:
                 # the timer leaks at the rate it fills: dT/dt = +1 stalling, -1 not. A
                 # stuck wheel's stick-slip at the regularised friction (a few steps of
