@@ -19,6 +19,10 @@ module                    holds
 ``identify``              eq. 28: terrain parameters from steady torques
 ========================  ===========================================================
 """
+from ._cache import refresh_once
+
+refresh_once()     # numba's cache, consistent across files, before anything compiled loads
+
 from .params import (ParameterError, Terrain, Vehicle, load_terrain, load_vehicle,
                      shipped_terrains, shipped_vehicles)
 from .simulate import Model, Trajectory, simulate
