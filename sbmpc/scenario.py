@@ -62,7 +62,8 @@ class PlannerSettings:
     optimum, found with far fewer expansions; the time heuristic is tight, so 1.1
     suffices; for energy 1.1 too, since its heuristic counts the copper loss: over
     Halton seeds the energy plans of hill_tradeoff, steep_hill and mixed_terrain spread
-    by 2.0-4.8 % at 1.1 (2.2-3.1 % with one-period controls, 3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
+    by 1.8-3.7 % at 1.1 (2.0-4.8 % before the stall test ran on fixed windows, 2.2-3.1 %
+    with one-period controls, 3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
     24 %, bench/bench_energy_plans.py); refine:
     after the first solution, go on (anytime weighted A*, pruning with the unweighted
     bound) for refine times the expansions it took, keeping the best plan (0: stop at
