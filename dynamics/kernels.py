@@ -55,10 +55,10 @@ NP = 27
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
  S_YAW, S_T, S_E, S_DIST, S_S, S_STALLT, S_STALLED,
  S_CWL, S_CWR, S_CFL, S_CFR, S_CLL, S_CLR, S_CRL, S_CRR, S_DWL, S_DWR,
- S_SWT, S_SWL, S_SWR) = range(33)
-NS = 33
+ S_SWT, S_SWL, S_SWR, S_SWCL, S_SWCR) = range(35)
+NS = 35
 # S_SW*: the stall test's window (STALL_WINDOW): time into it [s], the wheel speeds at
-# its start [rad/s]
+# its start [rad/s], the command it is judged against [rad/s]
 # S_C*: the unit friction and its slopes (fast form) at the speeds (S_CWL, S_CWR), kept
 # from the last step: the next step starts its solve there and need not look them up.
 # S_DW*: the wheel accelerations [rad/s^2] at the end of the last step (from its stages):
@@ -515,11 +515,19 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     # gives the same verdict. The time below the threshold is interpolated within the
     # window.
     if not open_loop:
-        if S[S_SWT] == 0.0:
+        if S[S_SWT] == 0.0 or cmd_l != S[S_SWCL] or cmd_r != S[S_SWCR]:
+            # a new window: at the first step, after the last window, or where the
+            # command changed within one (the part before the change is dropped, so a
+            # window is never judged against a command it did not have throughout)
+            S[S_SWT] = 0.0
             S[S_SWL] = wl0
             S[S_SWR] = wr0
+            S[S_SWCL] = cmd_l
+            S[S_SWCR] = cmd_r
         S[S_SWT] += dt
-        if S[S_SWT] >= STALL_WINDOW * (1.0 - 1e-9):
+        if S[S_SWT] + 0.5 * dt >= STALL_WINDOW:
+            # closed at the step nearest its length (a step that does not divide it:
+            # 15 ms steps give 15 ms windows, 30 ms steps 30 ms ones)
             # the window is complete: test it as one step of its length, from the wheel
             # speeds at its start (the approach over it telescopes: the sum of each
             # step's approach is the distance to the command at its start less that at

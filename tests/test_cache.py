@@ -1,7 +1,8 @@
-"""numba's cache kept consistent across files (dynamics/_cache.py)."""
+"""numba's cache kept consistent across files (_jitcache)."""
+import ast
 from pathlib import Path
 
-from dynamics import _cache as C
+import _jitcache as C
 
 
 def _tree(root: Path) -> dict:
@@ -14,12 +15,13 @@ def _tree(root: Path) -> dict:
 
 
 def _entries(dirs: dict) -> list[Path]:
+    """Cache entries named as numba names them (module stem, function, line, version)."""
     made = []
     for stem, d in dirs.items():
-        for ext in ("nbi", "nbc"):
-            p = d / f"{stem}._step-341.py311.{ext}"
-            p.write_bytes(b"x")
-            made.append(p)
+        d.mkdir(parents=True, exist_ok=True)
+        for name in (f"{stem}._step-341.py311.nbi", f"{stem}._step-341.py311.1.nbc"):
+            (d / name).write_bytes(b"x")
+            made.append(d / name)
     return made
 
 
@@ -47,9 +49,40 @@ def test_a_changed_source_clears_the_cache_of_every_compiled_file(tmp_path):
     assert (dirs["kernels"] / C.STAMP).read_text().strip() == C.digest(C.sources(tmp_path), tmp_path)
 
 
+def test_numba_cache_dir_is_refreshed_on_its_own_stamp(tmp_path, monkeypatch):
+    """With $NUMBA_CACHE_DIR numba keeps every entry there, in its own layout; a stamp
+    written elsewhere (a run without the variable) must not vouch for it."""
+    from numba.core import config
+    src = tmp_path / "src"
+    _tree(src)
+    assert C.refresh(src) is False                    # the __pycache__ folders: stamped, nothing to delete
+    cache = tmp_path / "cache"
+    monkeypatch.setattr(config, "CACHE_DIR", str(cache))
+    dirs = {f.stem: C.cache_dirs(f)[1] for f in C.sources(src)}
+    assert all(str(d).startswith(str(cache)) for d in dirs.values())
+    made = _entries(dirs)
+    assert C.refresh(src) is True and not any(p.exists() for p in made)
+    made = _entries(dirs)
+    assert C.refresh(src) is False and all(p.exists() for p in made)
+
+
 def test_every_file_with_compiled_code_is_a_source():
     """A new module with numba functions outside SOURCES would escape the refresh."""
     listed = set(C.sources())
     compiled = {p for pkg in ("dynamics", "maps", "sbmpc") for p in (C.ROOT / pkg).rglob("*.py")
                 if "njit" in p.read_text() or "from ._jit import" in p.read_text()}
     assert compiled and compiled <= listed, sorted(str(p) for p in compiled - listed)
+
+
+def test_the_guard_imports_no_layer_and_every_layer_calls_it_first():
+    """_jitcache sits below dynamics, maps and sbmpc (it imports none of them), and each
+    package with compiled code calls it before any of its compiled modules load."""
+    tree = ast.parse(Path(C.__file__).read_text())
+    imported = {(n.module or "").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not imported & {"dynamics", "maps", "sbmpc"}
+    for init in ("dynamics", "maps", "sbmpc/search", "sbmpc/problems"):
+        body = ast.parse((C.ROOT / init / "__init__.py").read_text()).body
+        stmts = [s for s in body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
+        assert isinstance(stmts[0], ast.ImportFrom) and stmts[0].module == "_jitcache", init
+        assert ast.unparse(stmts[1]) == "refresh_once()", init

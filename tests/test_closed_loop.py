@@ -376,6 +376,29 @@ def test_the_stall_timer_does_not_depend_on_the_step():
     assert verdicts == {0.0, 1.0}     # the grades straddle the threshold
 
 
+def test_a_stall_window_follows_its_command_and_closes_at_the_nearest_step():
+    """A window is judged against one command: where the command changes within it (a
+    control that ends off the 20 ms grid: the goal cut, a truth's command delay), the
+    part before the change is dropped and a new window starts. A step that does not
+    divide 20 ms closes the window at the step nearest 20 ms (19.9 ms steps: one step,
+    not two; 15 ms: one; 12.5 ms: two)."""
+    m = Model.load("p3at", "vinyl")
+    O = np.zeros(K.NO)
+    S = m.state(0.0, 0.0)
+    for _ in range(5):
+        K.step(m.P, m.table, S, 6.0, 6.0, 0.0, 0.001, False, O)
+    assert S[K.S_SWT] == pytest.approx(0.005) and (S[K.S_SWCL], S[K.S_SWCR]) == (6.0, 6.0)
+    wl, wr = S[K.S_WL], S[K.S_WR]
+    K.step(m.P, m.table, S, 6.0, 3.0, 0.0, 0.001, False, O)
+    assert S[K.S_SWT] == pytest.approx(0.001) and (S[K.S_SWCL], S[K.S_SWCR]) == (6.0, 3.0)
+    assert (S[K.S_SWL], S[K.S_SWR]) == (wl, wr)          # the new window starts where the change did
+    for dt, steps in ((0.0199, 1), (0.015, 1), (0.0125, 2), (0.005, 4), (0.001, 20)):
+        S = m.state(6.0, 6.0)      # moving: no sub-steps (a wheel leaving rest splits a coarse step)
+        for i in range(steps):
+            K.step(m.P, m.table, S, 6.0, 6.0, 0.0, dt, False, O)
+            assert (S[K.S_SWT] == 0.0) == (i == steps - 1), (dt, i)     # closed after exactly that many
+
+
 @pytest.mark.parametrize("terrain, w0, cmd, pitch_deg", [
     ("concrete", (-3.2, 7.5), (-2.2, 7.2), -13.4),   # left wheel dragged through zero downhill, drive saturated
     ("asphalt", (0.0, 0.0), (5.0, -1.2), -16.0),     # a turn started from rest on a steep descent

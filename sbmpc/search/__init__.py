@@ -1,3 +1,3 @@
-from dynamics._cache import refresh_once
+from _jitcache import refresh_once
 
-refresh_once()     # numba's cache, consistent across files (dynamics/_cache.py)
+refresh_once()     # numba's cache, consistent across files (_jitcache)

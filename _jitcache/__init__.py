@@ -1,0 +1,111 @@
+"""numba's on-disk cache, kept consistent across files (for ``dynamics``, ``maps`` and
+``sbmpc``; it imports none of them, so each layer may import it).
+
+numba keys a cached function on its own file only: a compiled function keeps the
+module constants and the inlined callees of *other* files it was compiled with. After
+an update that changes ``dynamics/kernels.py`` (say, the state layout ``NS``) but not
+``sbmpc/problems/skidsteer.py``, the search would load a skid-steer expansion compiled
+against the old layout and plan silently wrong (seen once: no path on a 2 % grade).
+So the first import of a package with compiled code (``dynamics``, ``maps``,
+``sbmpc.search``, ``sbmpc.problems``) calls :func:`refresh_once`: it hashes the sources
+of every file the compiled code is built from and, in each folder where numba may keep
+their cache (a source folder's ``__pycache__``, under ``$NUMBA_CACHE_DIR``, numba's
+user-wide cache), compares that with the stamp the last refresh left there; where it
+differs or is missing, it deletes those files' cache entries in that folder (numba
+then compiles them again, once) and writes the new stamp. A clean checkout or a fresh
+install has no cache and loses nothing.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+ROOT = Path(os.path.abspath(__file__)).parents[1]     # abspath, not resolve: numba's own paths
+# the files the compiled code is built from (the compiled functions and the constants
+# and helpers they read), relative to ROOT
+SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/heuristics.py")
+STAMP = "sbmpc-numba-sources.sha1"
+
+_done = False
+
+
+def sources(root: Path = ROOT) -> list[Path]:
+    """The Python files of :data:`SOURCES` under ``root``, sorted."""
+    out = []
+    for rel in SOURCES:
+        p = root / rel
+        out.extend(sorted(p.glob("*.py")) if p.is_dir() else ([p] if p.is_file() else []))
+    return out
+
+
+def digest(files: list[Path], root: Path = ROOT) -> str:
+    """SHA-1 over the files' paths (relative to ``root``) and contents."""
+    h = hashlib.sha1()
+    for f in files:
+        h.update(str(f.relative_to(root)).encode())
+        h.update(b"\0")
+        h.update(f.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def cache_dirs(py_file: Path) -> list[Path]:
+    """Where numba may keep the cache of the functions of ``py_file`` (numba's cache
+    locators, in its layout): the file's own ``__pycache__``, ``$NUMBA_CACHE_DIR``'s
+    folder for it when set, and numba's user-wide cache (for a source folder numba
+    cannot write to)."""
+    from numba.core import config
+    from numba.core.caching import _CacheLocator
+    from numba.misc.appdirs import AppDirs
+    sub = _CacheLocator.get_suitable_cache_subpath(str(py_file))
+    dirs = [py_file.parent / "__pycache__"]
+    if config.CACHE_DIR:
+        dirs.append(Path(config.CACHE_DIR) / sub)
+    dirs.append(Path(AppDirs(appname="numba", appauthor=False).user_cache_dir) / sub)
+    return dirs
+
+
+def refresh(root: Path = ROOT) -> bool:
+    """In every existing cache folder of :data:`SOURCES`' files whose stamp differs from
+    their sources' hash (or is missing), delete those files' cache entries and write
+    the stamp; True when entries were deleted. A folder that cannot be written is left
+    as it is (numba cannot cache there either)."""
+    files = sources(root)
+    if not files:
+        return False
+    new = digest(files, root)
+    where: dict = {}
+    for f in files:
+        for d in cache_dirs(f):
+            where.setdefault(d, []).append(f)
+    deleted = False
+    for d, fs in where.items():
+        if not d.is_dir():
+            continue                                    # nothing cached there
+        stamp = d / STAMP
+        try:
+            if stamp.read_text().strip() == new:
+                continue
+        except OSError:
+            pass
+        for f in fs:
+            for entry in list(d.glob(f"{f.stem}.*.nbi")) + list(d.glob(f"{f.stem}.*.nbc")):
+                try:
+                    entry.unlink()
+                    deleted = True
+                except OSError:                         # another process got there first, or read-only
+                    pass
+        try:
+            stamp.write_text(new + "\n")
+        except OSError:
+            pass
+    return deleted
+
+
+def refresh_once() -> None:
+    """:func:`refresh`, once per process."""
+    global _done
+    if not _done:
+        _done = True
+        refresh()
