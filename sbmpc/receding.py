@@ -351,7 +351,6 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 return finish("failed", _weaker(stalls, world.vehicle.name))
             X[K.S_STALLT] = 0.0
             X[K.S_STALLED] = 0.0
-            X[K.S_SWT] = 0.0
             # the stalled drive is restarted from where its wheels are, as a stall
             # protection would: its references set to the measured speeds, commands
             # still in the pipe dropped. Left at the commands that stalled, the rate
