@@ -510,10 +510,10 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     # the approach is how fast the rim speeds close in on the command (a vehicle that
     # reverses, brakes or turns around closes in; one held by a hill does not). The test
     # runs on windows of STALL_WINDOW whatever the step (a coarser step is its own
-    # window): the approach is taken over the whole window (from the wheel speeds at its
-    # start) and the progress read at its end, so a 1 ms step and a 20 ms step see the same windows and a timer near STALL_TIME
-    # gives the same verdict. The time below the threshold is interpolated within the
-    # window.
+    # window; one command per window): the approach is taken over the whole window,
+    # from the wheel speeds at its start, and the progress read at its end, so a 1 ms
+    # step and a 20 ms step see the same windows and a timer near STALL_TIME gives the
+    # same verdict. The time below the threshold is interpolated within the window.
     if not open_loop:
         if S[S_SWT] == 0.0 or cmd_l != S[S_SWCL] or cmd_r != S[S_SWCR]:
             # a new window: at the first step, after the last window, or where the
@@ -526,12 +526,11 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
             S[S_SWCR] = cmd_r
         S[S_SWT] += dt
         if S[S_SWT] + 0.5 * dt >= STALL_WINDOW:
-            # closed at the step nearest its length (a step that does not divide it:
-            # 15 ms steps give 15 ms windows, 30 ms steps 30 ms ones)
-            # the window is complete: test it as one step of its length, from the wheel
-            # speeds at its start (the approach over it telescopes: the sum of each
-            # step's approach is the distance to the command at its start less that at
-            # its end)
+            # the window is complete (at the step nearest its length where a step does
+            # not divide it: 15 ms steps give 15 ms windows, 30 ms steps 30 ms ones):
+            # test it as one step of its length, from the wheel speeds at its start (the
+            # steps' approaches telescope: their sum is the distance to the command at
+            # the window's start less that at its end)
             win = S[S_SWT]
             stalling = False
             cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r)) if (sat_l or sat_r) else 0.0
