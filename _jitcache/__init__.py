@@ -66,11 +66,37 @@ def cache_dirs(py_file: Path) -> list[Path]:
     return dirs
 
 
+def _writable(d: Path) -> bool:
+    """Whether numba can cache in ``d`` (created if need be), as its locators test it."""
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        probe = d / f".sbmpc-probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+        return True
+    except OSError:
+        return False
+
+
+def primary(py_file: Path) -> Path:
+    """The folder numba will cache the functions of ``py_file`` in (its first locator
+    that works): ``$NUMBA_CACHE_DIR``'s when set, else the file's ``__pycache__`` when
+    it can be written, else numba's user-wide cache."""
+    dirs = cache_dirs(py_file)
+    from numba.core import config
+    if config.CACHE_DIR:
+        return dirs[1]
+    return dirs[0] if _writable(dirs[0]) else dirs[-1]
+
+
 def refresh(root: Path = ROOT) -> bool:
-    """In every existing cache folder of :data:`SOURCES`' files whose stamp differs from
+    """In every cache folder of :data:`SOURCES`' files (those that exist, and the one
+    numba is about to cache each file in, :func:`primary`) whose stamp differs from
     their sources' hash (or is missing), delete those files' cache entries and write
     the stamp; True when entries were deleted. A folder that cannot be written is left
-    as it is (numba cannot cache there either)."""
+    as it is (numba cannot cache there either). Without the stamp in the folder numba
+    is about to fill, a first run in a fresh checkout left unstamped entries that the
+    next run took for stale and compiled again (measured: 90 s twice, then 4.5 s)."""
     files = sources(root)
     if not files:
         return False
@@ -79,10 +105,13 @@ def refresh(root: Path = ROOT) -> bool:
     for f in files:
         for d in cache_dirs(f):
             where.setdefault(d, []).append(f)
+    first = {primary(f) for f in {f.parent: f for f in files}.values()}     # one per folder
     deleted = False
     for d, fs in where.items():
-        if not d.is_dir():
-            continue                                    # nothing cached there
+        if not d.is_dir() and not (d in first and _writable(d)):
+            continue                                    # nothing cached there, nor will be
+        # (the folder numba is about to cache in is stamped even while empty: entries
+        # written later in this process then carry the right stamp)
         stamp = d / STAMP
         try:
             if stamp.read_text().strip() == new:

@@ -25,11 +25,13 @@ def _entries(dirs: dict) -> list[Path]:
     return made
 
 
-def test_a_changed_source_clears_the_cache_of_every_compiled_file(tmp_path):
+def test_a_changed_source_clears_the_cache_of_every_compiled_file(tmp_path, monkeypatch):
     """The hazard: kernels.py's state layout changes, loop.py's does not; numba would
     keep loop's compiled code (built against the old layout). A refresh clears both
     files' entries once, leaves the byte code and foreign entries alone, and then keeps
     the cache while nothing changes."""
+    from numba.core import config
+    monkeypatch.setattr(config, "CACHE_DIR", "")
     dirs = _tree(tmp_path)
     pyc = dirs["kernels"] / "kernels.cpython-311.pyc"
     pyc.write_bytes(b"x")
@@ -49,10 +51,26 @@ def test_a_changed_source_clears_the_cache_of_every_compiled_file(tmp_path):
     assert (dirs["kernels"] / C.STAMP).read_text().strip() == C.digest(C.sources(tmp_path), tmp_path)
 
 
+def test_a_fresh_checkout_stamps_the_folder_numba_is_about_to_fill(tmp_path, monkeypatch):
+    """No __pycache__ yet (a fresh clone, or a tree whose byte code went elsewhere): the
+    first refresh creates the folder numba will cache in and stamps it, so the entries
+    this run writes are kept by the next one. Without it, the next run found entries
+    without a stamp, deleted them and compiled everything again."""
+    from numba.core import config
+    monkeypatch.setattr(config, "CACHE_DIR", "")
+    root = tmp_path / "src"
+    (root / "dynamics").mkdir(parents=True)
+    (root / "dynamics" / "kernels.py").write_text("NS = 35\n")
+    assert C.refresh(root) is False
+    made = _entries({"kernels": root / "dynamics" / "__pycache__"})      # what the run compiles
+    assert C.refresh(root) is False and all(p.exists() for p in made)
+
+
 def test_numba_cache_dir_is_refreshed_on_its_own_stamp(tmp_path, monkeypatch):
     """With $NUMBA_CACHE_DIR numba keeps every entry there, in its own layout; a stamp
     written elsewhere (a run without the variable) must not vouch for it."""
     from numba.core import config
+    monkeypatch.setattr(config, "CACHE_DIR", "")
     src = tmp_path / "src"
     _tree(src)
     assert C.refresh(src) is False                    # the __pycache__ folders: stamped, nothing to delete
