@@ -13,7 +13,10 @@ their cache (a source folder's ``__pycache__``, under ``$NUMBA_CACHE_DIR``, numb
 user-wide cache), compares that with the stamp the last refresh left there; where it
 differs or is missing, it deletes those files' cache entries in that folder (numba
 then compiles them again, once) and writes the new stamp. A clean checkout or a fresh
-install has no cache and loses nothing.
+install has no cache and loses nothing. Not covered: a process that still runs the
+old code (a Jupyter kernel, a Ray cluster started before the update) and compiles
+after the refresh writes old entries under the new stamp; restart such processes
+after an update.
 """
 from __future__ import annotations
 
