@@ -81,11 +81,10 @@ def _writable(d: Path) -> bool:
         return False
 
 
-def primary(py_file: Path) -> Path:
-    """The folder numba will cache the functions of ``py_file`` in (its first locator
-    that works): ``$NUMBA_CACHE_DIR``'s when set, else the file's ``__pycache__`` when
-    it can be written, else numba's user-wide cache."""
-    dirs = cache_dirs(py_file)
+def primary(dirs: list[Path]) -> Path:
+    """Of a source folder's cache folders (:func:`cache_dirs`), the one numba will cache
+    in (its first locator that works): ``$NUMBA_CACHE_DIR``'s when set, else the
+    ``__pycache__`` when it can be written, else numba's user-wide cache."""
     from numba.core import config
     if config.CACHE_DIR:
         return dirs[1]
@@ -94,44 +93,43 @@ def primary(py_file: Path) -> Path:
 
 def refresh(root: Path = ROOT) -> bool:
     """In every cache folder of :data:`SOURCES`' files (those that exist, and the one
-    numba is about to cache each file in, :func:`primary`) whose stamp differs from
-    their sources' hash (or is missing), delete those files' cache entries and write
-    the stamp; True when entries were deleted. A folder that cannot be written is left
-    as it is (numba cannot cache there either). Without the stamp in the folder numba
-    is about to fill, a first run in a fresh checkout left unstamped entries that the
-    next run took for stale and compiled again (measured: 90 s twice, then 4.5 s)."""
+    numba is about to cache each source folder in, :func:`primary`) whose stamp differs
+    from their sources' hash (or is missing), delete those files' cache entries and
+    write the stamp; True when entries were deleted. A folder that cannot be written is
+    left as it is (numba cannot cache there either). Without the stamp in the folder
+    numba is about to fill, a first run in a fresh checkout left unstamped entries that
+    the next run took for stale and compiled again (measured: 90 s twice, then 4.5 s)."""
     files = sources(root)
     if not files:
         return False
     new = digest(files, root)
-    where: dict = {}
+    by_folder: dict = {}
     for f in files:
-        for d in cache_dirs(f):
-            where.setdefault(d, []).append(f)
-    first = {primary(f) for f in {f.parent: f for f in files}.values()}     # one per folder
+        by_folder.setdefault(f.parent, []).append(f)
     deleted = False
-    for d, fs in where.items():
-        if not d.is_dir() and not (d in first and _writable(d)):
-            continue                                    # nothing cached there, nor will be
-        # (the folder numba is about to cache in is stamped even while empty: entries
-        # written later in this process then carry the right stamp)
-        stamp = d / STAMP
-        try:
-            if stamp.read_text().strip() == new:
-                continue
-        except OSError:
-            pass
-        for f in fs:
-            for entry in list(d.glob(f"{f.stem}.*.nbi")) + list(d.glob(f"{f.stem}.*.nbc")):
-                try:
-                    entry.unlink()
-                    deleted = True
-                except OSError:                         # another process got there first, or read-only
-                    pass
-        try:
-            stamp.write_text(new + "\n")
-        except OSError:
-            pass
+    for fs in by_folder.values():
+        dirs = cache_dirs(fs[0])          # numba's cache folders depend on the source folder only
+        fill = primary(dirs)              # (created, when writable: stamped even while empty, so
+        for d in dirs:                    # the entries this process writes carry the right stamp)
+            if not (d.is_dir() or (d == fill and _writable(d))):
+                continue                  # nothing cached there, nor will be
+            stamp = d / STAMP
+            try:
+                if stamp.read_text().strip() == new:
+                    continue
+            except OSError:
+                pass
+            for f in fs:
+                for entry in list(d.glob(f"{f.stem}.*.nbi")) + list(d.glob(f"{f.stem}.*.nbc")):
+                    try:
+                        entry.unlink()
+                        deleted = True
+                    except OSError:       # another process got there first, or read-only
+                        pass
+            try:
+                stamp.write_text(new + "\n")
+            except OSError:
+                pass
     return deleted
 
 

@@ -54,7 +54,8 @@ def test_a_changed_source_clears_the_cache_of_every_compiled_file(tmp_path, monk
 def test_a_fresh_checkout_stamps_the_folder_numba_is_about_to_fill(tmp_path, monkeypatch):
     """No __pycache__ yet (a fresh clone, or a tree whose byte code went elsewhere): the
     first refresh creates the folder numba will cache in and stamps it, so the entries
-    this run writes are kept by the next one. Without it, the next run found entries
+    this run writes are kept by the next one (in __pycache__ and under a fresh
+    $NUMBA_CACHE_DIR alike). Without it, the next run found entries
     without a stamp, deleted them and compiled everything again."""
     from numba.core import config
     monkeypatch.setattr(config, "CACHE_DIR", "")
@@ -63,6 +64,11 @@ def test_a_fresh_checkout_stamps_the_folder_numba_is_about_to_fill(tmp_path, mon
     (root / "dynamics" / "kernels.py").write_text("NS = 35\n")
     assert C.refresh(root) is False
     made = _entries({"kernels": root / "dynamics" / "__pycache__"})      # what the run compiles
+    assert C.refresh(root) is False and all(p.exists() for p in made)
+    # the same with $NUMBA_CACHE_DIR pointing at a folder that does not exist yet
+    monkeypatch.setattr(config, "CACHE_DIR", str(tmp_path / "fresh-cache"))
+    assert C.refresh(root) is False
+    made = _entries({"kernels": C.cache_dirs(root / "dynamics" / "kernels.py")[1]})
     assert C.refresh(root) is False and all(p.exists() for p in made)
 
 
