@@ -260,6 +260,14 @@ def at_bound(effect: str, params: dict) -> tuple:
     return tuple(out)
 
 
+def bound_side(effect: str, name: str, value: float) -> str:
+    """'lower' or 'upper': the bound of ``effect``'s range for parameter ``name`` that
+    ``value`` is nearer (for :func:`at_bound`'s parameters: the one the fit ended at)."""
+    names, lo, hi, _, _ = CANDIDATES[effect]
+    a, b = lo[names.index(name)], hi[names.index(name)]
+    return "lower" if value - a <= b - value else "upper"
+
+
 @dataclass
 class Diagnosis:
     """The result of :func:`diagnose` (docs/formats.md diagnosis JSON via :meth:`to_json`)."""

@@ -191,7 +191,8 @@ def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = 
     parameter but the OPTIONAL ones: a partial file silently taking the rest from the
     P3-AT was a trap."""
     if not isinstance(data, dict):
-        raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {type(data).__name__}")
+        found = "an empty file" if data is None else type(data).__name__
+        raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {found}")
     data = dict(data)
     parent = None
     if "base" in data:

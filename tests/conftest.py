@@ -1,9 +1,6 @@
-import os
-
-import numpy as np
 import pytest
 
-from dynamics import Model, load_terrain, load_vehicle
+from dynamics import Model, load_vehicle
 
 # Hypothesis: few, deterministic examples; numba kernels are compiled once per run.
 try:

@@ -1,7 +1,6 @@
 """The Python way in (sbmpc.plan_scenario & co.) and the command line's conveniences:
 overrides of start, goal and budgets, --version, vehicle files with a base, 8-bit PNG
 maps, compare when only one search finds a path."""
-import shutil
 from dataclasses import replace
 from pathlib import Path
 

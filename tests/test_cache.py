@@ -110,3 +110,29 @@ def test_the_guard_imports_no_layer_and_every_layer_calls_it_first():
         stmts = [s for s in body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
         assert isinstance(stmts[0], ast.ImportFrom) and stmts[0].module == "_jitcache", init
         assert ast.unparse(stmts[1]) == "refresh_once()", init
+
+
+def test_a_cold_cache_is_announced_by_every_command_that_compiles(monkeypatch, capsys, tmp_path):
+    """plan, compare and run said that the first run compiles; simulate, synth and
+    diagnose sat silent for a minute. With numba's index file missing each says so in one
+    line on stderr; with it present nothing is said."""
+    from dynamics import kernels as K
+    from sbmpc.commands import compiling
+    from sbmpc.commands.cli import main
+    assert compiling._cold((K.rollout,)) is False          # warm in the test session (compiled, cached)
+
+    class Fresh:                                           # a function numba has not cached yet
+        class _cache:
+            class _cache_file:
+                _index_path = str(tmp_path / "missing.nbi")
+    assert compiling._cold((Fresh,)) is True
+    monkeypatch.setattr(compiling, "_cold", lambda functions: True)
+    csv = tmp_path / "run.csv"
+    for argv in (["simulate", "--v", "0.5", "--duration", "1"],
+                 ["synth", "--effect", "none", "--seed", "1", "--duration", "5", "--out", str(csv)]):
+        assert main(argv) == 0
+        err = capsys.readouterr().err
+        assert err.count("compiling the vehicle model (first run only") == 1, (argv, err)
+    monkeypatch.setattr(compiling, "_cold", lambda functions: False)
+    assert main(["simulate", "--v", "0.5", "--duration", "1"]) == 0
+    assert "compiling" not in capsys.readouterr().err

@@ -31,6 +31,7 @@ def test_a_command_beyond_the_drive_is_noted(capsys):
     assert main(["simulate", "--v", "1.0", "--radius", "2", "--duration", "5"]) == 0
     out = capsys.readouterr().out
     assert "note: the drive stays short of the commanded wheel speeds" in out and "right 8.2" in out
+    assert "left" not in out.split("stays short")[1].split(":")[0]      # the left wheel reached its 8.18 rad/s
     for argv in (["--v", "0.6", "--radius", "2", "--duration", "5"],      # reached
                  ["--v", "0.5", "--duration", "0.3"],                     # still accelerating: no verdict
                  ["--v", "0.5", "--radius", "1", "--duration", "0.5"],    # overshoot is not short

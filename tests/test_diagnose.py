@@ -184,6 +184,7 @@ def test_cli_synth_then_diagnose_writes_json_vehicle_and_report(tmp_path, capsys
         assert key in doc["baseline"]
     ext = load_vehicle(doc["extended_vehicle"])
     assert min(ext.radius_scale_left, ext.radius_scale_right) < 0.96
+    assert ext.name == "p3at+wheel_radius"      # not "p3at": a run it drives must not read as the model's own
     for f in ("report.md", "replay.png", "residuals.png"):
         assert (rep / f).stat().st_size > 500
     # the extended vehicle is accepted by simulate
@@ -219,6 +220,25 @@ def test_fits_at_a_bound_and_rivals_are_named():
     assert at_bound("viscous_friction", {"c_Nms": -0.9959}) == ("c_Nms",)
     assert at_bound("grade", {"grade_deg": 3.0}) == ()
     assert set(CANDIDATES) >= {"turning_friction", "wheel_radius"}
+
+
+def test_a_caveat_says_which_way_the_fit_pressed():
+    """The caveat of a fit at its lower bound says the data may want less (the DRIVE
+    asphalt run's mu_scale 0.1002 was told 'more'), at its upper bound more; the report's
+    parameter says which bound."""
+    from types import SimpleNamespace
+    from dynamics.discrepancy import CANDIDATES, Candidate, at_bound, bound_side
+    from sbmpc.commands.diagnose import _at, caveats
+    names, lo, hi, _, _ = CANDIDATES["turning_friction"]
+    i = names.index("mu_scale")
+    for value, side, want in ((lo[i] + 0.0002, "lower", "less than"), (hi[i] - 0.0002, "upper", "more than")):
+        params = {n: (value if n == "mu_scale" else 0.5 * (a + b)) for n, a, b in zip(names, lo, hi)}
+        c = Candidate("turning_friction", params, {n: 0.01 for n in names}, 1.0, 0.3, -50.0, 10.0,
+                      at_bound=at_bound("turning_friction", params))
+        assert bound_side("turning_friction", "mu_scale", value) == side
+        assert _at(c, "mu_scale") == f" (at its {side} bound)"
+        (line,) = caveats(SimpleNamespace(cause="turning_friction", candidates=[c], rivals=()))
+        assert f"the {side} bound of mu_scale" in line and f"may want {want} the candidate allows" in line
 
 
 def _speeds_and_pose_only(run):

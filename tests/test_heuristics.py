@@ -49,7 +49,6 @@ def test_a_large_map_plans_with_a_window(tmp_path):
 
 
 # ---- the energy step bound (least_step_energy) ----------------------------------------
-import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -212,7 +211,6 @@ def test_the_heuristic_stays_below_a_real_drive_into_a_disc_off_the_grids_nodes(
     1.22 J where entering it costs 0.24 J.)"""
     from sbmpc import problem as PB
     from sbmpc.problems import skidsteer as SS
-    from dynamics import kernels as K
     scn = SC.load(SCEN / "flat.yaml")
     goal = dict(scn.goal, x=16.125, y=8.51, radius=0.5)
     scn = replace(scn, goal=goal)

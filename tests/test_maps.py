@@ -143,7 +143,7 @@ def test_a_geotiff_dem_loads_north_up_with_its_own_resolution_and_origin(tmp_pat
     the south-west pixel's centre in the file's coordinates, or the one given."""
     H = np.zeros((6, 8))
     H[0, :] = 2.0                                   # the northern row of the file
-    p = _geotiff(tmp_path / "dem.tif", H)
+    _geotiff(tmp_path / "dem.tif", H)
     m = load_map({"file": "dem.tif"}, tmp_path)
     assert m.resolution == 0.5 and m.shape == (6, 8)
     assert m.origin == pytest.approx((500000.25, 4000000.0 - 6 * 0.5 + 0.25))

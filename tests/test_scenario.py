@@ -159,3 +159,15 @@ def test_a_terrain_class_raster_sets_the_terrain_of_every_cell(tmp_path):
     (tmp_path / "s.yaml").write_text(base.replace("FILE", "small.npy"))
     with pytest.raises(InputError, match="49 x 81 cells, found shape"):
         WO.resolve(SC.load(tmp_path / "s.yaml"))
+
+
+@pytest.mark.parametrize("text, found", [("", "found an empty file"), ("[1, 2]\n", "found a list"),
+                                         ("just words\n", "found a single string")])
+def test_a_file_that_is_not_a_mapping_says_what_it_holds(tmp_path, capsys, text, found):
+    """An empty scenario file said 'found NoneType' (a Python type name)."""
+    f = tmp_path / "s.yaml"
+    f.write_text(text)
+    assert main(["plan", str(f)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith(found), err
+

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from .compiling import model_note
 from .files import Outputs, atomic, path_arg, write_json, write_text
 
 
@@ -70,6 +71,7 @@ def run_synth(args) -> int:
         raise InputError(f"--seed: expected an integer in [0, 2147483647], found {args.seed}")
     Outputs([args.vehicle, args.terrain]).file(args.out, "--out")
     vehicle, terrain = _load_models(args.vehicle, args.terrain)
+    model_note()
     run, params = synth_run(args.effect, args.seed, vehicle, terrain, duration=args.duration)
     with atomic(args.out) as tmp:
         write_run(tmp, run)
@@ -110,6 +112,7 @@ def run_diagnose(args) -> int:
             raise InputError(f"{args.run}: '# slope_deg:' expected a grade in degrees within [-45, 45], "
                              f"found {run.meta['slope_deg']!r:.40}")
         pitch = math.radians(slope)
+    model_note()
     t0 = time.perf_counter()
 
     def progress(i, n, effect):
@@ -132,11 +135,11 @@ def run_diagnose(args) -> int:
           "parameters (± standard error)")
     for c in d.candidates:
         ps = ", ".join(f"{k} = {v:.4g}" + (f" ± {d_se:.2g}" if math.isfinite(d_se) else " (standard error: n/a)")
-                       + (" (at its bound)" if k in c.at_bound else "")
+                       + _at(c, k)
                        for (k, v), d_se in zip(c.params.items(), c.stderr.values()))
         pose = (f"  [fitted to the pose: held-out pose gain {c.pose_gain:.2f}]" if c.fitted_on == "pose" else
                 "  [fitted on the held-out part: the training part cannot test it]" if c.fitted_on == "heldout" else "")
-        ev = "" if not math.isfinite(c.evidence) else f"{c.evidence:.0f}"
+        ev = ("n/a (pose)" if c.fitted_on == "pose" else "n/a") if not math.isfinite(c.evidence) else f"{c.evidence:.0f}"
         print(f"{c.effect:18s} {c.heldout_error:9.2f} {c.gain:7.3f} {c.bic_delta:11.0f} {ev:>12s}  {ps}{pose}")
     print(cause_line(d))
     for line in caveats(d):
@@ -152,7 +155,7 @@ def run_diagnose(args) -> int:
             note += (f" (the terrain's mu_sa, mu_op are {d.extended_terrain.mu_sa:.3f}, {d.extended_terrain.mu_op:.3f};"
                      " the vehicle is unchanged)")
         out_vehicle.parent.mkdir(parents=True, exist_ok=True)
-        write_text(out_vehicle, vehicle_to_yaml(d.extended_vehicle, note))
+        write_text(out_vehicle, vehicle_to_yaml(extended_named(d.extended_vehicle, vehicle, d.cause), note))
     doc = d.to_json(str(out_vehicle) if out_vehicle else None)
     doc["run"] = str(args.run)
     doc["diagnosis_time_s"] = elapsed
@@ -201,12 +204,37 @@ def caveats(d) -> list:
     out = []
     named = next((c for c in d.candidates if c.effect == d.cause), None)
     if named is not None and named.at_bound:
-        out.append(f"the {d.cause} fit ended at the bound of {', '.join(named.at_bound)} (the data may want more than "
-                   "the candidate allows, or the cause is another effect it imitates)")
+        from dynamics.discrepancy import bound_side
+        sides = [bound_side(d.cause, k, named.params[k]) for k in named.at_bound]
+        ends = ", ".join(f"the {side} bound of {k}" for k, side in zip(named.at_bound, sides))
+        want = {frozenset({"lower"}): "less than", frozenset({"upper"}): "more than"}.get(
+            frozenset(sides), "values beyond what")
+        out.append(f"the {d.cause} fit ended at {ends} (the data may want {want} the candidate allows, or the "
+                   "cause is another effect it imitates)")
     if d.rivals:
         out.append(f"{', '.join(d.rivals)} explain{'s' if len(d.rivals) == 1 else ''} the held-out data within "
                    f"noise of {d.cause} (gains within 0.02): the data cannot tell them apart")
     return out
+
+
+def extended_named(extended, vehicle, cause: str):
+    """The extended vehicle named after the one it extends and the cause
+    (``p3at+wheel_radius``) where any of its parameters differs from it, so that a run
+    driven by it does not read as one driven by the model it corrects; else as it is
+    (grade and turning_friction leave the vehicle unchanged)."""
+    from dataclasses import fields, replace
+    same = all(getattr(extended, f.name) == getattr(vehicle, f.name) for f in fields(vehicle)
+               if f.name not in ("name", "description", "sources"))
+    return extended if same else replace(extended, name=f"{vehicle.name}+{cause}")
+
+
+def _at(c, k: str) -> str:
+    """' (at its lower bound)' or ' (at its upper bound)' where candidate c's parameter k
+    ended at a bound of its range (``Candidate.at_bound``), else ''."""
+    if k not in c.at_bound:
+        return ""
+    from dynamics.discrepancy import bound_side
+    return f" (at its {bound_side(c.effect, k, c.params[k])} bound)"
 
 
 def _n(x: float, fmt: str) -> str:
@@ -276,7 +304,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
              *([_pose_line(d.pose).capitalize() + ".", ""] if d.pose else []),
              "| candidate | held-out error | gain | BIC change | parameters | whiteness Q |", "|---|---|---|---|---|---|"]
     for c in d.candidates:
-        ps = ", ".join(f"{k} = {v:.4g} ± {_n(c.stderr[k], '.2g')}" + (" (at its bound)" if k in c.at_bound else "")
+        ps = ", ".join(f"{k} = {v:.4g} ± {_n(c.stderr[k], '.2g')}" + _at(c, k)
                        for k, v in c.params.items())
         gain = f"{c.gain:.3f}" + (f" (pose {c.pose_gain:.3f})" if c.fitted_on == "pose" else "")
         lines.append(f"| {c.effect} | {c.heldout_error:.2f} | {gain} | {c.bic_delta:.0f} | {ps} | "

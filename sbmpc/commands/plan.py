@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..errors import InputError, NoResult
 from ..search.counters import budget_text
+from .compiling import compile_note
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 
 
@@ -109,23 +110,6 @@ def _world(args):
     if limit:
         print(f"note: {limit}", file=sys.stderr)
     return world
-
-
-def compile_note(quiet: bool = False) -> None:
-    """One line on stderr when numba's on-disk cache of the planner is missing (a fresh
-    install or changed source): the first plan then compiles for 1-2 minutes."""
-    if quiet:
-        return
-    try:
-        import os
-        from ..problems.skidsteer import expand_batch
-        from ..search.loop import run_search
-        cold = any(not os.path.exists(f._cache._cache_file._index_path) for f in (run_search, expand_batch))
-    except Exception:          # numba's cache internals moved: say nothing
-        return
-    if cold:
-        print("compiling the planner (first run only, about 1-2 minutes, mostly before the search: the planning time printed shows part of it) ...",
-              file=sys.stderr, flush=True)
 
 
 class Progress:

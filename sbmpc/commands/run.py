@@ -5,7 +5,8 @@ from dataclasses import replace
 
 from ..errors import NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
-from .plan import Progress, _world, add_backend_flags, compile_note
+from .compiling import compile_note
+from .plan import Progress, _world, add_backend_flags
 
 
 def add_parsers(sub):

@@ -9,7 +9,7 @@ def add_parsers(sub):
     p = sub.add_parser("schema", help="print the JSON Schema of a scenario, plan, compare, run or diagnosis file",
                        description="Print the JSON Schema (draft 2020-12) of one of the files sbmpc reads or "
                        "writes, for editors and validators (docs/formats.md describes each key).")
-    p.add_argument("name", choices=tuple(SCHEMAS), help="which file")
+    p.add_argument("name", metavar="FILE", choices=tuple(SCHEMAS), help=f"which file: {', '.join(SCHEMAS)}")
     p.set_defaults(func=run_schema)
 
 

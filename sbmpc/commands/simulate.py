@@ -65,6 +65,7 @@ MAX_STEPS = 20_000_000     # steps of one simulation (its trajectory keeps about
 
 def run(args) -> int:
     from dynamics import ParameterError
+    from .compiling import model_note
     from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
     from dynamics.simulate import Model, simulate
 
@@ -78,6 +79,7 @@ def run(args) -> int:
         model = Model.load(args.vehicle, args.terrain, args.dt)
     except ParameterError as exc:
         raise InputError(str(exc)) from None
+    model_note()
     ramp = any(x is not None for x in (args.slope_deg, args.v0, args.length))
     if sum([ramp, args.radius is not None, args.lemniscate]) > 1:
         raise InputError("expected one manoeuvre (--radius, the ramp options, or --lemniscate), found several")
@@ -174,6 +176,8 @@ def _short_of_command(traj, cmd_l: float, cmd_r: float, settle_s: float = 1.0) -
     short = [abs(w) < abs(c) - tol and w * c >= 0.0 or w * c < 0.0 for w, c in ((wl, cmd_l), (wr, cmd_r))]
     if not any(short):
         return ""
-    return (f"the drive stays short of the commanded wheel speeds (left {wl:.2f} of {cmd_l:.2f} rad/s, right "
-            f"{wr:.2f} of {cmd_r:.2f} rad/s): the command is beyond what the motors deliver here (voltage or "
-            "current limit), so the path driven is not the commanded one; a lower --v reaches it")
+    sides = " and ".join(f"{name} {w:.2f} of {c:.2f} rad/s" for name, w, c, s in
+                         (("left", wl, cmd_l, short[0]), ("right", wr, cmd_r, short[1])) if s)
+    return (f"the drive stays short of the commanded wheel speeds ({sides}): the command is beyond what the "
+            "motors deliver here (voltage or current limit), so the path driven is not the commanded one; a "
+            "lower --v reaches it")
