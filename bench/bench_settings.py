@@ -5,7 +5,7 @@ check against the time plan) under each configuration, in one run.
     python bench/bench_settings.py --config hold_periods=1 --config hold_periods=2
     python bench/bench_settings.py --config period_s=1.0 --config period_s=2.0 --costs energy
 
-writes ``bench/results/settings.json``: per configuration, scenario and cost the plans'
+writes ``bench/results/settings.json`` (or ``--out``): per configuration, scenario and cost the plans'
 costs at the controller rate (energy [J] or travel time [s]) by seed, their median, the
 spread (max - min) / min [%], the median expansions and planning time [s] (every
 core; compare within one run). docs/performance.md#energy-plans quotes it.
@@ -44,6 +44,7 @@ def main(argv=None) -> int:
     ap.add_argument("--costs", nargs="+", default=["energy", "time"], choices=["energy", "time"])
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--scenarios", nargs="*", default=None)
+    ap.add_argument("--out", type=Path, default=OUT, help=f"results file (default {OUT.relative_to(ROOT)})")
     args = ap.parse_args(argv)
     names = args.scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml") if p.stem != "unreachable")
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
@@ -71,9 +72,9 @@ def main(argv=None) -> int:
                 rows[f"{name}/{cost}"] = row
                 print(text, name, cost, json.dumps({k: row[k] for k in ("median", "spread_pct", "median_expansions",
                                                                         "median_planning_s")}), flush=True)
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(res, indent=1))
-    print(f"wrote {OUT}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(res, indent=1))
+    print(f"wrote {args.out}")
     return 0
 
 

@@ -229,6 +229,7 @@ def _node(world: World, x: float, y: float) -> tuple:
 
 
 CTG_MAX_CELLS = 1_000_000    # larger maps get a cost-to-go window around start and goal
+OFF_CORRIDOR = 1e6           # s or J: what the grid adds off a corridor search's corridor (sbmpc.corridor)
 
 
 def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
@@ -283,8 +284,14 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     pose between the nodes, ``skidsteer._node_to_pose``), the factor
     its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
     time) and the goal's gap [s or J] the heuristic subtracts (:func:`_goal_gap`). Unreachable
-    nodes get a large finite cost. Cached per (world, cost): planning and replaying
-    share it.
+    nodes get a large finite cost. With ``world.keep_out`` (a corridor search,
+    :mod:`sbmpc.corridor`) a node in the corridor gets the least cost of the ways that
+    stay in it, one off it (or with no way that stays in it) the whole map's value plus
+    OFF_CORRIDOR: the search expands every node of the corridor it would open before
+    any other, and goes on over the whole map, guided as without a corridor, where the
+    corridor holds no way (the values are then no lower bounds: the corridor's plan is
+    the best the weighted search finds along the coarse route). Cached per (world,
+    cost): planning and replaying share it.
 
     On a map larger than ``max_cells`` the grid covers :func:`ctg_window` only (memory
     and time grow with the cells: a 5000 x 5000 map needed over 8 GB): every cell on the
@@ -362,12 +369,24 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         src.append(np.full(goal_nodes.size, S))
         dst.append(goal_nodes)
         w.append(np.zeros(goal_nodes.size))       # (explicit zeros are edges to csgraph)
-    G_ = coo_matrix((np.concatenate(w), (np.concatenate(src), np.concatenate(dst))), shape=(S + 1, S + 1)).tocsr()
-    if exits.size:
-        D = dijkstra(G_, indices=S)[:S]
-    else:
-        D = dijkstra(G_, indices=goal_nodes, min_only=True)[:S]
-    D[~np.isfinite(D)] = 1e12
+    src, dst, w = np.concatenate(src), np.concatenate(dst), np.concatenate(w)
+
+    def solve(keep, goals):
+        """Dijkstra over the steps ``keep`` from the goal's nodes ``goals``."""
+        G_ = coo_matrix((w[keep], (src[keep], dst[keep])), shape=(S + 1, S + 1)).tocsr()
+        if exits.size:
+            D = dijkstra(G_, indices=S)[:S]
+        else:
+            D = dijkstra(G_, indices=goals, min_only=True)[:S] if goals.size else np.full(S, np.inf)
+        D[~np.isfinite(D)] = 1e12
+        return D
+    D = solve(np.ones(src.size, bool), goal_nodes)
+    if world.keep_out is not None:
+        # a corridor search (sbmpc.corridor): inside the corridor the least cost of the ways
+        # that stay in it; off it (or where none stays in it) the whole map's plus OFF_CORRIDOR
+        off = np.r_[world.keep_out[j0:j1, i0:i1].ravel(), False]      # (the source node S is in)
+        inside = solve(~(off[src] | off[dst]), goal_nodes[~off[goal_nodes]])
+        D = np.where(inside < 1e12, inside, D + OFF_CORRIDOR)
     if (j0, j1, i0, i1) == (0, full_ny, 0, full_nx):
         out = D.reshape(ny, nx)
     else:

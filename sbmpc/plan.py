@@ -19,6 +19,7 @@ import numpy as np
 from dynamics import kernels as K
 
 from .check import HOLD_LAST_S, Check, controller_rate, predicted, replay
+from .corridor import Coarse, narrowed
 from .heuristics import _max_rise, steepest_climb_needed, unreachable_reason
 from .polish import Polished
 from .problem import batch_size, problem, search_threads
@@ -64,6 +65,7 @@ class Plan:
     polish: Polished | None = None     # the local search over the found controls (sbmpc.polish)
     rival: dict | None = None     # the time plan an energy plan was checked against (plan())
     failure: str | None = None    # for no_path, the kind of failure: one of FAILURES
+    coarse: Coarse | None = None  # the coarse search whose corridor the search looked in (sbmpc.corridor)
 
     @property
     def found(self) -> bool:
@@ -104,6 +106,7 @@ class Plan:
             "polish": self.polish.to_json() if self.polish else None,
             "rival": self.rival,
             "failure": self.failure,
+            "coarse": self.coarse.to_json() if self.coarse else None,
         }
 
 
@@ -322,13 +325,21 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
         return Plan(world.scenario.name, cost, "no_path", why, planning_time_s=time.perf_counter() - t0,
                     failure="unreachable")
     inc = _incumbent(world, cost, X0, incumbent) if incumbent else None
-    prob = problem(world, cost, X0)
+    coarse = None
+    sworld = world
+    if ps.corridor(cost) > 0.0 and inc is None:
+        # coarse to fine: the search looks along a coarse search's route (sbmpc.corridor)
+        sworld, coarse = narrowed(world, cost, X0, ps.corridor(cost), t0 + budget)
+    prob = problem(sworld, cost, X0)
     search = Search(prob)
     if inc is not None:
         search.bound(inc[0] * (1.0 + 1e-9))
-    res: SearchResult = search.run(ps.max_expansions, budget, progress=progress, batch=batch_size(ps),
-                                   threads=search_threads(ps))
-    common = dict(nodes_expanded=res.iterations, edges_simulated=res.edges_simulated, nodes=res.nodes, invalid_edges=res.invalid)
+    # (the coarse search's expansions and time come out of the plan's budgets)
+    spent = (coarse.expansions, coarse.edges) if coarse else (0, 0)
+    res: SearchResult = search.run(max(1, ps.max_expansions - spent[0]), budget - (time.perf_counter() - t0),
+                                   progress=progress, batch=batch_size(ps), threads=search_threads(ps))
+    common = dict(nodes_expanded=res.iterations + spent[0], edges_simulated=res.edges_simulated + spent[1],
+                  nodes=res.nodes, invalid_edges=res.invalid, coarse=coarse)
     if res.status == "found":
         T = res.states[:, K.S_T]
         controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))

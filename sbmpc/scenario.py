@@ -80,7 +80,9 @@ class PlannerSettings:
     by default for energy, whose plans the sampled speeds and the seed otherwise move
     by several per cent); energy_vs_time: an energy plan is checked against the time
     plan (the time search runs too) and the one that uses less energy at the controller
-    rate is kept (:func:`sbmpc.plan.plan`).
+    rate is kept (:func:`sbmpc.plan.plan`); corridor_time, corridor_energy: half-width
+    [m] of the corridor round a coarse search's route that the search of that cost looks
+    in (:mod:`sbmpc.corridor`; 0: the whole map).
     """
 
     branching: int = 16
@@ -107,12 +109,19 @@ class PlannerSettings:
     polish_time: bool = False
     polish_energy: bool = True
     energy_vs_time: bool = True
+    corridor_time: float = 0.0
+    corridor_energy: float = 0.0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
 
     def polishes(self, cost: str) -> bool:
         return self.polish_time if cost == "time" else self.polish_energy
+
+    def corridor(self, cost: str) -> float:
+        """Half-width [m] of the coarse route's corridor the search of ``cost`` looks in
+        (:mod:`sbmpc.corridor`; 0: the whole map)."""
+        return self.corridor_time if cost == "time" else self.corridor_energy
 
 
 @dataclass(frozen=True)
@@ -171,6 +180,8 @@ _SETTING_RANGES = {
     "energy_weight": (float, 1.0, 10.0),
     "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),
+    "corridor_time": (float, 0.0, 1000.0),
+    "corridor_energy": (float, 0.0, 1000.0),
 }
 # the settings that take one of a few words
 _SETTING_CHOICES = {"samples": ("fixed", "rotating"), "device": ("cpu", "cuda"),

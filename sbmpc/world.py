@@ -31,6 +31,8 @@ class World:
     emap: ElevationMap
     vehicle: Vehicle
     terrains: tuple
+    keep_out: np.ndarray | None = None   # (ny, nx) nodes off a corridor search's corridor (sbmpc.corridor),
+                                         # where the cost-to-go grid adds heuristics.OFF_CORRIDOR
 
     @property
     def half_length(self) -> float:

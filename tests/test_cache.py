@@ -116,16 +116,16 @@ def test_a_cold_cache_is_announced_by_every_command_that_compiles(monkeypatch, c
     """plan, compare and run said that the first run compiles; simulate, synth and
     diagnose sat silent for a minute. With numba's index file missing each says so in one
     line on stderr; with it present nothing is said."""
-    from dynamics import kernels as K
+    from types import SimpleNamespace
     from sbmpc.commands import compiling
     from sbmpc.commands.cli import main
-    assert compiling._cold((K.rollout,)) is False          # warm in the test session (compiled, cached)
 
-    class Fresh:                                           # a function numba has not cached yet
-        class _cache:
-            class _cache_file:
-                _index_path = str(tmp_path / "missing.nbi")
-    assert compiling._cold((Fresh,)) is True
+    def compiled(index):                                   # a function as numba's cache sees it
+        return SimpleNamespace(_cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(index))))
+    (tmp_path / "cached.nbi").write_bytes(b"x")
+    assert compiling._cold((compiled(tmp_path / "cached.nbi"),)) is False
+    assert compiling._cold((compiled(tmp_path / "cached.nbi"), compiled(tmp_path / "missing.nbi"))) is True
+    assert compiling._cold((object(),)) is False           # numba's internals moved: nothing is said
     monkeypatch.setattr(compiling, "_cold", lambda functions: True)
     csv = tmp_path / "run.csv"
     for argv in (["simulate", "--v", "0.5", "--duration", "1"],
