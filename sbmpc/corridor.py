@@ -2,9 +2,10 @@
 search then looks along it first (``planner.corridor_energy``, ``corridor_time``: the
 corridor's half-width [m]; 0 searches the whole map as before).
 
-The coarse search is the same search with every cell twice as large (position, heading,
-speed), half the controls per expansion (at least 4), a weight of at least
-COARSE_WEIGHT and at most COARSE_MAX_EXPANSIONS expansions: it finds some way to the
+The coarse search is the same search with every cell twice as large (position cells up
+to COARSE_CELL_XY, heading, speed), half the controls per expansion (at least
+COARSE_BRANCHING), a weight of at least COARSE_WEIGHT and at most COARSE_MAX_EXPANSIONS
+expansions: it finds some way to the
 goal in a fraction of the fine search's expansions, dearer than the fine plan. The fine
 search's cost-to-go grid then holds, for the nodes within the half-width of that route's
 path, the least cost of the ways that stay in the corridor, and for every other node the
@@ -34,6 +35,9 @@ from .search.astar import Search
 from .world import World
 
 COARSE_WEIGHT = 1.3            # the coarse search's least weight of h
+COARSE_CELL_XY = 1.0           # m: its position cells are twice the search's, up to this (or the search's own):
+                               # 2 m cells on hills_field merged the states that pass between hills
+COARSE_BRANCHING = 8           # its controls per expansion: half the search's, at least this (or the search's own)
 COARSE_MAX_EXPANSIONS = 20_000  # the coarse search's node budget (at most the planner's own)
 COARSE_TIME_SHARE = 0.25       # ... and at most this share of the plan's time budget
 
@@ -58,13 +62,14 @@ class Coarse:
 
 
 def coarse_world(world: World, cost: str) -> World:
-    """The world of the coarse search: cells twice as large, half the controls, a weight
-    of at least COARSE_WEIGHT, its node budget capped, no polish, no check against the
-    other cost."""
+    """The world of the coarse search: cells twice as large (position cells up to
+    COARSE_CELL_XY), half the controls (at least COARSE_BRANCHING), a weight of at least
+    COARSE_WEIGHT, its node budget capped, no polish, no check against the other cost."""
     ps = world.scenario.planner
     w = max(ps.weight(cost), COARSE_WEIGHT)
-    coarse = replace(ps, cell_xy=2.0 * ps.cell_xy, cell_yaw_deg=min(2.0 * ps.cell_yaw_deg, 180.0),
-                     cell_v=2.0 * ps.cell_v, branching=max(4, ps.branching // 2),
+    coarse = replace(ps, cell_xy=max(ps.cell_xy, min(2.0 * ps.cell_xy, COARSE_CELL_XY)),
+                     cell_yaw_deg=min(2.0 * ps.cell_yaw_deg, 180.0), cell_v=2.0 * ps.cell_v,
+                     branching=min(ps.branching, max(COARSE_BRANCHING, ps.branching // 2)),
                      max_expansions=min(ps.max_expansions, COARSE_MAX_EXPANSIONS), refine=0.0,
                      time_weight=w if cost == "time" else ps.time_weight,
                      energy_weight=w if cost == "energy" else ps.energy_weight,

@@ -1,4 +1,5 @@
 """Coarse to fine (sbmpc.corridor): the search looks along a coarse search's route first."""
+import json
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -63,8 +64,11 @@ def test_a_corridor_plan_takes_far_fewer_expansions_and_costs_about_the_same():
     assert fine.coarse.status == "found" and fine.coarse.cost > fine.energy_J
     assert fine.nodes_expanded <= 0.5 * plain.nodes_expanded, (fine.nodes_expanded, plain.nodes_expanded)
     assert abs(fine.energy_J - plain.energy_J) <= 0.02 * plain.energy_J, (fine.energy_J, plain.energy_J)
-    assert fine.to_json()["coarse"]["expansions"] == fine.coarse.expansions
-    assert plain.to_json()["coarse"] is None
+    doc = fine.to_json()
+    assert doc["coarse"]["expansions"] == fine.coarse.expansions and plain.to_json()["coarse"] is None
+    jsonschema = pytest.importorskip("jsonschema")
+    from sbmpc import schemas
+    jsonschema.Draft202012Validator(schemas.get("plan")).validate(json.loads(json.dumps(doc)))
 
 
 def test_without_a_coarse_route_the_whole_map_is_searched(monkeypatch):
