@@ -15,7 +15,9 @@ straight line would cross, the search opens the corridor's nodes before any othe
 ends in fewer expansions; where the corridor holds no way to the goal it goes on over
 the whole map, guided as without a corridor. Where the coarse search finds no route
 within its budgets, the fine search runs on the whole map as without it. The coarse
-search's expansions and time come out of the plan's budgets. Measured in
+search's time comes out of the plan's time budget (it takes at most COARSE_TIME_SHARE of
+it); its expansions are counted in the plan's but not charged to the search's node
+budget. A corridor world's grid is not cached (``heuristics.cost_to_go``). Measured in
 docs/performance.md#coarse-to-fine.
 """
 from __future__ import annotations
@@ -38,7 +40,8 @@ COARSE_WEIGHT = 1.3            # the coarse search's least weight of h
 COARSE_CELL_XY = 1.0           # m: its position cells are twice the search's, up to this (or the search's own):
                                # 2 m cells on hills_field merged the states that pass between hills
 COARSE_BRANCHING = 8           # its controls per expansion: half the search's, at least this (or the search's own)
-COARSE_MAX_EXPANSIONS = 20_000  # the coarse search's node budget (at most the planner's own)
+COARSE_MAX_EXPANSIONS = 20_000  # the coarse search's node budget (at most the planner's own; its
+                                # expansions are counted in the plan's, not charged to the search's budget)
 COARSE_TIME_SHARE = 0.25       # ... and at most this share of the plan's time budget
 
 

@@ -275,7 +275,21 @@ def grid_steps(H: np.ndarray, blocked: np.ndarray, res: float, climb: float):
             yield p[keep], q[keep], up[keep], d
 
 
-@functools.lru_cache(maxsize=8)
+def _cached_but_corridors(fn):
+    """``fn(world, cost, max_cells)`` cached per (world, cost, max_cells) like
+    functools.lru_cache(8), except for a corridor search's world (``World.keep_out``):
+    its grid serves one search, and caching it would push out the grids that planning,
+    replaying and a receding-horizon run's aims share."""
+    cached = functools.lru_cache(maxsize=8)(fn)
+
+    @functools.wraps(fn)
+    def call(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
+        return fn(world, cost, max_cells) if world.keep_out is not None else cached(world, cost, max_cells)
+    call.cache_clear = cached.cache_clear
+    return call
+
+
+@_cached_but_corridors
 def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
     over 8-neighbour steps, see :mod:`sbmpc.problems.skidsteer`; a time step takes its
@@ -392,6 +406,20 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     else:
         out = np.zeros(e.shape)
         out[j0:j1, i0:i1] = D.reshape(ny, nx)
+        if world.keep_out is not None:
+            # off the window and off the corridor: the straight-line bound the heuristic
+            # takes there (the window's exits' bound), plus OFF_CORRIDOR
+            beyond = np.ones(e.shape, bool)
+            beyond[j0:j1, i0:i1] = False
+            jj, ii = np.nonzero(beyond & world.keep_out)
+            dist = np.maximum(np.hypot(e.origin[0] + res * ii - g["x"], e.origin[1] + res * jj - g["y"])
+                              - g["radius"], 0.0)
+            if cost == "time":
+                line = dist / vb
+            else:
+                line = np.maximum(0.0, froll * dist + mg * (_lowest_in_disc(e, g["x"], g["y"], g["radius"])
+                                                           - Hfull[jj, ii]))
+            out[jj, ii] = line + OFF_CORRIDOR
     out.setflags(write=False)        # cached and shared
     frmax = float(froll_cell.max())
     gap = _goal_gap(e, g, X.ravel()[goal_nodes], Y.ravel()[goal_nodes], H.ravel()[goal_nodes],

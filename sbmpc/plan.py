@@ -334,9 +334,10 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     search = Search(prob)
     if inc is not None:
         search.bound(inc[0] * (1.0 + 1e-9))
-    # (the coarse search's expansions and time come out of the plan's budgets)
+    # the coarse search's time comes out of the search's budget; its expansions are counted,
+    # not charged to the search's node budget (a small budget would starve the search)
     spent = (coarse.expansions, coarse.edges) if coarse else (0, 0)
-    res: SearchResult = search.run(max(1, ps.max_expansions - spent[0]), budget - (time.perf_counter() - t0),
+    res: SearchResult = search.run(ps.max_expansions, budget - (coarse.seconds if coarse else 0.0),
                                    progress=progress, batch=batch_size(ps), threads=search_threads(ps))
     common = dict(nodes_expanded=res.iterations + spent[0], edges_simulated=res.edges_simulated + spent[1],
                   nodes=res.nodes, invalid_edges=res.invalid, coarse=coarse)
@@ -419,4 +420,5 @@ def plan_both(world: World, progress=None) -> dict:
 def _adopt(other: Plan, cost: str, own: Plan, why: str | None = None) -> Plan:
     mine = (f"{own.energy_J:.1f} J" if cost == "energy" else f"{own.travel_time_s:.2f} s") if own.found else ""
     note = why or f"better on {cost} than the {cost} search's own plan, {mine} at the controller rate"
-    return counting(replace(other, cost=cost, found_by=f"{other.cost} search ({note})", rival=None), own)
+    return counting(replace(other, cost=cost, found_by=f"{other.cost} search ({note})", rival=None,
+                            coarse=own.coarse), own)

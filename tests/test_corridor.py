@@ -91,9 +91,21 @@ def test_a_corridor_that_holds_no_way_to_the_goal_still_plans(monkeypatch):
         X, Y = np.meshgrid(e.origin[0] + e.resolution * np.arange(nx), e.origin[1] + e.resolution * np.arange(ny))
         s = world.scenario.start
         return np.hypot(X - s["x"], Y - s["y"]) > 2.0
+    plain = search_plan(_world("flat", threads=1), "time")
     monkeypatch.setattr(CO, "corridor_mask", near_start_only)
     p = search_plan(_world("flat", threads=1, corridor_time=1.5), "time")
     assert p.found and p.check.reached and p.coarse.status == "found"
+    # the corridor's nodes first: more expansions than the whole map's search alone
+    assert p.nodes_expanded - p.coarse.expansions > plain.nodes_expanded, (p.nodes_expanded, plain.nodes_expanded)
+
+
+def test_the_coarse_search_does_not_starve_a_small_node_budget():
+    """flat's time plan takes 93 expansions; with a budget of 120 the coarse search's
+    expansions (counted, not charged) leave the search its whole budget."""
+    plain = search_plan(_world("flat", threads=1, max_expansions=120), "time")
+    p = search_plan(_world("flat", threads=1, max_expansions=120, corridor_time=1.5), "time")
+    assert plain.found and p.found, p.reason
+    assert p.coarse.expansions > 0
 
 
 @pytest.mark.parametrize("value", [-1.0, "wide"])
@@ -102,3 +114,28 @@ def test_a_bad_half_width_is_named(value):
         SC.parse({"name": "x", "map": {"generate": {"size": [10, 10], "resolution": 0.5}}, "terrain": "vinyl",
                   "vehicle": "p3at", "start": {"x": 1, "y": 1}, "goal": {"x": 8, "y": 8, "radius": 0.5},
                   "planner": {"corridor_energy": value}})
+
+
+def test_off_a_windowed_grid_the_corridor_still_charges_its_penalty():
+    """On a map larger than the grid's window the grid is 0 beyond the window (the
+    straight-line bound applies there): a node off the corridor there would have been
+    cheaper than one in it. It gets the straight-line bound plus OFF_CORRIDOR; nodes in
+    the corridor stay below OFF_CORRIDOR."""
+    w = _world("flat")
+    s, g = w.scenario.start, w.scenario.goal
+    xs, ys = np.linspace(s["x"], g["x"], 200), np.linspace(s["y"], g["y"], 200)
+    keep_out = CO.corridor_mask(w, np.column_stack([xs, ys]), 1.0)
+    narrow = replace(w, keep_out=keep_out)
+    grid = HE.cost_to_go(narrow, "time", max_cells=1000)[0]
+    j0, j1, i0, i1 = HE.ctg_window(narrow, 1000)
+    beyond = np.ones(grid.shape, bool)
+    beyond[j0:j1, i0:i1] = False
+    assert beyond.any() and (beyond & keep_out).any()
+    e = w.emap
+    X, Y = np.meshgrid(e.origin[0] + e.resolution * np.arange(grid.shape[1]),
+                       e.origin[1] + e.resolution * np.arange(grid.shape[0]))
+    vb = HE._bounds(w)[0]
+    line = np.maximum(np.hypot(X - g["x"], Y - g["y"]) - g["radius"], 0.0) / vb
+    np.testing.assert_allclose(grid[beyond & keep_out], (line + HE.OFF_CORRIDOR)[beyond & keep_out], rtol=0, atol=1e-6)
+    assert np.all(grid[~beyond & keep_out] >= HE.OFF_CORRIDOR)
+    assert np.all(grid[~beyond & ~keep_out] < HE.OFF_CORRIDOR)
