@@ -139,3 +139,16 @@ def test_off_a_windowed_grid_the_corridor_still_charges_its_penalty():
     np.testing.assert_allclose(grid[beyond & keep_out], (line + HE.OFF_CORRIDOR)[beyond & keep_out], rtol=0, atol=1e-6)
     assert np.all(grid[~beyond & keep_out] >= HE.OFF_CORRIDOR)
     assert np.all(grid[~beyond & ~keep_out] < HE.OFF_CORRIDOR)
+
+
+def test_the_summary_says_what_the_coarse_search_did(tmp_path, capsys):
+    import yaml
+    from sbmpc.commands.cli import main
+    doc = yaml.safe_load((SCEN / "flat.yaml").read_text())
+    doc.setdefault("planner", {})["corridor_time"] = 1.5
+    f = tmp_path / "flat_corridor.yaml"
+    f.write_text(yaml.safe_dump(doc))
+    assert main(["plan", str(f), "--cost", "time", "--quiet", "--threads", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "  coarse to fine: a coarse route (" in out and "searched within 1.5 m of it first" in out
+

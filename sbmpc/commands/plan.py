@@ -162,9 +162,22 @@ def summary(plan) -> str:
     return (f"{plan.scenario} [{plan.cost}]: found\n"
             f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
             f"{len(plan.controls)} controls\n"
-            + _check_line(plan) + _rival_line(plan) +
+            + _check_line(plan) + _rival_line(plan) + _coarse_line(plan) +
             f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
             f"{plan.edges_simulated} edges simulated")
+
+
+def _coarse_line(plan) -> str:
+    """One line on the coarse search of a corridor search (planner.corridor_*), or ''."""
+    c = plan.coarse
+    if c is None:
+        return ""
+    if c.status != "found":
+        return (f"  coarse to fine: the coarse search found no route in {c.expansions} expansions; the whole map "
+                "was searched\n")
+    unit = "J" if plan.cost == "energy" else "s"
+    return (f"  coarse to fine: a coarse route ({c.cost:.1f} {unit} at the planner's step, {c.expansions} expansions, "
+            f"{c.seconds:.2f} s, counted below), searched within {c.half_width_m:g} m of it first\n")
 
 
 def _check_line(plan) -> str:
