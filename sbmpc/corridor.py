@@ -5,9 +5,8 @@ corridor's half-width [m]; 0 searches the whole map as before).
 The coarse search is the same search with every cell twice as large (position cells up
 to COARSE_CELL_XY, heading, speed), half the controls per expansion (at least
 COARSE_BRANCHING), a weight of at least COARSE_WEIGHT and at most COARSE_MAX_EXPANSIONS
-expansions: it finds some way to the
-goal in a fraction of the fine search's expansions, dearer than the fine plan. The fine
-search's cost-to-go grid then holds, for the nodes within the half-width of that route's
+expansions: it finds some way to the goal in a fraction of the fine search's expansions,
+dearer than the fine plan. The fine search's cost-to-go grid then holds, for the nodes within the half-width of that route's
 path, the least cost of the ways that stay in the corridor, and for every other node the
 whole map's value plus ``heuristics.OFF_CORRIDOR`` (:func:`narrowed`,
 ``heuristics.cost_to_go``): the grid rises where the route bends round hills the
