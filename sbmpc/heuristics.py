@@ -370,16 +370,23 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     if i1 < full_nx:
         edge[:, -1] = True
     exits = np.flatnonzero(edge.ravel() & ~blocked)
-    if exits.size:
-        dist = np.maximum(np.hypot(X.ravel()[exits] - g["x"], Y.ravel()[exits] - g["y"]) - g["radius"], 0.0)
+    @functools.cache
+    def lowest_goal() -> float:
+        """The goal disc's lowest height [m] (found when a bound first needs it)."""
+        return _lowest_in_disc(e, g["x"], g["y"], g["radius"])
+
+    def line_bound(x, y, z):
+        """The straight-line bound [s or J] from points (x, y, z) [m] to the goal disc:
+        what a cell on the window's edge takes to leave it, and (a corridor search) a
+        node off both the window and the corridor."""
+        dist = np.maximum(np.hypot(x - g["x"], y - g["y"]) - g["radius"], 0.0)
         if cost == "time":
-            bound = dist / vb
-        else:
-            bound = np.maximum(0.0, froll * dist + mg * (_lowest_in_disc(e, g["x"], g["y"], g["radius"]) - H.ravel()[exits]))
+            return dist / vb
+        return np.maximum(0.0, froll * dist + mg * (lowest_goal() - z))
+    if exits.size:
         src.append(np.full(exits.size, S))
         dst.append(exits)
-        w.append(bound / OCTILE + 1e-12)
-    if exits.size:
+        w.append(line_bound(X.ravel()[exits], Y.ravel()[exits], H.ravel()[exits]) / OCTILE + 1e-12)
         src.append(np.full(goal_nodes.size, S))
         dst.append(goal_nodes)
         w.append(np.zeros(goal_nodes.size))       # (explicit zeros are edges to csgraph)
@@ -412,14 +419,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
             beyond = np.ones(e.shape, bool)
             beyond[j0:j1, i0:i1] = False
             jj, ii = np.nonzero(beyond & world.keep_out)
-            dist = np.maximum(np.hypot(e.origin[0] + res * ii - g["x"], e.origin[1] + res * jj - g["y"])
-                              - g["radius"], 0.0)
-            if cost == "time":
-                line = dist / vb
-            else:
-                line = np.maximum(0.0, froll * dist + mg * (_lowest_in_disc(e, g["x"], g["y"], g["radius"])
-                                                           - Hfull[jj, ii]))
-            out[jj, ii] = line + OFF_CORRIDOR
+            out[jj, ii] = line_bound(e.origin[0] + res * ii, e.origin[1] + res * jj, Hfull[jj, ii]) + OFF_CORRIDOR
     out.setflags(write=False)        # cached and shared
     frmax = float(froll_cell.max())
     gap = _goal_gap(e, g, X.ravel()[goal_nodes], Y.ravel()[goal_nodes], H.ravel()[goal_nodes],
