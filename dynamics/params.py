@@ -191,8 +191,7 @@ def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = 
     parameter but the OPTIONAL ones: a partial file silently taking the rest from the
     P3-AT was a trap."""
     if not isinstance(data, dict):
-        found = "an empty file" if data is None else type(data).__name__
-        raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {found}")
+        raise ParameterError(f"{src}: expected a mapping of parameter names to values, found {yaml_kind(data)}")
     data = dict(data)
     parent = None
     if "base" in data:
@@ -285,6 +284,16 @@ class NoAliasLoader(yaml.SafeLoader):
                         None, None, f"the key {key_node.value!r} appears twice in one mapping (first {also}on line "
                         f"{first.start_mark.line + 1}); a YAML key may appear once", key_node.start_mark)
         return super().construct_mapping(node, deep)
+
+
+def yaml_kind(data) -> str:
+    """What a YAML document holds, in words, for a message that expected a mapping: 'an
+    empty file', 'a list', 'a single string' (else the Python type's name)."""
+    if data is None:
+        return "an empty file"
+    kinds = {list: "a list", str: "a single string", bool: "a single true/false", int: "a single number",
+             float: "a single number"}
+    return kinds.get(type(data), type(data).__name__)
 
 
 def read_yaml_text(path: Path) -> Any:

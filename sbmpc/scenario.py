@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from dynamics.params import did_you_mean, read_yaml_text
+from dynamics.params import did_you_mean, read_yaml_text, yaml_kind
 
 from .errors import InputError
 
@@ -425,21 +425,12 @@ def _run(spec, probs: _Problems) -> RunSettings:
     return RunSettings(**kw)
 
 
-def _yaml_kind(data) -> str:
-    """What a YAML document holds, in words (for a message: 'an empty file', 'a list')."""
-    if data is None:
-        return "an empty file"
-    kinds = {list: "a list", str: "a single string", bool: "a single true/false", int: "a single number",
-             float: "a single number"}
-    return kinds.get(type(data), type(data).__name__)
-
-
 def parse(data, src: str = "<scenario>", path: Path | None = None) -> Scenario:
     """A :class:`Scenario` from parsed YAML; raises InputError listing every problem."""
     probs = _Problems(src)
     if not isinstance(data, dict):
         raise InputError(f"{src}: expected a mapping of scenario keys (name, map, terrain, vehicle, start, goal), "
-                         f"found {_yaml_kind(data)}")
+                         f"found {yaml_kind(data)}")
     known = {"name", "description", "map", "terrain", "vehicle", "start", "goal", "cost", "planner", "run"}
     _unknown(data, known, "", probs)
     name = data.get("name", path.stem if path else "scenario")
