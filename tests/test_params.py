@@ -119,3 +119,11 @@ def test_models_manoeuvres_and_replace_name_what_is_wrong():
         p3at.replace(mas=30.0)
     with pytest.raises(ParameterError, match="unknown terrain parameter 'foo'"):
         vinyl.replace(foo=1)
+
+
+@pytest.mark.parametrize("text, found", [("", "found an empty file"), ("- 1\n", "found a list")])
+def test_a_vehicle_file_that_is_not_a_mapping_says_what_it_holds(tmp_path, text, found):
+    f = tmp_path / "v.yaml"
+    f.write_text(text)
+    with pytest.raises(ParameterError, match=f"expected a mapping of parameter names to values, {found}$"):
+        load_vehicle(f)
