@@ -50,6 +50,22 @@ def current_window(omega, v_max, k, r_a, i_max):
 
 
 @jit
+def window_share(current, omega, v_max, k, r_a, i_max):
+    """The share [-] of the drive's reach (eq. 27's window at wheel speed omega [rad/s],
+    :func:`current_window`) that a delivered current [A] uses in its own direction: 0 at
+    no current, 1 at the bound (the continuous limit or the voltage bound); 1 also where
+    the window holds no current of that sign (over-speed). A side at share s can still
+    deliver 1 / s times its current: what a heavier vehicle, or one with more grip, would
+    ask of it."""
+    lo, hi = current_window(omega, v_max, k, r_a, i_max)
+    if current > 0.0:
+        return current / hi if hi > 0.0 else 1.0
+    if current < 0.0:
+        return current / lo if lo < 0.0 else 1.0
+    return 0.0
+
+
+@jit
 def electrical_power(current, omega, k, r_a):
     """Electrical power drawn by one side [W]: P = R_a I^2 + k w I (copper loss plus
     mechanical power; negative when the side regenerates)."""

@@ -29,6 +29,7 @@ from .search.astar import Search, SearchResult
 from .search.counters import budget_text
 from .trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
 from . import world as WO
+from .margin import report
 from .world import World, _start, capability
 
 FAILURES = {
@@ -66,6 +67,7 @@ class Plan:
     rival: dict | None = None     # the time plan an energy plan was checked against (plan())
     failure: str | None = None    # for no_path, the kind of failure: one of FAILURES
     coarse: Coarse | None = None  # the coarse search whose corridor the search looked in (sbmpc.corridor)
+    margin: dict | None = None    # how close the plan runs to the limits (sbmpc.margin.report), "kept", "note"
 
     @property
     def found(self) -> bool:
@@ -107,6 +109,7 @@ class Plan:
             "rival": self.rival,
             "failure": self.failure,
             "coarse": self.coarse.to_json() if self.coarse else None,
+            "margin": self.margin,
         }
 
 
@@ -300,6 +303,46 @@ def cross_checked(own: Plan, other: Plan) -> Plan:
 
 def search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
                 incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
+    """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
+    search (:func:`_search_plan`), keeping the planner's margin (``planner.margin``,
+    :mod:`sbmpc.margin`). Where no plan keeps it (the search found nothing and edges
+    failed on the margin), the search runs again without it in what is left of the time
+    budget: a plan at the nominal vehicle's limit, which says so (``margin.kept`` false,
+    ``margin.note``); a vehicle stalled on a slope needs every bit of its drive to get
+    away. The plan's ``margin`` reports how close it runs to each limit."""
+    cost = WO.checked_cost(world, cost)
+    time_budget_s = WO.checked_budget(time_budget_s)
+    ps = world.scenario.planner
+    p = _search_plan(world, cost, progress, start, incumbent, time_budget_s)
+    kept = True
+    note = None
+    failed = None
+    if (not p.found and margin_on(ps) and p.failure in ("exhausted", "node_budget")
+            and p.invalid_edges.get(SS.CODES[SS.MARGIN - 1], 0) > 0):
+        budget = ps.time_budget_s if time_budget_s is None else time_budget_s
+        left = budget - p.planning_time_s
+        if left > 0.0:
+            bare = WO.without_margin(world)
+            q = _search_plan(bare, cost, progress, start, incumbent, left)
+            if q.found:
+                note = (f"no plan keeps the margin ({p.reason.split(';')[0]}); this plan rides the nominal "
+                        f"vehicle's limits (planner.margin 0)")
+                failed = p.invalid_edges
+                p, kept = counting(q, p), False
+    if p.found:
+        rep = report(world, p.trajectory) or {}
+        p = replace(p, margin=dict(rep, kept=kept and margin_on(ps), note=note,
+                                   **({"invalid_edges_with_margin": failed} if failed else {})))
+    return p
+
+
+def margin_on(ps) -> bool:
+    """Whether planner settings ``ps`` keep a margin (a drive reserve and twin, or a tip margin)."""
+    return ps.margin > 0.0 or ps.margin_turn > 0.0 or ps.margin_tip_deg > 0.0
+
+
+def _search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
+                 incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
     search: search, polish, check at the controller rate and repair.
 

@@ -18,9 +18,12 @@ from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
 
-def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
+def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False) -> tuple:
     """(params, data) flat arrays of :mod:`sbmpc.problems.skidsteer` for a world and cost, with
-    the edges integrated at ``dt`` [s] (default the planner's step)."""
+    the edges integrated at ``dt`` [s] (default the planner's step). ``margin``: edges
+    must also keep the planner's margin (``planner.margin``, ``margin_tip_deg``: the
+    search's and the polish's edges); without it an edge fails only where the vehicle
+    does (the checks, the runs' drives)."""
     scn, e, v = world.scenario, world.emap, world.vehicle
     ps = scn.planner
     dt = ps.dt if dt is None else dt
@@ -33,8 +36,16 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
     ctg, frmax, kegrid, gap = cost_to_go(world, cost)
-    offd = offt + sum(b.size for b in blocks)
-    data = np.ascontiguousarray(np.concatenate(parts + blocks + [ctg.ravel()]))
+    twins = []
+    if margin and ps.margin > 0.0:
+        # the margin's pessimistic twin (skidsteer.twin_fails): heavier, more grip, by the margin
+        f = 1.0 + ps.margin
+        tv = v.replace(mass=v.mass * f, inertia=v.inertia * f)
+        twins = [np.concatenate([K.pack(tv, tt), friction_table(tv, tt)])
+                 for tt in (t.replace(mu_sa=t.mu_sa * f, mu_op=t.mu_op * f) for t in world.terrains)]
+    offw = offt + sum(b.size for b in blocks)
+    offd = offw + sum(b.size for b in twins)
+    data = np.ascontiguousarray(np.concatenate(parts + blocks + twins + [ctg.ravel()]))
     Q = np.zeros(SS.NQ)
     Q[SS.Q_DT] = dt
     Q[SS.Q_NSTEP] = max(1, round(ps.period_s / dt))
@@ -42,6 +53,10 @@ def pack_world(world: World, cost: str, dt: float | None = None) -> tuple:
     Q[SS.Q_HL], Q[SS.Q_HW] = world.half_length, world.half_width
     tip = math.radians(ps.tip_over_deg)
     Q[SS.Q_TIP] = tip
+    Q[SS.Q_TIPM] = tip - math.radians(ps.margin_tip_deg) if margin else tip
+    Q[SS.Q_RESERVE] = ps.margin_turn if margin else 0.0
+    Q[SS.Q_OFFTW] = offw if twins else -1
+    Q[SS.Q_TWHEAD] = math.radians(ps.margin_heading_deg)
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny
     Q[SS.Q_COST] = SS.COST_TIME if cost == "time" else SS.COST_ENERGY
@@ -65,7 +80,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     the scenario's start state), its edges integrated at ``dt`` [s] (default the
     planner's step)."""
     ps = world.scenario.planner
-    Q, data = pack_world(world, cost, dt)
+    Q, data = pack_world(world, cost, dt, margin=True)
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)

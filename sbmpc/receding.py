@@ -86,6 +86,7 @@ class RunResult:
     plans: list = field(default_factory=list)        # [Replan], the first plan first
     stalls: int = 0
     periods: int = 0
+    guarded: int = 0                  # periods held back: their prediction came within the tip-over margin
 
     @property
     def replans(self) -> int:
@@ -139,6 +140,7 @@ class RunResult:
             "prediction_error": {"travel_time": err("travel_time_s"), "energy": err("energy_J")},
             "stalls": self.stalls,
             "periods": self.periods,
+            "guarded": self.guarded,
             "trigger": s.trigger,
             "tolerance": {"xy_m": s.tol_xy, "yaw_deg": s.tol_yaw_deg, "v_m_s": s.tol_v},
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
@@ -165,9 +167,13 @@ class _Executor:
     period is executed in full; before the first command arrives the loops hold the
     start state's wheel-speed references: a vehicle that starts at speed keeps it)."""
 
-    def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0):
+    def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0, tip_guard: bool = False):
         self.dt = 1.0 / world.vehicle.controller_rate
-        self.Q, self.data = PB.pack_world(world, cost, self.dt)
+        self.Q, self.data = PB.pack_world(world, cost, self.dt, margin=tip_guard)
+        if tip_guard:
+            # the tip-over margin alone (planner.margin_tip_deg): the guard of a run's periods
+            self.Q[SS.Q_RESERVE] = 0.0
+            self.Q[SS.Q_OFFTW] = -1.0
         self.lag = int(round(delay_s / self.dt))
         self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
 
@@ -255,21 +261,29 @@ def per_period(controls, period_s: float) -> list:
 
 
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
-        settings: RunSettings | None = None, progress=None, warm: bool = True) -> RunResult:
+        settings: RunSettings | None = None, progress=None, warm: bool = True,
+        truth_grip: float | None = None) -> RunResult:
     """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
 
     ``truth``: the vehicle that really drives (default: the world's own); ``settings``
     default to the scenario's ``run`` section; ``progress(label)`` may return a search
     progress callback; ``warm=False`` plans every re-plan from scratch (for the
-    benchmark)."""
+    benchmark); ``truth_grip``: the true ground's mu_sa and mu_op are the world's terrains'
+    times this factor."""
     cost = WO.checked_cost(world, cost)
     truth = WO.checked_vehicle(truth, "truth")
     rs = settings or world.scenario.run
     ps = world.scenario.planner
     twin = world if truth is None else replace(world, vehicle=truth)
+    if truth_grip is not None and truth_grip != 1.0:
+        twin = replace(twin, terrains=tuple(t.replace(mu_sa=t.mu_sa * truth_grip, mu_op=t.mu_op * truth_grip)
+                                            for t in twin.terrains))
     aim = _aim(world)
-    out = RunResult(world.scenario.name, cost, world.vehicle.name, twin.vehicle.name, rs)
+    truth_name = twin.vehicle.name + (f", grip x{truth_grip:g}" if truth_grip not in (None, 1.0) else "")
+    out = RunResult(world.scenario.name, cost, world.vehicle.name, truth_name, rs)
     model = _Executor(world, cost)
+    guard = _Executor(world, cost, tip_guard=True) if ps.margin_tip_deg > 0.0 else None
+    guarded = False                    # the last plan's first period was held back by the guard
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)           # the measured state
     pieces = []
@@ -336,6 +350,22 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # the last control was cut where the prediction entered the goal: hold it
             # for a full period (the rollout stops in the goal)
             control = (control[0], control[1], max(control[2], ps.period_s))
+        if guard is not None:
+            # safety: a period whose prediction from the measured state comes within the
+            # tip-over margin is not driven; the vehicle re-plans from where it stands
+            # (and stops for good where the fresh plan's first period is held back too)
+            _, gend, _ = guard.step(X, control, record=False)
+            if gend in (-SS.MARGIN, -SS.TIP):
+                if guarded and since == 0:
+                    return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
+                                            f"every way on that the planner found comes within the tip-over margin "
+                                            f"({ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) from the "
+                                            f"measured state; the run stops rather than tip over")
+                guarded = True
+                out.guarded += 1
+                why = f"the next period would come within the tip-over margin at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                continue
+        guarded = False
         _, _, P = model.step(P, control, record=False)
         rec, end, X = real.step(X, control)
         pieces.append(rec if not pieces else rec[1:])

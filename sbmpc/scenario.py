@@ -82,7 +82,14 @@ class PlannerSettings:
     plan (the time search runs too) and the one that uses less energy at the controller
     rate is kept (:func:`sbmpc.plan.plan`); corridor_time, corridor_energy: half-width
     [m] of the corridor round a coarse search's route that the search of that cost looks
-    in (:mod:`sbmpc.corridor`; 0: the whole map).
+    in (:mod:`sbmpc.corridor`; 0: the whole map); margin: every edge is also driven by a
+    pessimistic twin, mass, inertia, mu_sa and mu_op raised by this share, along the same
+    path from its own drive state, and fails where the twin stalls (0: none;
+    docs/planner.md#margin); margin_turn: while the commands turn, the drive keeps this
+    share of its reach (eq. 27's window at the wheel's speed) unused, except for
+    ``MARGIN_TIME`` at a time (0: none); margin_tip_deg: edges keep pitch and roll this
+    far below tip_over_deg; margin_heading_deg: the twin meets the steeper of the grades
+    along headings this far either side.
     """
 
     branching: int = 16
@@ -111,6 +118,10 @@ class PlannerSettings:
     energy_vs_time: bool = True
     corridor_time: float = 0.0
     corridor_energy: float = 0.0
+    margin: float = 0.1
+    margin_turn: float = 0.0
+    margin_tip_deg: float = 5.0
+    margin_heading_deg: float = 0.0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -182,6 +193,10 @@ _SETTING_RANGES = {
     "threads": (int, 0, 1024),
     "corridor_time": (float, 0.0, 1000.0),
     "corridor_energy": (float, 0.0, 1000.0),
+    "margin": (float, 0.0, 0.5),
+    "margin_turn": (float, 0.0, 0.5),
+    "margin_tip_deg": (float, 0.0, 30.0),
+    "margin_heading_deg": (float, 0.0, 45.0),
 }
 # the settings that take one of a few words
 _SETTING_CHOICES = {"samples": ("fixed", "rotating"), "device": ("cpu", "cuda"),
@@ -406,6 +421,10 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
                 kw[key] = spec[key]
     if kw.get("dt", 0.01) > kw.get("period_s", 1.0):
         probs.add("planner.dt", "a step no longer than planner.period_s", kw.get("dt"))
+    tip = kw.get("tip_over_deg", PlannerSettings.tip_over_deg)
+    if kw.get("margin_tip_deg", PlannerSettings.margin_tip_deg) >= tip:
+        probs.add("planner.margin_tip_deg", f"a margin below planner.tip_over_deg ({tip:g})",
+                  kw.get("margin_tip_deg", PlannerSettings.margin_tip_deg))
     return PlannerSettings(**kw)
 
 

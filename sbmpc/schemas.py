@@ -108,8 +108,23 @@ def plan() -> dict:
                                       "planning_time_s": NUM}, ("cost", "status", "energy_J")),
                                 {"type": "null"}]},
             "failure": {"enum": [*FAILURES, None]},
+            "margin": {"oneOf": [_margin(), {"type": "null"}]},
         }, ("schema", "scenario", "cost", "status", "reason", "travel_time_s", "energy_J", "planning_time_s",
             "nodes_expanded", "edges_simulated", "controls", "trajectory"))}
+
+
+def _margin() -> dict:
+    """The plan JSON's ``margin`` (sbmpc.margin.report, plan.search_plan)."""
+    where = {"t": NUM, "x": NUM, "y": NUM}
+    return _obj({"margin": NUM, "margin_turn": NUM, "tip_margin_deg": NUM, "heading_deg": NUM,
+                 "drive_headroom": _obj({"least": NUM, **where}, ("least", "t", "x", "y")),
+                 "turn_headroom": {"oneOf": [_obj({"least": NUM, **where}, ("least", "t", "x", "y")), {"type": "null"}]},
+                 "tip": _obj({"least_deg": NUM, **where}, ("least_deg", "t", "x", "y")),
+                 "kept": {"type": "boolean"}, "note": STR_OR_NULL,
+                 "robustness": _obj({"samples": {"type": "integer"}, "relative_sd": NUM, "seed": {"type": "integer"},
+                                     "p_stall": NUM, "p_tip": NUM, "p_miss": NUM},
+                                    ("samples", "p_stall", "p_tip", "p_miss"))},
+                ("margin", "drive_headroom", "tip", "kept"))
 
 
 def compare() -> dict:
@@ -143,7 +158,7 @@ def run() -> dict:
                     "replans": {"type": "integer"}, "planning_time_s": NUM, "travel_time_s": NUM_OR_NULL,
                     "energy_J": NUM_OR_NULL, "predicted": pe, "executed": pe,
                     "prediction_error": _obj({"travel_time": NUM_OR_NULL, "energy": NUM_OR_NULL}),
-                    "stalls": {"type": "integer"}, "periods": {"type": "integer"},
+                    "stalls": {"type": "integer"}, "periods": {"type": "integer"}, "guarded": {"type": "integer"},
                     "trigger": {"enum": ["tolerance", "every"]},
                     "first_planning_time_s": NUM_OR_NULL, "replan_time_s": {"type": "array", "items": NUM},
                     "tolerance": _obj({"xy_m": NUM, "yaw_deg": NUM, "v_m_s": NUM}),

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
+from .margin import DRAW_TRIES, drawn_worlds as _drawn_worlds  # noqa: F401  (the sweep's robustness draw)
 
 COLUMNS = ("task_id", "scenario", "family_seed", "cost", "seed", "settings", "variant", "status", "reason",
            "failure", "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",
@@ -329,33 +330,6 @@ def _variant_world(world, variant: dict):
     except ParameterError as exc:
         raise InputError(f"variant {variant['name']!r}: {str(exc).replace('<replace>: ', '')}") from None
     return replace(world, vehicle=v, terrains=terrains)
-
-
-def _drawn_worlds(world, rob: dict, task_id: str):
-    """``samples`` worlds with vehicle and terrain parameters drawn from normal
-    distributions (relative standard deviation ``vary[name]``) around ``world``'s."""
-    from dynamics import ParameterError
-    rng = np.random.default_rng([int(rob.get("seed", 0)), int(task_id[:8], 16)])
-    vary = rob.get("vary", {}) or {}
-    out = []
-    for _ in range(int(rob["samples"])):
-        for _ in range(DRAW_TRIES):         # a draw outside a parameter's range is drawn again
-            v, ts = world.vehicle, world.terrains
-            vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
-            tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
-            try:
-                ts = tuple(t.replace(**{k: getattr(t, k) * max(0.05, 1.0 + e) for k, e in tk.items()}) for t in ts)
-                out.append(replace(world, vehicle=v.replace(**vk), terrains=ts))
-                break
-            except ParameterError as exc:
-                last = str(exc).replace("<replace>: ", "")
-        else:
-            raise InputError(f"no draw of {', '.join(sorted(vary))} within the parameters' ranges in {DRAW_TRIES} "
-                             f"tries (the last: {last}); lower the relative standard deviations")
-    return out
-
-
-DRAW_TRIES = 100      # draws per robustness sample before its parameters are said to leave their ranges
 
 
 def run_task(task: dict) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -186,17 +186,28 @@ def start_state(world: World) -> np.ndarray:
     X[:K.NS] = S
     X[SS.X_YAWW] = math.atan2(math.sin(yaw), math.cos(yaw))
     X[SS.X_V] = s["v"]
+    X[SS.X_TW:SS.X_TW + K.NS] = S          # the margin's twin starts where the vehicle does
     return X
 
 
+@functools.lru_cache(maxsize=8)
+def without_margin(world: World) -> World:
+    """The world planned without the margin (``planner.margin``, ``margin_tip_deg`` 0):
+    :func:`sbmpc.plan.search_plan`'s fallback where no plan keeps it. Cached per world
+    (worlds hash by identity), so that a run's re-plans share its cost-to-go grid."""
+    ps = replace(world.scenario.planner, margin=0.0, margin_turn=0.0, margin_tip_deg=0.0)
+    return replace(world, scenario=replace(world.scenario, planner=ps))
+
+
 def _start(world: World, start) -> np.ndarray:
-    """The planner state to start from: ``start`` (contiguous float64) or the scenario's;
+    """The planner state to start from: a copy of ``start`` (float64) or the scenario's;
     an InputError unless it is SS.NX finite numbers (the compiled kernels read that many:
-    a shorter one read past its end)."""
+    a shorter one read past its end). The margin's twin (SS.X_TW) starts from the
+    vehicle's state, whatever ``start`` held there: a plan is made from what is measured."""
     if start is None:
         return start_state(world)
     try:
-        X = np.ascontiguousarray(start, float)
+        X = np.array(start, float)
     except (TypeError, ValueError):
         raise InputError(f"start: expected a planner state of {SS.NX} numbers (world.start_state), "
                          f"found {type(start).__name__}") from None
@@ -204,6 +215,7 @@ def _start(world: World, start) -> np.ndarray:
         found = f"shape {X.shape}" if X.shape != (SS.NX,) else "NaN or inf in it"
         raise InputError(f"start: expected a planner state of {SS.NX} finite numbers (world.start_state, "
                          f"a model state and heading and speed), found {found}")
+    X[SS.X_TW:SS.X_TW + K.NS] = X[:K.NS]
     return X
 
 

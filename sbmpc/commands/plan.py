@@ -23,6 +23,9 @@ def add_parsers(sub):
     p.add_argument("--rrd", type=path_arg, help="write a rerun recording (.rrd) here")
     p.add_argument("--seed", type=int, help="seed of the Halton sampling (default: the scenario's)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on long searches")
+    p.add_argument("--robustness", type=int, metavar="N", default=0,
+                   help="replay the plan open loop at the controller rate by N vehicles with mass, mu_sa and mu_op "
+                   "drawn with 5 %% relative sd: p_stall, p_tip, p_miss in the summary and the JSON's margin")
     add_backend_flags(p)
     p.set_defaults(func=run_plan)
 
@@ -49,6 +52,9 @@ def add_backend_flags(p):
     p.add_argument("--time-budget", type=float, help="wall-clock budget [s] (default: the scenario's)")
     p.add_argument("--start", help="start pose X,Y[,YAW_DEG] [m, m, deg] (default: the scenario's)")
     p.add_argument("--goal", help="goal X,Y[,RADIUS] [m] (default: the scenario's)")
+    p.add_argument("--margin", type=float, help="share of the drive's reach every edge keeps in reserve, and of "
+                   "mass and grip its pessimistic twin carries more (default: the scenario's planner.margin, "
+                   "0.1; 0: plans at the nominal vehicle's limit; docs/planner.md#margin)")
 
 
 def _numbers(text: str, flag: str, n_min: int, n_max: int, what: str) -> list:
@@ -86,6 +92,10 @@ def _world(args):
         if not 0.01 <= args.time_budget <= 86400:
             raise InputError(f"--time-budget: expected seconds in [0.01, 86400], found {args.time_budget}")
         over["time_budget_s"] = args.time_budget
+    if getattr(args, "margin", None) is not None:
+        if not 0.0 <= args.margin <= 0.5:
+            raise InputError(f"--margin: expected a share in [0, 0.5], found {args.margin}")
+        over["margin"] = args.margin
     if over:
         scn = replace(scn, planner=replace(scn.planner, **over))
     if getattr(args, "start", None) is not None:
@@ -162,9 +172,26 @@ def summary(plan) -> str:
     return (f"{plan.scenario} [{plan.cost}]: found\n"
             f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
             f"{len(plan.controls)} controls\n"
-            + _check_line(plan) + _rival_line(plan) + _coarse_line(plan) +
+            + _check_line(plan) + _margin_line(plan) + _rival_line(plan) + _coarse_line(plan) +
             f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
             f"{plan.edges_simulated} edges simulated")
+
+
+def _margin_line(plan) -> str:
+    """How close the plan runs to the limits (planner.margin), and its robustness when measured."""
+    from ..margin import summary_line
+    m = plan.margin
+    if not m:
+        return ""
+    out = "  " + summary_line(m, m.get("kept", False)) + "\n"
+    if m.get("note"):
+        out += f"  note: {m['note']}\n"
+    r = m.get("robustness")
+    if r:
+        out += (f"  robustness: replayed open loop by {r['samples']} vehicles (mass, mu_sa, mu_op drawn with "
+                f"{100 * r['relative_sd']:g} % relative sd): p_stall {r['p_stall']:.2f}, p_tip {r['p_tip']:.2f}, "
+                f"p_miss {r['p_miss']:.2f}\n")
+    return out
 
 
 def _coarse_line(plan) -> str:
@@ -212,11 +239,16 @@ def run_plan(args) -> int:
     outs = Outputs(scenario_inputs(args.scenario))
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
+    if not 0 <= args.robustness <= 10_000:
+        raise InputError(f"--robustness: expected a number of vehicles in [0, 10000], found {args.robustness}")
     world = _world(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
     plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost),
                    time_progress=Progress("time search (the energy plan is checked against it)", args.quiet, cost="time"))
+    if args.robustness and plan.found and plan.margin is not None:
+        from ..margin import robustness
+        plan.margin["robustness"] = robustness(world, cost, plan.controls, args.robustness)
     print(summary(plan))
     if args.json:
         write_json(args.json, plan.to_json())

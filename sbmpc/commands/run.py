@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from ..errors import NoResult
+from ..errors import InputError, NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 from .compiling import compile_note
 from .plan import Progress, _world, add_backend_flags
@@ -19,6 +19,10 @@ def add_parsers(sub):
     r.add_argument("scenario", type=path_arg, help="scenario YAML file")
     r.add_argument("--truth", help="the vehicle that really drives: a shipped name or a vehicle YAML "
                    "(e.g. the extended vehicle of sbmpc diagnose); default: the planning vehicle")
+    r.add_argument("--truth-mass", type=float, metavar="F", help="the true vehicle's mass (and inertia) times F "
+                   "(e.g. 1.1: a 10 %% heavier payload)")
+    r.add_argument("--truth-grip", type=float, metavar="F", help="the true ground's mu_sa and mu_op times F on "
+                   "every terrain (e.g. 0.9: 10 %% less grip)")
     r.add_argument("--vehicle", help="the vehicle the planner plans with (default: the scenario's)")
     r.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
     r.add_argument("--trigger", choices=("tolerance", "every"), help="when to re-plan (default: the scenario's "
@@ -65,12 +69,21 @@ def run_run(args) -> int:
     outs.file(args.rrd, "--rrd")
     world = _world(args)          # with --vehicle as its planning vehicle
     truth = checked_vehicle(args.truth, "--truth")
+    for flag, f in (("--truth-mass", args.truth_mass), ("--truth-grip", args.truth_grip)):
+        if f is not None and not 0.2 <= f <= 5.0:
+            raise InputError(f"{flag}: expected a factor in [0.2, 5], found {f}")
+    if args.truth_mass is not None:
+        v = truth or world.vehicle
+        truth = v.replace(mass=v.mass * args.truth_mass, inertia=v.inertia * args.truth_mass,
+                          name=f"{v.name} x{args.truth_mass:g} mass")
+    grip = args.truth_grip
     settings = world.scenario.run
     if args.trigger:
         settings = replace(settings, trigger=args.trigger)
     cost = world.scenario.cost          # --cost applied by _world
     compile_note(args.quiet)
-    res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost))
+    res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost),
+                       truth_grip=grip)
     print(summary(res))
     if args.json:
         write_json(args.json, res.to_json())

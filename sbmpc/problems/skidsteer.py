@@ -64,6 +64,7 @@ import numpy as np
 from numba import njit, prange
 
 from dynamics import kernels as K
+from dynamics.drive import window_share
 from maps.grid import cell_value, height_at, pitch_roll_at, slope_grades_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
@@ -71,19 +72,25 @@ from ..search.astar import EXPAND, GOAL, HEURISTIC
 # ---- extra state entries after the model's ------------------------------------------
 X_YAWW = K.NS          # heading wrapped to (-pi, pi] [rad]
 X_V = K.NS + 1         # speed at the end of the edge [m/s]
-NX = K.NS + 2
+X_MT = K.NS + 2        # margin timer [s]: how long the drive has run within its margin (leaks as it fills)
+X_TW = K.NS + 3        # the margin's pessimistic twin: its model state (K.NS entries) from here on
+NX = 2 * K.NS + 3
 
 # ---- invalid-edge codes (returned negated by propagate) -----------------------------
-CODES = ("left the map", "stalled (drive saturated, commanded motion not achieved)", "tipped over (pitch or roll beyond the limit)")
-OFF_MAP, STALL, TIP = 1, 2, 3
+CODES = ("left the map", "stalled (drive saturated, commanded motion not achieved)", "tipped over (pitch or roll beyond the limit)",
+         "ran out of margin (the drive within its reserve of its limits, or pitch or roll within the tip-over margin)")
+OFF_MAP, STALL, TIP, MARGIN = 1, 2, 3, 4
 # ---- edge ends ---------------------------------------------------------------------
 IN_GOAL = 1
 
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP) = range(28)
-NQ = 28
+ Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD) = range(32)
+NQ = 32
+MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
+                      # margin timer leaks at the rate it fills): a start from rest or a
+                      # change of command saturates the PID for a moment by design
 SQRT2 = math.sqrt(2.0)
 COST_TIME, COST_ENERGY = 0.0, 1.0
 
@@ -92,7 +99,8 @@ COST_TIME, COST_ENERGY = 0.0, 1.0
 def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     """Simulate one edge in place on S for up to ``nsteps`` steps (module doc). Every
     step is recorded into the rows of ``rec`` from row ``rows`` on, while there are any.
-    ``O``: scratch for the model's outputs (K.NO). Returns (end, rows): end is 0 (full
+    ``O``: scratch for the model's outputs (K.NO). With a margin (``planner.margin``,
+    module doc) the pessimistic twin in S[X_TW:] steps along. Returns (end, rows): end is 0 (full
     period), IN_GOAL (stopped in the goal disc) or a negative code. Allocates nothing:
     the same code runs as a CUDA device function (:mod:`sbmpc.problems.skidsteer_cuda`)."""
     dt = params[Q_DT]
@@ -109,6 +117,19 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     block = int(params[Q_BLOCK])
     tip = params[Q_TIP]
     tan_tip = math.tan(tip)         # the tip-over limit as a grade (no arctangent per step)
+    # the margin (module doc): the tip limit less its margin (= tip: none), the share of
+    # the drive's reach kept in reserve while turning (0: none), the pessimistic twin
+    tan_tipm = math.tan(min(params[Q_TIPM], tip))
+    reserve = params[Q_RESERVE]
+    full = 1.0 - reserve
+    offw = int(params[Q_OFFTW])
+    twin = offw >= 0
+    T = S[X_TW:X_TW + K.NS] if twin else S[:0]
+    Pw = data[max(offw, 0):max(offw, 0) + K.NP]
+    c_head = math.cos(params[Q_TWHEAD])     # the twin's heading error (margin_heading_deg)
+    s_head = math.sin(params[Q_TWHEAD])
+    prev_w = 0.0
+    v_end = 0.0
     margin = params[Q_MARGIN]
     x_lo = ox + margin
     y_lo = oy + margin
@@ -136,6 +157,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         if abs(along) > tan_tip or abs(across) > tan_tip:
             end = -TIP
             break
+        if abs(along) > tan_tipm or abs(across) > tan_tipm:
+            end = -MARGIN
+            break
         if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:
             end = IN_GOAL
             break
@@ -148,6 +172,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
                 Pk = data[a:a + K.NP]
                 Tk = data[a + K.NP:a + block]
                 kp = k
+                if twin:
+                    a = offw + k * block
+                    Pw = data[a:a + K.NP]
         # the step integrates against the grade at its midpoint, extrapolated from the
         # grades at this step's start and the last one's (at the start alone the step
         # was first order on a changing grade)
@@ -155,6 +182,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         prev = along
         cp = 1.0 / math.sqrt(1.0 + g * g)     # the pitch's cosine and sine
         K.step_slope(Pk, Tk, S, cmd_l, cmd_r, g * cp, cp, dt, False, O)
+        v_end = O[K.O_V]
         stepped = True
         if record and rows < rec.shape[0]:
             S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
@@ -163,13 +191,47 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         if S[K.S_STALLED] > 0.0:
             end = -STALL
             break
+        if reserve > 0.0 and cmd_l != cmd_r:
+            # the margin, while the commands turn: the drive keeps ``reserve`` of its
+            # reach (eq. 27's window at the wheel's speed) unused, except for MARGIN_TIME
+            # at a time. While it does, the PID holds the commanded wheel speeds for a
+            # vehicle that needs up to 1 / (1 - reserve) times the torque (heavier, more
+            # grip, a weaker supply), and such a vehicle turns on the same path; a turn
+            # at the drive's limit has the radius its friction and mass allow, and a
+            # heading error never closes in open loop. (Straight commands drive a
+            # symmetric vehicle straight whatever it weighs: there the twin judges.)
+            vm = max(Pk[K.P_VMAX] - Pk[K.P_SAG] * S[K.S_E], 0.0)
+            sl = window_share(O[K.O_IL], S[K.S_WL], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
+            sr = window_share(O[K.O_IR], S[K.S_WR], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
+            if sl > full or sr > full:
+                S[X_MT] += dt
+                if S[X_MT] > MARGIN_TIME:
+                    end = -MARGIN
+                    break
+            else:
+                S[X_MT] = max(0.0, S[X_MT] - dt)
+        if twin:
+            # the pessimistic twin, stepped along the same path under the same commands
+            # from its own drive state: it loses speed on a climb at the drive's limit
+            # and carries less into the next. Its heading may be off by up to the
+            # margin's heading error, and it takes the steeper of the two grades it
+            # would then meet (a plane: along cos e +- across sin e): on a flank the
+            # grade along a line depends on its heading. The edge fails where it stalls
+            gw = along * c_head + (s_head * abs(across) if along >= 0.0 else -s_head * abs(across))
+            gm = gw + 0.5 * (gw - prev_w) if i > 0 else gw
+            prev_w = gw
+            cw = 1.0 / math.sqrt(1.0 + gm * gm)
+            K.step_slope(Pw, Tk, T, cmd_l, cmd_r, gm * cw, cw, dt, False, O)
+            if T[K.S_STALLED] > 0.0:
+                end = -MARGIN
+                break
     if stepped:
         # the height under the vehicle: the model's own z (integrated along the pitch)
         # is replaced by the map's; nothing within the edge reads it
         S[K.S_Z] = height_at(H, res, ox, oy, S[K.S_X], S[K.S_Y])
     yaw = S[K.S_YAW]
     S[X_YAWW] = yaw - 2.0 * math.pi * math.floor((yaw + math.pi) / (2.0 * math.pi))
-    S[X_V] = O[K.O_V] if i > 0 else S[X_V]
+    S[X_V] = v_end if i > 0 else S[X_V]
     return end, rows
 
 
@@ -334,7 +396,7 @@ def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
 
 
 # ---- control sequences (the polish of a found plan: sbmpc.polish) -----------------
-NOT_REACHED = 4.0     # returned negated: the sequence ended outside the goal disc
+NOT_REACHED = 5.0     # returned negated: the sequence ended outside the goal disc
 PRUNED = np.inf       # returned when the cost so far already reaches the bound
 
 

@@ -1,0 +1,132 @@
+"""Plans with margin (``planner.margin``): what the margin costs, and what it buys.
+
+    python bench/bench_margin.py                       # every shipped scenario, both costs
+    python bench/bench_margin.py --scenarios hills_field steep_hill --margins 0 0.05 0.1 0.2
+
+For every scenario, cost and margin (Halton seed 0, default settings otherwise):
+
+* the plan's travel time and energy at the controller rate, and its price against the
+  plan without margin;
+* p_stall and p_miss: the plan's controls replayed open loop at 1 kHz by ``samples``
+  vehicles whose mass, mu_sa and mu_op are drawn around the nominal with relative
+  standard deviations of 5 % and of 10 % (the draw of ``sbmpc sweep``'s robustness);
+* closed loop: ``sbmpc run`` (receding horizon, re-planning from the measured state)
+  with a true vehicle 10 % heavier, and with 10 % less grip (mu_sa and mu_op).
+
+Writes bench/results/margin.json (one run, this machine; numba warm after the first plan).
+
+    python bench/bench_margin.py --curve        # the README figure: docs/margin.png
+
+``--curve``: time and energy plans of ``hills_field`` and ``steep_hill`` at margins 0 to
+0.2 (p_stall under the 5 % draw, no runs), written to bench/results/margin_curve.json and
+plotted as price against margin with p_stall.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+OUT = ROOT / "bench" / "results" / "margin.json"
+CURVE = ROOT / "bench" / "results" / "margin_curve.json"
+FIG = ROOT / "docs" / "margin.png"
+SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
+
+
+def closed_loop(world, cost, mass=1.0, grip=1.0) -> dict:
+    from sbmpc import receding as R
+    v = world.vehicle
+    truth = v.replace(mass=v.mass * mass, inertia=v.inertia * mass) if mass != 1.0 else None
+    t0 = time.perf_counter()
+    r = R.run(world, cost, truth, truth_grip=grip)
+    d = r.to_json()
+    return {"status": d["status"], "reason": (d["reason"] or "")[:300] or None, "travel_time_s": d["travel_time_s"],
+            "energy_J": d["energy_J"], "replans": d["replans"], "stalls": d["stalls"], "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
+    ap.add_argument("--costs", nargs="+", default=["time", "energy"])
+    ap.add_argument("--configs", nargs="+", default=["margin=0,margin_tip_deg=0", "default"],
+                    help="planner settings to compare, each 'key=value,key=value' or 'default'")
+    ap.add_argument("--samples", type=int, default=20)
+    ap.add_argument("--no-runs", action="store_true", help="skip the closed-loop runs")
+    ap.add_argument("--out", type=Path, default=OUT)
+    ap.add_argument("--curve", action="store_true", help="the README figure's sweep over the margin (module doc)")
+    args = ap.parse_args()
+    if args.curve:
+        args.scenarios, args.out, args.no_runs = ["hills_field", "steep_hill"], CURVE, True
+        args.configs = [f"margin={m},margin_tip_deg={t}" for m, t in ((0, 0), (0.05, 5), (0.1, 5), (0.15, 5), (0.2, 5))]
+    from sbmpc import api
+    from sbmpc.margin import robustness
+    old = json.loads(args.out.read_text()) if args.out.exists() else {}
+    rows = {(r["scenario"], r["cost"], r["config"]): r for r in old.get("rows", [])}
+    for name in args.scenarios:
+        for cost in args.costs:
+            for conf in args.configs:
+                over = {} if conf == "default" else {k: float(v) for k, v in (kv.split("=") for kv in conf.split(","))}
+                w = api.load_world(ROOT / "scenarios" / f"{name}.yaml", **over)
+                m = w.scenario.planner.margin
+                from sbmpc import plan as PL
+                t0 = time.perf_counter()
+                p = PL.plan(w, cost)
+                row = {"scenario": name, "cost": cost, "config": conf, "margin": m, "status": p.status,
+                       "planning_time_s": round(time.perf_counter() - t0, 2), "expansions": p.nodes_expanded,
+                       "travel_time_s": p.travel_time_s, "energy_J": p.energy_J,
+                       "margin_report": p.margin}
+                if p.found:
+                    for sd in (0.05, 0.10):
+                        row[f"draw_{round(sd * 100)}pct"] = robustness(w, cost, p.controls, args.samples, sd)
+                    if not args.no_runs:
+                        row["run_mass_1.1"] = closed_loop(w, cost, mass=1.1)
+                        row["run_grip_0.9"] = closed_loop(w, cost, grip=0.9)
+                rows[(name, cost, conf)] = row
+                print(json.dumps(row), flush=True)
+                args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
+                                                "python": sys.version.split()[0], "samples": args.samples,
+                                                "rows": list(rows.values())}, indent=1))
+    if args.curve:
+        figure(list(rows.values()), FIG)
+    return 0
+
+
+def figure(rows: list, path: Path) -> None:
+    """Price of the margin (cost against the plan without it) and p_stall under the 5 %
+    draw, against the margin, per scenario and cost."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    for (name, cost), style in zip(sorted({(r["scenario"], r["cost"]) for r in rows}), ("o-", "s--", "^-", "v--")):
+        rs = sorted((r for r in rows if (r["scenario"], r["cost"]) == (name, cost) and r["status"] == "found"),
+                    key=lambda r: r["margin"])
+        key = "travel_time_s" if cost == "time" else "energy_J"
+        base = next((r[key] for r in rs if r["margin"] == 0), None)
+        if not rs or not base:
+            continue
+        m = [r["margin"] for r in rs]
+        a.plot(m, [100 * (r[key] / base - 1) for r in rs], style, label=f"{name}, {cost} plan")
+        b.plot(m, [r["draw_5pct"]["p_stall"] for r in rs], style, label=f"{name}, {cost} plan")
+    a.set_xlabel("planner.margin")
+    a.set_ylabel("price: cost against margin 0 [%]")
+    a.axhline(5, color="grey", lw=0.8, ls=":")
+    b.set_xlabel("planner.margin")
+    b.set_ylabel("p_stall, open loop, 5 % draw of mass, mu_sa, mu_op")
+    b.axhline(0.05, color="grey", lw=0.8, ls=":")
+    a.legend(fontsize=8)
+    a.grid(alpha=0.3)
+    b.grid(alpha=0.3)
+    fig.suptitle("Plans with margin: what it costs and what it buys (Halton seed 0, 20 drawn vehicles)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

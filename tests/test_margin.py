@@ -1,0 +1,189 @@
+"""Plans with margin (planner.margin, margin_turn, margin_tip_deg; sbmpc.margin): the
+drive's share, the turn reserve, the pessimistic twin against the heavier vehicle's own
+drive at 1 kHz, the tip-over margin, the fallback, the report and the run's guard."""
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from dynamics import kernels as K
+from dynamics.drive import current_window, window_share
+from sbmpc import api
+from sbmpc import check as CK
+from sbmpc import plan as PL
+from sbmpc import problem as PB
+from sbmpc import world as WO
+from sbmpc.margin import report, robustness
+from sbmpc.problems import skidsteer as SS
+
+P3AT = dict(v_max=12.0, k=1.3825, ra=0.706, imax=3.62)
+
+
+def _plane(grade_deg=0.0, roll_deg=0.0, size=(40.0, 12.0), res=0.5, **planner):
+    """A world on a tilted plane of grass: height rises by tan(grade) per metre along x
+    and by tan(roll) per metre along y; start at rest at (3, 6) facing +x, goal far ahead."""
+    nx, ny = int(size[0] / res) + 1, int(size[1] / res) + 1
+    x = np.arange(nx) * res
+    y = np.arange(ny) * res
+    H = x[None, :] * math.tan(math.radians(grade_deg)) + y[:, None] * math.tan(math.radians(roll_deg))
+    scn = {"name": "plane", "map": {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0},
+           "terrain": "grass", "vehicle": "p3at", "start": {"x": 3.0, "y": 6.0, "yaw_deg": 0.0, "v": 0.0},
+           "goal": {"x": size[0] - 3.0, "y": 6.0, "radius": 1.0}, "cost": "time"}
+    return api.load_world(scn, heights=H, resolution=res, **planner)
+
+
+def _edge(world, X, control, margin=True):
+    """One searched edge (propagate) from X: (cost or code, end state)."""
+    Q, data = PB.pack_world(world, "time", margin=margin)
+    out = np.zeros(SS.NX)
+    X = WO._start(world, X)
+    c = SS.propagate(Q, data, X, np.array(control, float), out)
+    return c, out
+
+
+# ---- the drive's share ---------------------------------------------------------------------
+def test_the_drive_share_is_0_at_no_current_and_1_at_either_bound():
+    k, ra, imax, vm = P3AT["k"], P3AT["ra"], P3AT["imax"], P3AT["v_max"]
+    assert window_share(0.0, 3.0, vm, k, ra, imax) == 0.0
+    assert window_share(imax, 1.0, vm, k, ra, imax) == pytest.approx(1.0)        # continuous limit
+    w = 8.0                                                                         # the voltage bound
+    assert window_share((vm - k * w) / ra, w, vm, k, ra, imax) == pytest.approx(1.0)
+    assert window_share(-imax, -1.0, vm, k, ra, imax) == pytest.approx(1.0)
+    # over-speed (back-EMF beyond the supply): no driving current is left
+    assert window_share(0.0 + 1e-9, 9.5, vm, k, ra, imax) == 1.0
+
+
+@given(st.floats(-8.0, 8.0), st.floats(0.0, 1.0))
+def test_the_drive_share_is_the_current_over_its_bound(w, f):
+    """Within the window the share is linear in the current: f of the bound is f."""
+    k, ra, imax, vm = P3AT["k"], P3AT["ra"], P3AT["imax"], P3AT["v_max"]
+    lo, hi = current_window(w, vm, k, ra, imax)
+    if hi > 1e-6:
+        assert window_share(f * hi, w, vm, k, ra, imax) == pytest.approx(f, abs=1e-12)
+    if lo < -1e-6:
+        assert window_share(f * lo, w, vm, k, ra, imax) == pytest.approx(f, abs=1e-12)
+
+
+# ---- the turn reserve ------------------------------------------------------------------------
+def test_a_turn_at_the_drives_limit_breaks_the_turn_reserve_and_a_straight_run_at_top_speed_does_not():
+    """On level grass the P3-AT's (4, 2) rad/s turn needs its whole drive (share 1 in
+    steady state, bench: 0.90 on flat asphalt): with margin_turn 0.05 the edge fails on
+    the margin, without it passes. Straight at the no-load speed the drive sits on its
+    voltage bound too, but straight commands drive any symmetric vehicle straight: it passes."""
+    w = _plane(margin_turn=0.05, margin=0.0, margin_tip_deg=0.0)
+    X = WO.start_state(w)
+    _, _, X, _ = CK.replay(w, "time", [(4.0, 4.0, 2.0)], every=1 << 30, start=X)     # at speed
+    c, _ = _edge(w, X, (4.0, 2.0, 2.0))
+    assert c == -SS.MARGIN
+    c0, _ = _edge(w, X, (4.0, 2.0, 2.0), margin=False)
+    assert c0 > 0.0
+    top = w.vehicle.no_load_speed
+    c1, S = _edge(w, X, (top, top, 2.0))
+    assert c1 > 0.0 and S[SS.X_MT] == 0.0           # valid: straight commands never run the timer
+    v = w.vehicle
+    assert window_share(S[K.S_IL], S[K.S_WL], v.v_max, v.torque_constant, v.armature_resistance,
+                        v.current_limit) == pytest.approx(1.0, abs=1e-3)     # ... though at the bound
+
+
+# ---- the pessimistic twin --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def ramp():
+    """Grass at 11.5 deg: the P3-AT holds it (12.2 deg at most); 10 % heavier with 10 %
+    more grip it does not (about 10.5 deg)."""
+    return _plane(11.5, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0)
+
+
+def test_the_twin_fails_a_climb_the_heavier_vehicle_cannot_drive(ramp):
+    """From 2 s of climbing at 4 rad/s, four more seconds straight up: the nominal
+    vehicle gets through, the edge fails on the margin, and the twin's verdict is the
+    heavier vehicle's own: the same controls driven by it at 1 kHz stall."""
+    w = ramp
+    lead = [(4.0, 4.0, 2.0)]
+    X = WO.start_state(w)
+    _, end, X1, _ = CK.replay(w, "time", lead, every=1 << 30, start=X)
+    assert end == 0
+    c, _ = _edge(w, X1, (4.0, 4.0, 4.0))
+    assert c == -SS.MARGIN
+    c0, _ = _edge(w, X1, (4.0, 4.0, 4.0), margin=False)
+    assert c0 > 0.0
+    v = w.vehicle
+    heavy = replace(w, vehicle=v.replace(mass=v.mass * 1.1, inertia=v.inertia * 1.1),
+                    terrains=tuple(t.replace(mu_sa=t.mu_sa * 1.1, mu_op=t.mu_op * 1.1) for t in w.terrains))
+    _, end_h, _, _ = CK.replay(heavy, "time", lead + [(4.0, 4.0, 4.0)], every=1 << 30, dt=0.001)
+    _, end_n, _, _ = CK.replay(w, "time", lead + [(4.0, 4.0, 4.0)], every=1 << 30, dt=0.001)
+    assert end_h == -SS.STALL and end_n == 0
+
+
+def test_a_gentler_climb_keeps_the_margin(ramp):
+    """At 8 deg both vehicles climb: the margin passes the edge at the nominal's cost."""
+    w = _plane(8.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0)
+    X = WO.start_state(w)
+    _, _, X1, _ = CK.replay(w, "time", [(4.0, 4.0, 2.0)], every=1 << 30, start=X)
+    c, S = _edge(w, X1, (4.0, 4.0, 4.0))
+    c0, S0 = _edge(w, X1, (4.0, 4.0, 4.0), margin=False)
+    assert c > 0.0 and c == c0
+    assert np.array_equal(S[:K.NS], S0[:K.NS])          # the vehicle's own state: untouched by the twin
+    assert S[SS.X_TW + K.S_WL] < S[K.S_WL]             # the twin, heavier, lags on the climb
+
+
+# ---- the tip-over margin -----------------------------------------------------------------------
+def test_a_side_slope_inside_the_tip_margin_fails_on_the_margin_and_passes_without():
+    """Driving along the contour of a 27 deg side slope: 3 deg from the 30 deg tip-over
+    limit, inside the 5 deg margin."""
+    w = _plane(0.0, 27.0, size=(40.0, 20.0), margin=0.0, margin_turn=0.0, margin_tip_deg=5.0)
+    X = WO.start_state(replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, y=10.0))))
+    c, _ = _edge(w, X, (3.0, 3.0, 1.0))
+    assert c == -SS.MARGIN
+    c0, _ = _edge(w, X, (3.0, 3.0, 1.0), margin=False)
+    assert c0 > 0.0
+
+
+# ---- the plan: fallback and report ---------------------------------------------------------------
+def test_where_no_plan_keeps_the_margin_the_plan_rides_the_limit_and_says_so(ramp):
+    """Up the 11.5 deg ramp no path keeps a 10 % margin (the twin stalls on the way):
+    the plan is the one without it, its JSON says margin.kept false with a note, and it
+    reaches the goal at 1 kHz."""
+    w = _plane(11.5, size=(20.0, 12.0), margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, max_expansions=4000)
+    p = PL.plan(w, "time")
+    assert p.found and p.check.reached
+    assert p.margin["kept"] is False and "margin" in p.margin["note"]
+    assert p.margin["invalid_edges_with_margin"][SS.CODES[SS.MARGIN - 1]] > 0
+    d = json.loads(json.dumps(p.to_json()))
+    from sbmpc.schemas import plan as plan_schema
+    import jsonschema
+    jsonschema.validate(d, plan_schema())
+
+
+def test_the_report_reads_the_tip_margin_and_the_drive_at_its_limit():
+    """A straight run at top speed along a 20 deg side slope: least tip-over margin 10 deg
+    (30 - 20, within the map's bilinear rounding) and no drive headroom held 0.5 s (the
+    voltage bound at top speed)."""
+    w = _plane(0.0, 20.0, size=(40.0, 20.0), margin=0.0, margin_turn=0.0, margin_tip_deg=0.0)
+    X = WO.start_state(replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, y=10.0))))
+    top = w.vehicle.no_load_speed
+    traj, end, _, _ = CK.replay(w, "time", [(top, top, 6.0)], start=X, dt=0.001)
+    rep = report(w, traj)
+    assert rep["tip"]["least_deg"] == pytest.approx(10.0, abs=0.3)
+    assert rep["drive_headroom"]["least"] == pytest.approx(0.0, abs=1e-6)
+    assert rep["turn_headroom"] is None
+
+
+def test_robustness_counts_the_drawn_vehicles_that_stall():
+    """The ramp's plan without margin, replayed by vehicles drawn with 10 % sd: some
+    (the heavier) stall, and the shares are consistent."""
+    w = _plane(11.5, size=(20.0, 12.0), margin=0.0, margin_turn=0.0, margin_tip_deg=0.0, max_expansions=4000)
+    p = PL.plan(w, "time")
+    r = robustness(w, "time", p.controls, 12, sd=0.10)
+    assert r["samples"] == 12 and 0.0 < r["p_stall"] <= r["p_miss"] <= 1.0
+
+
+# ---- settings -------------------------------------------------------------------------------------
+def test_a_tip_margin_at_or_beyond_the_tip_limit_is_refused_with_the_key():
+    from sbmpc.errors import InputError
+    with pytest.raises(InputError, match="planner.margin_tip_deg: expected a margin below planner.tip_over_deg"):
+        api.load_scenario({"name": "x", "map": {"heights": [[0, 0], [0, 0]], "resolution": 1.0}, "terrain": "grass",
+                           "vehicle": "p3at", "start": {"x": 0.2, "y": 0.2}, "goal": {"x": 0.8, "y": 0.8},
+                           "planner": {"tip_over_deg": 20, "margin_tip_deg": 20}})
