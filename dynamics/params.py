@@ -307,11 +307,40 @@ def read_yaml_text(path: Path) -> Any:
     except UnicodeDecodeError:
         raise ValueError("expected a UTF-8 text (YAML) file, found binary data") from None
     try:
-        return yaml.load(text, Loader=NoAliasLoader)
+        data = yaml.load(text, Loader=NoAliasLoader)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}: " if mark is not None else ""
         raise ValueError(f"{where}malformed YAML: {getattr(exc, 'problem', exc)}") from None
+    except RecursionError:
+        raise ValueError(f"expected YAML nested at most {MAX_YAML_DEPTH} levels deep, found nesting too deep to "
+                         "parse") from None
+    depth = yaml_depth(data)
+    if depth > MAX_YAML_DEPTH:
+        raise ValueError(f"expected YAML nested at most {MAX_YAML_DEPTH} levels deep, found more")
+    return data
+
+
+MAX_YAML_DEPTH = 64     # levels of nested lists and mappings a parameter, scenario or sweep file may hold
+
+
+def yaml_depth(data) -> int:
+    """How deeply lists and mappings nest in parsed YAML (a scalar: 0), without recursion;
+    counted up to MAX_YAML_DEPTH + 1."""
+    best = 0
+    stack = [(data, 1)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, dict):
+            kids = list(node.values())
+        elif isinstance(node, list):
+            kids = node
+        else:
+            continue
+        best = max(best, d)
+        if d <= MAX_YAML_DEPTH:
+            stack.extend((k, d + 1) for k in kids)
+    return best
 
 
 def _read_yaml(path: Path) -> Any:

@@ -50,6 +50,50 @@ class MapWarning(UserWarning):
     """A map loads but may mislead the planner (an 8-bit PNG's height steps)."""
 
 
+def png_size(path: Path) -> tuple | None:
+    """(width, height) of a PNG from its IHDR chunk, read from the header alone (None if
+    the file is not a PNG)."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+def refuse_large_png(path: Path) -> None:
+    """A MapError naming the file and the limit when a PNG's header claims more than
+    MAX_CELLS pixels: judged before the image is decoded (a decompression bomb's 65 535 x
+    65 535 header, or a 12 000 x 12 000 image that would take gigabytes to read)."""
+    size = png_size(path)
+    if size is not None and size[0] * size[1] > MAX_CELLS:
+        raise MapError(f"{path}: expected at most {MAX_CELLS // 1_000_000} million cells, found a PNG whose header "
+                       f"claims {size[1]} x {size[0]} (crop or coarsen the map)")
+
+
+def load_npy(path: Path) -> np.ndarray:
+    """A .npy array, its shape judged from the header before the data is read (at most
+    MAX_CELLS cells); a MapError naming the file otherwise."""
+    try:
+        with open(path, "rb") as f:
+            version = np.lib.format.read_magic(f)
+            if version == (1, 0):
+                shape, _, _ = np.lib.format.read_array_header_1_0(f)
+            else:
+                shape, _, _ = np.lib.format.read_array_header_2_0(f)
+    except (ValueError, OSError, EOFError) as exc:
+        raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
+    cells = 1
+    for n in shape:
+        cells *= int(n)
+    if cells > MAX_CELLS:
+        raise MapError(f"{path}: expected at most {MAX_CELLS // 1_000_000} million cells, found a .npy whose header "
+                       f"claims shape {tuple(shape)} (crop or coarsen the map)")
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
+
+
 def png_bit_depth(path: Path) -> int | None:
     """The bit depth of a PNG from its IHDR chunk (None if the file is not a PNG)."""
     with open(path, "rb") as f:
@@ -162,16 +206,19 @@ def load_map(spec, base: Path | str | None = ".", where: str = "map") -> Elevati
         if "height_range" in spec:
             raise MapError(f"{where}.height_range: expected only with a PNG map (a .npy holds heights in metres), "
                            "found it with '.npy'")
-        try:
-            H = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
+        H = load_npy(path)
     elif path.suffix.lower() == ".png":
         hr = spec.get("height_range")
-        if not (isinstance(hr, (list, tuple)) and len(hr) == 2 and all(isinstance(a, (int, float)) for a in hr) and hr[0] <= hr[1]):
-            raise MapError(f"{where}.height_range: expected [z_min, z_max] in metres for a PNG map, found {hr!r}")
+        if not (isinstance(hr, (list, tuple)) and len(hr) == 2
+                and all(isinstance(a, (int, float)) and not isinstance(a, bool) and -1e300 < a < 1e300 for a in hr)
+                and hr[0] <= hr[1]):
+            raise MapError(f"{where}.height_range: expected [z_min, z_max], two finite numbers in metres with "
+                           f"z_min <= z_max, for a PNG map, found {_shown(hr)}")
+        refuse_large_png(path)
         H = read_png_heights(path, float(hr[0]), float(hr[1]))
+        emap = _checked(H, res, origin, str(path), path.stem)
         if png_bit_depth(path) == 8 and hr[1] > hr[0]:
+            # warned once the map is known to load: a refusal after it made two lines
             import warnings
             step = (float(hr[1]) - float(hr[0])) / 255.0
             warnings.warn(MapWarning(
@@ -179,9 +226,21 @@ def load_map(spec, base: Path | str | None = ".", where: str = "map") -> Elevati
                 f"[{hr[0]:g}, {hr[1]:g}] m, a {math.degrees(math.atan(step / res)):.1f} deg step between "
                 f"neighbouring cells; smooth slopes become stairs. Save the heights as a 16-bit PNG or a .npy "
                 f"array"), stacklevel=2)
+        return emap
     else:
         raise MapError(f"{where}.file: expected a .npy, .png or .tif file, found '{path.suffix or path.name}'")
     return _checked(H, res, origin, str(path), path.stem)
+
+
+def _shown(v, limit: int = 60) -> str:
+    """A value for a message: a huge integer by its number of digits, else its repr, cut."""
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_shown(a, 20) for a in v[:4]) + (", ..." if len(v) > 4 else "") + "]"
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10 ** 30:
+        if v.bit_length() < 14_000:       # (str() of an int refuses beyond 4 300 digits)
+            return f"an integer of {len(str(abs(v)))} digits"
+        return f"an integer of about {int(v.bit_length() * 0.30103) + 1} digits"
+    return f"{v!r:.{limit}}"
 
 
 def _read_tif(path: Path) -> tuple:
@@ -253,11 +312,9 @@ def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "t
         raise MapError(f"{where}.file: expected an existing file, found no file at '{path}'")
     suf = path.suffix.lower()
     if suf == ".npy":
-        try:
-            C = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise MapError(f"{path}: expected a NumPy .npy array, found a file that cannot be read as one ({exc})") from None
+        C = load_npy(path)
     elif suf == ".png":
+        refuse_large_png(path)
         from PIL import Image
         try:
             with Image.open(path) as im:
