@@ -48,7 +48,7 @@ def test_deeply_nested_yaml_is_refused_in_one_line(tmp_path, capsys):
     ok.write_text("name: " + "[" * 60 + "]" * 60 + "\n")           # within the limit: judged on its merits
     assert main(["plan", str(ok)]) == 2
     err = capsys.readouterr().err
-    assert "nested" not in err and "name: expected a non-empty string" in err
+    assert "levels deep" not in err and "name: expected a non-empty string" in err
 
 
 def test_a_400_digit_height_range_is_refused_naming_the_key(tmp_path, capsys):
