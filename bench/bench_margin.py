@@ -60,7 +60,11 @@ def main() -> int:
     ap.add_argument("--no-runs", action="store_true", help="skip the closed-loop runs")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--curve", action="store_true", help="the README figure's sweep over the margin (module doc)")
+    ap.add_argument("--table", action="store_true", help="print the markdown table of --out's results (docs/planner.md)")
     args = ap.parse_args()
+    if args.table:
+        print(table(json.loads(args.out.read_text())["rows"]))
+        return 0
     if args.curve:
         args.scenarios, args.out, args.no_runs = ["hills_field", "steep_hill"], CURVE, True
         args.configs = [f"margin={m},margin_tip_deg={t}" for m, t in ((0, 0), (0.05, 5), (0.1, 5), (0.15, 5), (0.2, 5))]
@@ -95,6 +99,33 @@ def main() -> int:
     if args.curve:
         figure(list(rows.values()), FIG)
     return 0
+
+
+def table(rows: list) -> str:
+    """docs/planner.md#margin's table: per scenario and cost, the plan without margin and
+    with the default, their price, p_stall / p_tip under the 5 % and 10 % draws, and the
+    closed-loop runs with a 10 % heavier vehicle and with 10 % less grip."""
+    def cost(r):
+        return r["travel_time_s"] if r["cost"] == "time" else r["energy_J"]
+
+    def runs(r):
+        return " / ".join({"reached": "reached", "failed": "**failed**"}.get(r.get(k, {}).get("status"), "-")
+                          for k in ("run_mass_1.1", "run_grip_0.9"))
+
+    out = ["| scenario | cost | margin 0: cost, p_stall 5 % (10 %) | runs +10 % mass / -10 % grip | default: cost (price) | "
+           "p_stall 5 % (10 %) | p_tip 5 % | runs +10 % mass / -10 % grip |", "|---|---|---|---|---|---|---|---|"]
+    base = {(r["scenario"], r["cost"]): r for r in rows if r["margin"] == 0}
+    for r in rows:
+        b = base.get((r["scenario"], r["cost"]))
+        if r["margin"] == 0 or b is None or r["status"] != "found" or b["status"] != "found":
+            continue
+        unit = "s" if r["cost"] == "time" else "J"
+        d5, d10, b5, b10 = r["draw_5pct"], r["draw_10pct"], b["draw_5pct"], b["draw_10pct"]
+        out.append(f"| `{r['scenario']}` | {r['cost']} | {cost(b):.1f} {unit}, {b5['p_stall']:.2f} ({b10['p_stall']:.2f}) | "
+                   f"{runs(b)} | {cost(r):.1f} {unit} ({100 * (cost(r) / cost(b) - 1):+.1f} %)"
+                   f"{'' if r['margin_report']['kept'] else ' (no plan kept it)'} | "
+                   f"{d5['p_stall']:.2f} ({d10['p_stall']:.2f}) | {d5['p_tip']:.2f} | {runs(r)} |")
+    return "\n".join(out)
 
 
 def figure(rows: list, path: Path) -> None:

@@ -323,6 +323,17 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                             if progress and cost == "energy" else None)
             else:
                 p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
+                if not p.found and why.startswith("stalled") and PL.margin_on(ps):
+                    # stalled where the margin's plans drove it: the vehicle is weaker than
+                    # the margin allows for, and needs all of its drive to get away (search_plan
+                    # falls back by itself only where the margin's search ends early)
+                    bare = PL.search_plan(WO.without_margin(target), cost, start=X, incumbent=tail,
+                                          progress=progress(f"{label}, without the margin") if progress else None,
+                                          time_budget_s=max(budget - p.planning_time_s, 0.25 * budget))
+                    if bare.found:
+                        bare = replace(bare, margin=dict(bare.margin or {}, kept=False,
+                                                         note=f"no plan from the stall keeps the margin ({p.reason})"))
+                    p = PL.counting(bare, p)
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]

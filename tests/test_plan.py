@@ -79,7 +79,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     from dataclasses import replace
     import sbmpc.repair as mod
     scn = SC.load(SCEN / "hills_field.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0)))
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0, margin=0.0, margin_tip_deg=0.0)))
     p = PL.search_plan(world, "energy")     # the energy search's own (plan() would take the time plan)
     assert p.found and p.repairs >= 1 and p.check.reached
     saved = mod.MAX_REPAIRS
@@ -105,7 +105,7 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     from dataclasses import replace
     from sbmpc.search.astar import Search
     scn = SC.load(SCEN / "hills_field.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=5)))
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=5, margin=0.0, margin_tip_deg=0.0)))
     starts, run = [], Search.run
 
     def spy(self, *a, **k):

@@ -86,8 +86,8 @@ IN_GOAL = 1
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD) = range(32)
-NQ = 32
+ Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG) = range(33)
+NQ = 33
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
@@ -129,6 +129,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     c_head = math.cos(params[Q_TWHEAD])     # the twin's heading error (margin_heading_deg)
     s_head = math.sin(params[Q_TWHEAD])
     prev_w = 0.0
+    lag_cap = params[Q_TWLAG]
     v_end = 0.0
     margin = params[Q_MARGIN]
     x_lo = ox + margin
@@ -153,7 +154,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         if x < x_lo or x > x_hi or y < y_lo or y > y_hi:
             end = -OFF_MAP
             break
-        along, across = slope_grades_at(H, res, ox, oy, x, y, S[K.S_YAW], params[Q_HL], params[Q_HW])
+        yaw_i = S[K.S_YAW]
+        along, across = slope_grades_at(H, res, ox, oy, x, y, yaw_i, params[Q_HL], params[Q_HW])
         if abs(along) > tan_tip or abs(across) > tan_tip:
             end = -TIP
             break
@@ -211,17 +213,33 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             else:
                 S[X_MT] = max(0.0, S[X_MT] - dt)
         if twin:
-            # the pessimistic twin, stepped along the same path under the same commands
-            # from its own drive state: it loses speed on a climb at the drive's limit
-            # and carries less into the next. Its heading may be off by up to the
-            # margin's heading error, and it takes the steeper of the two grades it
-            # would then meet (a plane: along cos e +- across sin e): on a flank the
-            # grade along a line depends on its heading. The edge fails where it stalls
-            gw = along * c_head + (s_head * abs(across) if along >= 0.0 else -s_head * abs(across))
+            # the pessimistic twin, under the same commands from its own drive state: it
+            # loses speed on a climb at the drive's limit and carries less into the next.
+            # It drives with the vehicle's heading from its own position, so it meets the
+            # grade where it is (behind, on the steep part of a ramp the vehicle has
+            # topped); it falls at most Q_TWLAG behind (a run re-plans beyond its
+            # position tolerance). Its heading may be off by up to the margin's heading
+            # error, and it takes the steeper of the two grades it would then meet (a
+            # plane: along cos e +- across sin e). The edge fails where it stalls
+            tx = T[K.S_X]
+            ty = T[K.S_Y]
+            if x_lo <= tx <= x_hi and y_lo <= ty <= y_hi:
+                al_t, ac_t = slope_grades_at(H, res, ox, oy, tx, ty, yaw_i, params[Q_HL], params[Q_HW])
+            else:
+                al_t = along
+                ac_t = across
+            gw = al_t * c_head + (s_head * abs(ac_t) if al_t >= 0.0 else -s_head * abs(ac_t))
             gm = gw + 0.5 * (gw - prev_w) if i > 0 else gw
             prev_w = gw
             cw = 1.0 / math.sqrt(1.0 + gm * gm)
+            T[K.S_YAW] = yaw_i
             K.step_slope(Pw, Tk, T, cmd_l, cmd_r, gm * cw, cw, dt, False, O)
+            lx = S[K.S_X] - T[K.S_X]
+            ly = S[K.S_Y] - T[K.S_Y]
+            lag = math.sqrt(lx * lx + ly * ly)
+            if lag > lag_cap:
+                T[K.S_X] = S[K.S_X] - lx * (lag_cap / lag)
+                T[K.S_Y] = S[K.S_Y] - ly * (lag_cap / lag)
             if T[K.S_STALLED] > 0.0:
                 end = -MARGIN
                 break
