@@ -60,10 +60,14 @@ def main() -> int:
     ap.add_argument("--no-runs", action="store_true", help="skip the closed-loop runs")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--curve", action="store_true", help="the README figure's sweep over the margin (module doc)")
+    ap.add_argument("--replot", action="store_true", help="redraw docs/margin.png from bench/results/margin_curve.json")
     ap.add_argument("--table", action="store_true", help="print the markdown table of --out's results (docs/planner.md)")
     args = ap.parse_args()
     if args.table:
         print(table(json.loads(args.out.read_text())["rows"]))
+        return 0
+    if args.replot:
+        figure(json.loads(CURVE.read_text())["rows"], FIG)
         return 0
     if args.curve:
         args.scenarios, args.out, args.no_runs = ["hills_field", "steep_hill"], CURVE, True
@@ -149,12 +153,12 @@ def figure(rows: list, path: Path) -> None:
     a.set_ylabel("price: cost against margin 0 [%]")
     a.axhline(5, color="grey", lw=0.8, ls=":")
     b.set_xlabel("planner.margin")
-    b.set_ylabel("p_stall, open loop, 5 % draw of mass, mu_sa, mu_op")
+    b.set_ylabel("p_stall (open loop, 5 % draw)")
     b.axhline(0.05, color="grey", lw=0.8, ls=":")
     a.legend(fontsize=8)
     a.grid(alpha=0.3)
     b.grid(alpha=0.3)
-    fig.suptitle("Plans with margin: what it costs and what it buys (Halton seed 0, 20 drawn vehicles)")
+    fig.suptitle("Plans with margin: price against margin 0, and p_stall of 20 vehicles (mass, mu_sa, mu_op drawn)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
