@@ -366,7 +366,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # tip-over margin is not driven; the vehicle re-plans from where it stands
             # (and stops for good where the fresh plan's first period is held back too)
             _, gend, _ = guard.step(X, control, record=False)
-            if gend in (-SS.MARGIN, -SS.TIP):
+            # a plan made without the margin (none kept it: it says so) rides within it by
+            # design: its periods are held back only where they would tip the vehicle over
+            kept = bool((current.margin or {}).get("kept", True)) if current is not None else True
+            if gend == -SS.TIP or (gend == -SS.MARGIN and kept):
                 if guarded and since == 0:
                     return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
                                             f"every way on that the planner found comes within the tip-over margin "
