@@ -16,6 +16,8 @@ Entities (one set per plan label, e.g. ``time`` and ``energy``)::
     plots/i_l/<label>, plots/i_r/<label>       Scalars [A]
     plots/power/<label>          Scalars [W]
     plots/energy/<label>         Scalars [J]
+    margins/<label>/drive, margins/<label>/tip   Points3D (labelled): where the plan runs
+                                 closest to the drive's limit and to tipping over, static
 
 A receding-horizon run (:func:`write_run`) has the label ``executed`` and the paths of
 its plans as ``plans/<k>``.
@@ -157,8 +159,28 @@ def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: floa
     for label, plan in plans.items():
         if plan.found:
             _log_trajectory(rec, label, plan.trajectory, COLOURS.get(label, (60, 110, 220)), every_s, vehicle)
+            _log_margin(rec, label, plan.margin, emap)
     _close(rec)
     return path
+
+
+def _log_margin(rec, label: str, margin: dict | None, emap) -> None:
+    """Where a plan runs closest to the limits (plan.margin, :mod:`sbmpc.margin`), marked
+    on its path: ``margins/<label>/drive`` (the least drive headroom held 0.5 s) and
+    ``margins/<label>/tip`` (the least tip-over margin), labelled with how much."""
+    import rerun as rr
+    if not margin:
+        return
+    for key, what, text in (("drive_headroom", "drive", "least drive headroom {:.0f} %"),
+                            ("tip", "tip", "least tip-over margin {:.1f} deg")):
+        m = margin.get(key)
+        if not m:
+            continue
+        value = 100.0 * m["least"] if key == "drive_headroom" else m["least_deg"]
+        z = float(emap.height(m["x"], m["y"])) + 0.3
+        rec.log(f"margins/{label}/{what}", rr.Points3D([[m["x"], m["y"], z]], colors=[(200, 40, 160)], radii=[0.12],
+                                                        labels=[f"{label}: {text.format(value)} (t = {m['t']:.1f} s)"]),
+                static=True)
 
 
 def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: float = 0.1, scenario=None,

@@ -142,15 +142,19 @@ def test_a_side_slope_inside_the_tip_margin_fails_on_the_margin_and_passes_witho
 
 
 # ---- the plan: fallback and report ---------------------------------------------------------------
-def test_where_no_plan_keeps_the_margin_the_plan_rides_the_limit_and_says_so(ramp):
+def test_where_no_plan_keeps_the_margin_the_plan_rides_the_limit_and_says_so(ramp, tmp_path):
     """Up the 11.5 deg ramp no path keeps a 10 % margin (the twin stalls on the way):
     the plan is the one without it, its JSON says margin.kept false with a note, and it
-    reaches the goal at 1 kHz."""
+    reaches the goal at 1 kHz; its recording marks where it runs closest to the limits."""
     w = _plane(11.5, size=(20.0, 12.0), margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, max_expansions=4000)
     p = PL.plan(w, "time")
     assert p.found and p.check.reached
     assert p.margin["kept"] is False and "margin" in p.margin["note"]
     assert p.margin["invalid_edges_with_margin"][SS.CODES[SS.MARGIN - 1]] > 0
+    from sbmpc import recording
+    rrd = recording.write(tmp_path / "p.rrd", w.emap, {"time": p}, scenario=w.scenario, vehicle=w.vehicle)
+    ents = recording.entities(rrd)
+    assert ents.get("/margins/time/tip") == 1 and ents.get("/margins/time/drive") == 1
     d = json.loads(json.dumps(p.to_json()))
     from sbmpc.schemas import plan as plan_schema
     import jsonschema
