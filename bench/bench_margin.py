@@ -41,8 +41,8 @@ SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp
 
 def closed_loop(world, cost, mass=1.0, grip=1.0) -> dict:
     from sbmpc import receding as R
-    v = world.vehicle
-    truth = v.replace(mass=v.mass * mass, inertia=v.inertia * mass) if mass != 1.0 else None
+    from sbmpc.world import heavier
+    truth = heavier(world.vehicle, mass) if mass != 1.0 else None
     t0 = time.perf_counter()
     r = R.run(world, cost, truth, truth_grip=grip)
     d = r.to_json()

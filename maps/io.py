@@ -50,14 +50,21 @@ class MapWarning(UserWarning):
     """A map loads but may mislead the planner (an 8-bit PNG's height steps)."""
 
 
+def _png_header(path: Path) -> bytes | None:
+    """The first 26 bytes of a PNG (signature and IHDR up to the bit depth), None if the
+    file is not a PNG."""
+    with open(path, "rb") as f:
+        head = f.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return head
+
+
 def png_size(path: Path) -> tuple | None:
     """(width, height) of a PNG from its IHDR chunk, read from the header alone (None if
     the file is not a PNG)."""
-    with open(path, "rb") as f:
-        head = f.read(24)
-    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    head = _png_header(path)
+    return None if head is None else (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
 
 
 def refuse_large_png(path: Path) -> None:
@@ -96,11 +103,8 @@ def load_npy(path: Path) -> np.ndarray:
 
 def png_bit_depth(path: Path) -> int | None:
     """The bit depth of a PNG from its IHDR chunk (None if the file is not a PNG)."""
-    with open(path, "rb") as f:
-        head = f.read(26)
-    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return head[24]
+    head = _png_header(path)
+    return None if head is None else head[24]
 
 
 def _number(spec, key, where, positive=False):

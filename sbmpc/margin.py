@@ -19,6 +19,7 @@ moment by design) and the least tip-over margin, each with where and when.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import replace
 
 import numpy as np
@@ -40,7 +41,6 @@ def _sustained_max(t: np.ndarray, x: np.ndarray, span: float) -> tuple:
         return 0.0, 0
     best, at = -math.inf, 0
     j = 0
-    from collections import deque
     q: deque = deque()             # indices of a sliding-window minimum
     for i in range(n):
         while q and x[q[-1]] >= x[i]:
@@ -145,7 +145,6 @@ def drawn_worlds(world, rob: dict, task_id: str):
 
 
 DRAW_TRIES = 100      # draws per robustness sample before its parameters are said to leave their ranges
-
 
 
 def robustness(world, cost: str, controls, samples: int, sd: float = 0.05, seed: int = 0) -> dict:

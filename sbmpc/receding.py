@@ -169,7 +169,7 @@ class _Executor:
 
     def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0, tip_guard: bool = False):
         self.dt = 1.0 / world.vehicle.controller_rate
-        self.Q, self.data = PB.pack_world(world, cost, self.dt, margin=tip_guard)
+        self.Q, self.data = PB.pack_world(world, cost, self.dt)
         if tip_guard:
             # half the tip-over margin alone (planner.margin_tip_deg): the guard of a run's
             # periods. Half: a plan keeps the whole margin at the planner's step, and its
@@ -177,8 +177,6 @@ class _Executor:
             # its own fresh plans' periods 50 times)
             ps = world.scenario.planner
             self.Q[SS.Q_TIPM] = math.radians(ps.tip_over_deg - 0.5 * ps.margin_tip_deg)
-            self.Q[SS.Q_RESERVE] = 0.0
-            self.Q[SS.Q_OFFTW] = -1.0
         self.lag = int(round(delay_s / self.dt))
         self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
 
@@ -281,8 +279,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     ps = world.scenario.planner
     twin = world if truth is None else replace(world, vehicle=truth)
     if truth_grip is not None and truth_grip != 1.0:
-        twin = replace(twin, terrains=tuple(t.replace(mu_sa=t.mu_sa * truth_grip, mu_op=t.mu_op * truth_grip)
-                                            for t in twin.terrains))
+        twin = replace(twin, terrains=WO.gripped(twin.terrains, truth_grip))
     aim = _aim(world)
     truth_name = twin.vehicle.name + (f", grip x{truth_grip:g}" if truth_grip not in (None, 1.0) else "")
     out = RunResult(world.scenario.name, cost, world.vehicle.name, truth_name, rs)

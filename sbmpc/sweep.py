@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .margin import DRAW_TRIES, drawn_worlds as _drawn_worlds  # noqa: F401  (the sweep's robustness draw)
+from .margin import drawn_worlds as _drawn_worlds     # the robustness draw
 
 COLUMNS = ("task_id", "scenario", "family_seed", "cost", "seed", "settings", "variant", "status", "reason",
            "failure", "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",

@@ -190,6 +190,16 @@ def start_state(world: World) -> np.ndarray:
     return X
 
 
+def heavier(vehicle: Vehicle, f: float) -> Vehicle:
+    """The vehicle with its mass and inertia times f (a load spread like the body)."""
+    return vehicle.replace(mass=vehicle.mass * f, inertia=vehicle.inertia * f)
+
+
+def gripped(terrains, f: float) -> tuple:
+    """The terrains with both friction coefficients of eq. 22, mu_sa and mu_op, times f."""
+    return tuple(t.replace(mu_sa=t.mu_sa * f, mu_op=t.mu_op * f) for t in terrains)
+
+
 @functools.lru_cache(maxsize=8)
 def without_margin(world: World) -> World:
     """The world planned without the margin (``planner.margin``, ``margin_tip_deg`` 0):

@@ -63,7 +63,7 @@ def summary(res) -> str:
 
 def run_run(args) -> int:
     from .. import receding, recording
-    from ..world import checked_vehicle
+    from ..world import checked_vehicle, heavier
     outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
@@ -74,8 +74,7 @@ def run_run(args) -> int:
             raise InputError(f"{flag}: expected a factor in [0.2, 5], found {f}")
     if args.truth_mass is not None:
         v = truth or world.vehicle
-        truth = v.replace(mass=v.mass * args.truth_mass, inertia=v.inertia * args.truth_mass,
-                          name=f"{v.name} x{args.truth_mass:g} mass")
+        truth = heavier(v, args.truth_mass).replace(name=f"{v.name} x{args.truth_mass:g} mass")
     grip = args.truth_grip
     settings = world.scenario.run
     if args.trigger:
