@@ -72,6 +72,31 @@ class Replan:
 
 
 @dataclass
+class HorizonStats:
+    """The horizon plans of a receding-horizon run (``planner.horizon_s``): how long each
+    took [s], how many the search made and how many kept the previous plan, why the run
+    re-planned from the measured state instead of the predicted one."""
+
+    horizon_s: float
+    seconds: list = field(default_factory=list)
+    expansions: list = field(default_factory=list)
+    kept_previous: int = 0
+    from_measured: int = 0
+    fallbacks: int = 0
+    fallback_s: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        s = np.array(self.seconds) if self.seconds else np.zeros(1)
+        later = s[1:] if len(s) > 1 else s
+        return {"horizon_s": self.horizon_s, "plans": len(self.seconds),
+                "first_s": float(s[0]), "replan_median_s": float(np.median(later)),
+                "replan_p95_s": float(np.percentile(later, 95)), "replan_max_s": float(later.max()),
+                "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
+                "kept_previous": self.kept_previous, "from_measured": self.from_measured,
+                "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s]}
+
+
+@dataclass
 class RunResult:
     """The outcome of a receding-horizon run (docs/formats.md ``sbmpc run`` JSON)."""
 
@@ -87,6 +112,7 @@ class RunResult:
     stalls: int = 0
     periods: int = 0
     guarded: int = 0                  # periods held back: their prediction came within the tip-over margin
+    horizon: HorizonStats | None = None   # receding-horizon planning (planner.horizon_s > 0)
 
     @property
     def replans(self) -> int:
@@ -146,6 +172,7 @@ class RunResult:
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
                            "(branch and bound, kept if nothing cheaper is found); the cost-to-go grid is reused"),
             "plans": [r.to_json() for r in self.plans],
+            **({"horizon": self.horizon.to_json()} if self.horizon is not None else {}),
             "trajectory": TR.trajectory_json(self.trajectory),
         }
 
@@ -222,6 +249,7 @@ class _Executor:
         return rec[:rows], int(end), S
 
 
+STUCK_HORIZONS = 2   # a horizon run falls back to whole-route plans where its terminal cost did not fall for this many horizons
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
 
@@ -283,6 +311,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     aim = _aim(world)
     truth_name = twin.vehicle.name + (f", grip x{truth_grip:g}" if truth_grip not in (None, 1.0) else "")
     out = RunResult(world.scenario.name, cost, world.vehicle.name, truth_name, rs)
+    if ps.horizon_s > 0.0:
+        return _run_horizon(world, cost, twin, out)
     model = _Executor(world, cost)
     guard = _Executor(world, cost, tip_guard=True) if ps.margin_tip_deg > 0.0 else None
     guarded = False                    # the last plan's first period was held back by the guard
@@ -433,3 +463,130 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             off += [f"speed off by {dv:.2f} m/s"] if dv > rs.tol_v else []
             if off:
                 why = ", ".join(off)
+
+
+def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> RunResult:
+    """:func:`run` with receding-horizon plans (``planner.horizon_s``, :mod:`sbmpc.horizon`).
+
+    The first plan is made from the start state in ``horizon_first_budget_s``. Then, period
+    by period: the vehicle (the truth, at its controller rate) drives the first period of
+    the current plan while the next plan is made from the state the planner's model
+    predicts at that period's end, warm-started from the current plan. Where the measured
+    state then lies outside the run's tolerance of that prediction, or the vehicle
+    stalled, the next plan is made again from the measured state (the vehicle waits for
+    it: counted in ``horizon.from_measured``). Every plan's wall-clock time is kept
+    (``horizon`` in the run JSON): the latency a robot would see.
+
+    What the horizon cannot see (a dead end behind a hill too steep to climb, a pass
+    whose approach lies beyond the horizon) shows as a horizon plan that finds no way on,
+    or as a vehicle that makes no progress: the terminal cost at the measured state has
+    not fallen for ``STUCK_HORIZONS`` horizons. Then the run falls back to whole-route
+    plans from the measured state (:func:`sbmpc.plan.search_plan` in the run's re-plan
+    budget) and follows them, re-planning the whole route where the vehicle leaves one's
+    tolerance, as :func:`run` does (``horizon.fallbacks``, their times in
+    ``horizon.fallback_s``)."""
+    from .horizon import HorizonPlanner, periods
+    rs = out.settings
+    ps = world.scenario.planner
+    out.horizon = stats = HorizonStats(ps.horizon_s)
+    hp = HorizonPlanner(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+    model = _Executor(world, cost)
+    real = _Executor(twin, cost, twin.vehicle.delay)
+    X = WO.start_state(twin)
+    pieces = []
+    every = max(1, round(TR.RECORD_EVERY / real.dt))
+    tol_yaw = math.radians(rs.tol_yaw_deg)
+    stalls = []
+    g = world.scenario.goal
+    # no whole-route plan to scale from: the straight line at a third of the top speed
+    v_top = world.vehicle.v_max / world.vehicle.torque_constant * world.vehicle.wheel_radius
+    t_limit = rs.max_time_factor * 3.0 * math.hypot(g["x"] - X[K.S_X], g["y"] - X[K.S_Y]) / max(v_top, 1e-6) + 30.0
+    window = max(2, int(round(STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
+    togo = []                           # the terminal cost at the measured state, period by period
+    guide = None                        # [(wl, wr, d)]: the whole-route plan followed after a fallback
+
+    def finish(status, reason):
+        out.status, out.reason = status, reason
+        rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
+        idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
+        out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
+        return out
+
+    def made(h, why, X0):
+        stats.seconds.append(h.seconds)
+        stats.expansions.append(h.expansions)
+        stats.kept_previous += h.found_by == "previous"
+        p = PL.Plan(world.scenario.name, cost, "found" if h.found else "no_path", h.reason,
+                    list(h.controls), {}, planning_time_s=h.seconds, nodes_expanded=h.expansions,
+                    found_by=h.found_by)
+        out.plans.append(Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
+                                h.found_by == "previous", g["radius"]))
+        return h
+
+    def whole_route(why):
+        p = PL.search_plan(world, cost, start=X, time_budget_s=rs.replan_time_budget_s)
+        stats.fallbacks += 1
+        stats.fallback_s.append(p.planning_time_s)
+        out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False, g["radius"]))
+        return p
+
+    h = made(hp.plan(X, budget_s=ps.horizon_first_budget_s), "start", X)
+    while True:
+        if guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
+            why = ("the horizon plan found no way on" if not h.found else
+                   f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
+            p = whole_route(f"{why}: whole-route plan")
+            if not p.found:
+                weaker = f"; {_weaker(stalls, world.vehicle.name)}" if stalls else ""
+                return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
+                                        f"({why}): {p.reason}{weaker}")
+            guide = periods(p.controls, ps.period_s)
+        if guide is not None:
+            control = guide.pop(0)
+            if not guide:
+                control = (control[0], control[1], max(control[2], ps.period_s))
+        else:
+            step = periods(h.controls, ps.period_s)
+            control = step[0]
+            if h.goal and len(step) == 1:
+                control = (control[0], control[1], max(control[2], ps.period_s))
+        _, _, P = model.step(X, control, record=False)
+        nxt = hp.plan(P, previous=h) if guide is None else None     # made while the period is driven
+        rec, end, X = real.step(X, control)
+        pieces.append(rec if not pieces else rec[1:])
+        out.periods += 1
+        if end == SS.IN_GOAL:
+            return finish("reached", None)
+        if X[K.S_T] > t_limit:
+            return finish("failed", f"took longer than {t_limit:.0f} s without reaching the goal")
+        dxy, dyaw, dv = deviation(X, P)
+        off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
+        if end == -SS.STALL:
+            out.stalls += 1
+            stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
+            if out.stalls > rs.max_stalls:
+                return finish("failed", _weaker(stalls, world.vehicle.name))
+            X[K.S_STALLT] = 0.0
+            X[K.S_STALLED] = 0.0
+            X[K.S_REFL] = X[K.S_WL]          # as in run(): the stalled drive restarted where its wheels are
+            X[K.S_REFR] = X[K.S_WR]
+            real.pipe = None
+            off = True
+        elif end < 0:
+            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                                    f"t = {X[K.S_T]:.1f} s")
+        if guide is not None:
+            if off or not guide:
+                p = whole_route("off the whole-route plan" if off else "the whole-route plan ended short of the goal")
+                if not p.found:
+                    return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
+                                            f"t = {X[K.S_T]:.1f} s: {p.reason}")
+                guide = periods(p.controls, ps.period_s)
+            continue
+        togo.append(hp.to_go(X))
+        if off:
+            stats.from_measured += 1
+            h = made(hp.plan(X, previous=h), "stalled" if end == -SS.STALL else
+                     f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s", X)
+        else:
+            h = made(nxt, "next period", P)

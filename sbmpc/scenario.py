@@ -89,7 +89,14 @@ class PlannerSettings:
     share of its reach (eq. 27's window at the wheel's speed) unused, except for
     ``MARGIN_TIME`` at a time (0: none); margin_tip_deg: edges keep pitch and roll this
     far below tip_over_deg; margin_heading_deg: the twin meets the steeper of the grades
-    along headings this far either side.
+    along headings this far either side; horizon_s: ``sbmpc run`` (and ``plan``/``compare``
+    with ``--horizon``) plans receding-horizon, each plan a search this many seconds
+    ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
+    the period before (:mod:`sbmpc.horizon`; 0: whole-route plans); horizon_budget_s,
+    horizon_first_budget_s, horizon_expansions: each horizon plan's wall-clock budget,
+    the first one's, and its node budget; horizon_weight: w of the horizon searches
+    (greedy: a horizon plan is no optimum anyway, and at the scenarios' own weights the
+    searches ran out of their 0.1 s before reaching the horizon).
     """
 
     branching: int = 16
@@ -122,6 +129,11 @@ class PlannerSettings:
     margin_turn: float = 0.0
     margin_tip_deg: float = 5.0
     margin_heading_deg: float = 0.0
+    horizon_s: float = 0.0
+    horizon_budget_s: float = 0.1
+    horizon_first_budget_s: float = 0.5
+    horizon_expansions: int = 2000
+    horizon_weight: float = 2.0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -188,6 +200,11 @@ _SETTING_RANGES = {
     "time_weight": (float, 1.0, 10.0),
     "refine": (float, 0.0, 100.0),
     "hold_periods": (int, 1, 8),
+    "horizon_s": (float, 0.0, 3600.0),
+    "horizon_budget_s": (float, 0.001, 3600.0),
+    "horizon_first_budget_s": (float, 0.001, 3600.0),
+    "horizon_expansions": (int, 1, 10_000_000),
+    "horizon_weight": (float, 1.0, 10.0),
     "energy_weight": (float, 1.0, 10.0),
     "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),

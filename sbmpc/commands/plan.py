@@ -96,6 +96,10 @@ def _world(args):
         if not 0.0 <= args.margin <= 0.5:
             raise InputError(f"--margin: expected a share in [0, 0.5], found {args.margin}")
         over["margin"] = args.margin
+    if getattr(args, "horizon", None) is not None:
+        if not 0.0 <= args.horizon <= 3600.0:
+            raise InputError(f"--horizon: expected seconds in [0, 3600], found {args.horizon}")
+        over["horizon_s"] = args.horizon
     if over:
         scn = replace(scn, planner=replace(scn.planner, **over))
     if getattr(args, "start", None) is not None:

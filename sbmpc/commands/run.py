@@ -23,6 +23,9 @@ def add_parsers(sub):
                    "(e.g. 1.1: a 10 %% heavier payload)")
     r.add_argument("--truth-grip", type=float, metavar="F", help="the true ground's mu_sa and mu_op times F on "
                    "every terrain (e.g. 0.9: 10 %% less grip)")
+    r.add_argument("--horizon", type=float, metavar="S", help="plan receding-horizon: every period a search S "
+                   "seconds ahead, made while the vehicle drives the period before (default: the scenario's "
+                   "planner.horizon_s, 0: whole-route plans; docs/planner.md#receding-horizon)")
     r.add_argument("--vehicle", help="the vehicle the planner plans with (default: the scenario's)")
     r.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
     r.add_argument("--trigger", choices=("tolerance", "every"), help="when to re-plan (default: the scenario's "
@@ -45,6 +48,17 @@ def summary(res) -> str:
         lines.append(f"  {'predicted':10}{pred['travel_time_s']:10.2f}{pred['energy_J']:12.1f}")
         lines.append(f"  {'executed':10}{ex['travel_time_s']:10.2f}{ex['energy_J']:12.1f}")
     rt = d["replan_time_s"]
+    hz = d.get("horizon")
+    if hz:
+        lines.append(f"  {hz['plans']} horizon plans ({hz['horizon_s']:g} s ahead): first {hz['first_s'] * 1e3:.0f} ms, "
+                     f"then median {hz['replan_median_s'] * 1e3:.0f} ms, 95th percentile "
+                     f"{hz['replan_p95_s'] * 1e3:.0f} ms, max {hz['replan_max_s'] * 1e3:.0f} ms; "
+                     f"{hz['kept_previous']} kept the previous plan, {hz['from_measured']} from the measured state"
+                     + (f"; {hz['fallbacks']} whole-route plans where the horizon saw no way on "
+                        f"({sum(hz['fallback_s']):.2f} s)" if hz["fallbacks"] else ""))
+        lines.append(f"  executed: {ex['travel_time_s']:.2f} s, {ex['energy_J']:.1f} J, {d['periods']} periods, "
+                     f"{d['stalls']} stalls" if ex["travel_time_s"] is not None else "")
+        return "\n".join(x for x in lines if x)
     lines.append(f"  {d['replans']} re-plans ({d['trigger']} trigger), {d['stalls']} stalls, {d['periods']} periods; "
                  f"planning {d['planning_time_s']:.2f} s (first {d['first_planning_time_s'] or 0:.2f} s"
                  + (f", re-plans {sum(rt) / len(rt):.2f} s on average)" if rt else ")"))

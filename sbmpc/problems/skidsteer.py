@@ -86,8 +86,9 @@ IN_GOAL = 1
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
- Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG) = range(33)
-NQ = 33
+ Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG,
+ Q_HORIZON, Q_TURNCOST) = range(35)
+NQ = 35
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
@@ -335,6 +336,36 @@ def _node_to_pose(params, dx, dy, dz):
     return step_energy(params[Q_FRMAX], params[Q_MG] * dz, math.sqrt(dx * dx + dy * dy), params[Q_COPPER])
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _heading_error(params, data, state, dx, dy):
+    """|angle| [rad] between the heading of ``state`` and the way on: down the cost-to-go
+    grid's slope where there is one (bilinear over the surrounding nodes), else towards
+    the goal (dx, dy). The horizon search's terminal cost charges a turn it leaves to
+    after the horizon (:mod:`sbmpc.horizon`); the grid knows no heading."""
+    gx = dx
+    gy = dy
+    offd = int(params[Q_OFFD])
+    if offd >= 0:
+        nx = int(params[Q_NX])
+        ny = int(params[Q_NY])
+        res = params[Q_RES]
+        u = (state[K.S_X] - params[Q_OX]) / res
+        v = (state[K.S_Y] - params[Q_OY]) / res
+        i = min(max(int(math.floor(u)), 0), nx - 2)
+        j = min(max(int(math.floor(v)), 0), ny - 2)
+        fu = min(max(u - i, 0.0), 1.0)
+        fv = min(max(v - j, 0.0), 1.0)
+        a = offd + j * nx + i
+        c00, c10, c01, c11 = data[a], data[a + 1], data[a + nx], data[a + nx + 1]
+        sx = -((c10 - c00) * (1.0 - fv) + (c11 - c01) * fv)
+        sy = -((c01 - c00) * (1.0 - fu) + (c11 - c10) * fu)
+        if sx * sx + sy * sy > 0.0:
+            gx = sx
+            gy = sy
+    e = (state[K.S_YAW] - math.atan2(gy, gx) + math.pi) % (2.0 * math.pi) - math.pi
+    return abs(e)
+
+
 @njit(HEURISTIC.signature, cache=True, error_model="numpy")
 def heuristic(params, data, state):
     """Lower bound of the time [s] or energy [J] to the goal disc (module doc): the larger
@@ -374,6 +405,8 @@ def heuristic(params, data, state):
         hd = c - params[Q_KEGRID] * ke
         if hd > h:
             h = hd
+    if params[Q_HORIZON] > 0.0 and params[Q_TURNCOST] > 0.0 and d > 0.0:
+        h += params[Q_TURNCOST] * _heading_error(params, data, state, dx, dy)
     # less the goal's gap, after the clamp: every value moves by the same constant (may
     # go below 0 near the goal), so the weighted search's order stays as without it
     return (h if h > 0.0 else 0.0) - params[Q_GOALGAP]
@@ -381,9 +414,14 @@ def heuristic(params, data, state):
 
 @njit(GOAL.signature, cache=True, error_model="numpy")
 def is_goal(params, data, state):
+    """In the goal disc; or, with a horizon (params[Q_HORIZON] > 0: the end of a
+    receding-horizon search's look-ahead, a planner time [s]), at or past it: the search
+    then ends at the horizon node of least g + w h, the heuristic its terminal cost."""
     dx = params[Q_GX] - state[K.S_X]
     dy = params[Q_GY] - state[K.S_Y]
-    return dx * dx + dy * dy <= params[Q_GR] * params[Q_GR]
+    if dx * dx + dy * dy <= params[Q_GR] * params[Q_GR]:
+        return True
+    return params[Q_HORIZON] > 0.0 and state[K.S_T] >= params[Q_HORIZON]
 
 
 @njit(cache=True, error_model="numpy")
