@@ -34,6 +34,10 @@ from .search.astar import Search
 from .world import World, _start, start_state, wheel_speed_range
 
 
+CHUNK = 8          # expansions between the search's budget checks
+PROGRESS = 0.5     # a warm start is kept where its terminal cost falls by this share of its cost
+
+
 @dataclass(frozen=True)
 class HorizonPlan:
     """One horizon plan: ``controls`` [(wl, wr, duration_s)] from ``start`` to the horizon
@@ -58,8 +62,10 @@ class HorizonPlan:
 
 
 def periods(controls, period_s: float) -> list:
-    """Controls [(wl, wr, duration_s)] split into planning periods (a held control into
-    periods of the same command, the last piece the remainder)."""
+    """A plan's controls [(wl, wr, duration_s)] as a run executes them: one planning
+    period at a time, a control held over several periods (``planner.hold_periods``)
+    split into periods of the same command (the drive is the same; the run measures
+    and may re-plan after each period), the last piece the remainder."""
     out = []
     for wl, wr, d in controls:
         while d > period_s * (1.0 + 1e-9):
@@ -157,17 +163,19 @@ class HorizonPlanner:
             if steps and not previous.goal:
                 steps.append(steps[-1][:2] + (self.period_s,))
             v = self._value(params, X0, steps)
-            w = self.prob.weight
-            # kept only where it makes way: a plan that parks (little cost, no progress)
-            # must not bound the search, which would then find nothing that beats it
-            if v is not None and v[0] + w * v[1] < w * max(float(SS.heuristic(params, self.prob.data, X0)), 0.0):
+            # kept only where it makes way: its cost buys at least PROGRESS of its worth in
+            # terminal cost (a plan that parks, little cost and no progress, must not
+            # bound the search, which then finds nothing that beats it)
+            if v is not None and self.to_go(X0) - v[1] >= PROGRESS * v[0]:
                 warm = (v, steps[:v[3]])
         prob = replace(self.prob, params=params, start=X0)
         search = Search(prob, capacity=max(256, 4 * self.max_expansions))
-        w = self.prob.weight
         if warm is not None:
-            search.bound((warm[0][0] + w * warm[0][1]) * (1.0 + 1e-9))
-        res = search.run(self.max_expansions, max(budget - (time.perf_counter() - t0), 1e-3),
+            # pruned: nodes whose g + h (unweighted: f = g + w h falls along a path when
+            # w > 1, and would prune the start itself) cannot beat the warm plan's
+            search.bound((warm[0][0] + warm[0][1]) * (1.0 + 1e-9), weight=1.0)
+        # small chunks: the budget is checked between them (256 expansions took 0.1 s)
+        res = search.run(self.max_expansions, max(budget - (time.perf_counter() - t0), 1e-3), chunk=CHUNK,
                          batch=self.batch, threads=self.threads)
         if res.status == "found":
             T = res.states[:, K.S_T]

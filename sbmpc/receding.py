@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -42,6 +43,7 @@ from dynamics import kernels as K
 from dynamics.params import Vehicle
 
 from . import plan as PL
+from .horizon import HorizonPlanner, periods
 from . import problem as PB
 from . import trajectory as TR
 
@@ -277,20 +279,6 @@ def _weaker(stalls: list, name: str) -> str:
             f"with a model of this vehicle (sbmpc diagnose on a run of it writes one)")
 
 
-def per_period(controls, period_s: float) -> list:
-    """A plan's controls [(wl, wr, duration_s)] as the run executes them: one planning
-    period at a time, a control held over several periods (``planner.hold_periods``)
-    split into periods of the same command (the drive is the same; the run measures
-    and may re-plan after each period), the last piece the remainder."""
-    out = []
-    for wl, wr, d in controls:
-        while d > period_s * (1.0 + 1e-9):
-            out.append((wl, wr, period_s))
-            d = round(d - period_s, 9)
-        out.append((wl, wr, d))
-    return out
-
-
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True,
         truth_grip: float | None = None) -> RunResult:
@@ -378,7 +366,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
                 current, k, P, since, why = p, 0, X.copy(), 0, None
-                steps = per_period(p.controls, ps.period_s)
+                steps = periods(p.controls, ps.period_s)
             elif current is not None and k < len(steps) and not why.startswith("stalled"):
                 # like any MPC: when a re-plan fails, keep driving the previous plan and try
                 # again after the next period
@@ -481,15 +469,16 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     whose approach lies beyond the horizon) shows as a horizon plan that finds no way on,
     or as a vehicle that makes no progress: the terminal cost at the measured state has
     not fallen for ``STUCK_HORIZONS`` horizons. Then the run falls back to whole-route
-    plans from the measured state (:func:`sbmpc.plan.search_plan` in the run's re-plan
+    plans from the measured state (:func:`sbmpc.plan.search_plan` in the planner's
     budget) and follows them, re-planning the whole route where the vehicle leaves one's
     tolerance, as :func:`run` does (``horizon.fallbacks``, their times in
     ``horizon.fallback_s``)."""
-    from .horizon import HorizonPlanner, periods
     rs = out.settings
     ps = world.scenario.planner
     out.horizon = stats = HorizonStats(ps.horizon_s)
+    t_setup = time.perf_counter()
     hp = HorizonPlanner(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+    setup = time.perf_counter() - t_setup   # the cost-to-go grid and the turn cost: part of the first plan's time
     model = _Executor(world, cost)
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)
@@ -524,13 +513,16 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
         return h
 
     def whole_route(why):
-        p = PL.search_plan(world, cost, start=X, time_budget_s=rs.replan_time_budget_s)
+        # the whole-route planner's own budget: where the horizon saw no way on, a
+        # re-plan's budget (run.replan_time_budget_s) was too short on narrow_pass
+        p = PL.search_plan(world, cost, start=X)
         stats.fallbacks += 1
         stats.fallback_s.append(p.planning_time_s)
         out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False, g["radius"]))
         return p
 
-    h = made(hp.plan(X, budget_s=ps.horizon_first_budget_s), "start", X)
+    h = hp.plan(X, budget_s=max(ps.horizon_first_budget_s - setup, 1e-3))
+    h = made(replace(h, seconds=h.seconds + setup), "start", X)
     while True:
         if guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
             why = ("the horizon plan found no way on" if not h.found else

@@ -94,9 +94,11 @@ class PlannerSettings:
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
     the period before (:mod:`sbmpc.horizon`; 0: whole-route plans); horizon_budget_s,
     horizon_first_budget_s, horizon_expansions: each horizon plan's wall-clock budget,
-    the first one's, and its node budget; horizon_weight: w of the horizon searches
-    (greedy: a horizon plan is no optimum anyway, and at the scenarios' own weights the
-    searches ran out of their 0.1 s before reaching the horizon).
+    the first one's, and its node budget; horizon_weight: w of the horizon searches,
+    which is also what the terminal cost is worth against the cost so far (the grid is a
+    lower bound: 1.3 values the way made near what it costs; 2 drove energy plans too
+    fast, 13-55 % dearer than whole-route runs, and 1 ran out of the budget before the
+    horizon; bench/bench_horizon.py).
     """
 
     branching: int = 16
@@ -130,10 +132,10 @@ class PlannerSettings:
     margin_tip_deg: float = 5.0
     margin_heading_deg: float = 0.0
     horizon_s: float = 0.0
-    horizon_budget_s: float = 0.1
+    horizon_budget_s: float = 0.09
     horizon_first_budget_s: float = 0.5
     horizon_expansions: int = 2000
-    horizon_weight: float = 2.0
+    horizon_weight: float = 1.3
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight

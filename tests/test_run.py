@@ -14,6 +14,7 @@ from dynamics.discrepancy import diagnose
 from dynamics.params import vehicle_to_yaml
 from dynamics.synth import apply, synth_run
 from sbmpc import world as WO
+from sbmpc import horizon as HZ
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
@@ -41,7 +42,7 @@ def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost
     """The truth is driven at the controller rate, as the plan was checked: with a
     perfect model the run is the first plan, sample for sample, to round-off until the
     first control held over two periods, which the run executes period by period
-    (:func:`sbmpc.receding.per_period`): there the map's grade is no longer extrapolated
+    (:func:`sbmpc.horizon.periods`): there the map's grade is no longer extrapolated
     to the step's midpoint for the first step of the second period (an edge starts from
     the grade at its start), and the two drives part by at most a few micro-metres per
     second, 1e-6 m and 1e-4 J by the end of runup_ramp's energy plan. (A plan whose
@@ -314,9 +315,9 @@ def test_a_control_held_over_periods_is_executed_period_by_period(flat):
     time, so the run measures, and may re-plan, after every period as an MPC does: with a
     perfect model flat.yaml's time plan (controls of 1 and 2 s, the last cut at the
     goal) takes ceil(travel time / period) periods and arrives when the plan said.
-    per_period splits each control into periods of the same command, the remainder
+    periods splits each control into periods of the same command, the remainder
     last, and keeps the total duration."""
-    assert R.per_period([(1.0, 2.0, 2.0), (3.0, 3.0, 1.0), (4.0, 5.0, 1.727)], 1.0) == [
+    assert HZ.periods([(1.0, 2.0, 2.0), (3.0, 3.0, 1.0), (4.0, 5.0, 1.727)], 1.0) == [
         (1.0, 2.0, 1.0), (1.0, 2.0, 1.0), (3.0, 3.0, 1.0), (4.0, 5.0, 1.0), (4.0, 5.0, 0.727)]
     res = R.run(flat, "time")
     plan = res.plans[0].plan
