@@ -1,7 +1,7 @@
 """Receding-horizon SBMPC (``planner.horizon_s``) against whole-route re-planning.
 
     python bench/bench_horizon.py                      # shipped scenarios and 70/170 m fields, both costs
-    python bench/bench_horizon.py --fields 70 170 340 --truths nominal heavy
+    python bench/bench_horizon.py --fields --truths heavy slippery --out bench/results/horizon_truths.json
     taskset -c 0 python bench/bench_horizon.py --threads 1    # one core, as the targets are stated
 
 For every scenario, cost and truth, two closed-loop runs of ``sbmpc run`` on the same
@@ -92,6 +92,8 @@ def main() -> int:
     ap.add_argument("--truths", nargs="+", default=["nominal"], choices=sorted(TRUTHS))
     ap.add_argument("--horizon", type=float, default=10.0)
     ap.add_argument("--threads", type=int, default=None, help="planner.threads (1: one core)")
+    ap.add_argument("--out", type=Path, default=OUT, help="results file (default bench/results/horizon.json; "
+                    "the figure is drawn from that one only)")
     ap.add_argument("--plot", action="store_true", help="only draw docs/horizon.png from the results file")
     args = ap.parse_args()
     if args.plot:
@@ -135,10 +137,11 @@ def main() -> int:
         "cost_ratio_range": [float(ratios.min()), float(ratios.max())] if ratios.size else None,
         "within_5pct": int(np.sum(ratios <= 1.05)),
     }
-    OUT.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
+    args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
                                "threads": args.threads, "summary": summary, "rows": rows}, indent=1))
     print(json.dumps(summary, indent=1))
-    plot(json.loads(OUT.read_text()))
+    if args.out == OUT:
+        plot(json.loads(OUT.read_text()))
     return 0
 
 

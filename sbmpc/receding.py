@@ -115,6 +115,7 @@ class RunResult:
     periods: int = 0
     guarded: int = 0                  # periods held back: their prediction came within the tip-over margin
     horizon: HorizonStats | None = None   # receding-horizon planning (planner.horizon_s > 0)
+    driven: list = field(default_factory=list)    # the controls (wl, wr, duration_s) driven, period by period
 
     @property
     def replans(self) -> int:
@@ -547,6 +548,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
         rec, end, X = real.step(X, control)
         pieces.append(rec if not pieces else rec[1:])
         out.periods += 1
+        out.driven.append((control[0], control[1], round(float(rec[-1, K.R_T] - rec[0, K.R_T]), 9)))
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if X[K.S_T] > t_limit:
@@ -582,3 +584,23 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                      f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s", X)
         else:
             h = made(nxt, "next period", P)
+
+
+def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:
+    """``sbmpc plan --horizon`` and ``compare --horizon``: the receding-horizon run of
+    ``world`` (``planner.horizon_s`` > 0) driven by the planning vehicle itself, at its
+    controller rate, reported as a plan: its controls are those driven period by
+    period, its trajectory the drive, its planning time that of every plan made
+    (``found_by`` gives the plans' count and latencies)."""
+    cost = WO.checked_cost(world, cost)
+    res = run(world, cost)
+    hz = res.horizon.to_json()
+    n = sum(r.plan.nodes_expanded for r in res.plans)
+    by = (f"receding horizon: {hz['plans']} plans {hz['horizon_s']:g} s ahead (first {hz['first_s'] * 1e3:.0f} ms, "
+          f"95th percentile {hz['replan_p95_s'] * 1e3:.0f} ms)"
+          + (f", {hz['fallbacks']} whole-route plans where the horizon saw no way on" if hz["fallbacks"] else ""))
+    if res.status != "reached":
+        return PL.Plan(world.scenario.name, cost, "no_path", res.reason, planning_time_s=res.planning_time_s,
+                       nodes_expanded=n, found_by=by, failure="exhausted")
+    return PL.Plan(world.scenario.name, cost, "found", None, list(res.driven), res.trajectory,
+                   planning_time_s=res.planning_time_s, nodes_expanded=n, found_by=by)

@@ -149,3 +149,26 @@ def test_horizon_settings_are_validated(tmp_path):
     p.write_text(text)
     with pytest.raises(Exception, match="horizon_weight"):
         SC.load(p)
+
+
+def test_plan_and_compare_with_a_horizon_report_the_drive(tmp_path, capsys):
+    """``plan --horizon``: the receding-horizon run by the planning vehicle, reported as a
+    plan whose controls, driven again at the controller rate from the start, are its
+    trajectory; ``compare --horizon`` does so for both costs."""
+    out = tmp_path / "plan.json"
+    assert main(["plan", str(SCN / "flat.yaml"), "--horizon", "8", "--cost", "time", "--json", str(out),
+                 "--quiet"]) == 0
+    assert "receding horizon:" in capsys.readouterr().out
+    d = json.loads(out.read_text())
+    jsonschema.validate(d, schemas.plan())
+    assert d["status"] == "found" and d["found_by"].startswith("receding horizon: ")
+    ctrl = [(c["wl"], c["wr"], c["duration_s"]) for c in d["controls"]]
+    ex = R._Executor(_world(), "time")
+    X = WO.start_state(_world())
+    for c in ctrl:
+        _, end, X = ex.step(X, c, record=False)
+    assert end == SS.IN_GOAL
+    assert X[K.S_T] == pytest.approx(d["travel_time_s"], abs=1e-6)
+    assert main(["compare", str(SCN / "flat.yaml"), "--horizon", "8", "--out", str(tmp_path / "cmp"), "--quiet"]) == 0
+    plans = json.loads((tmp_path / "cmp" / "compare.json").read_text())["plans"]
+    assert all(p["found_by"].startswith("receding horizon") for p in plans.values())

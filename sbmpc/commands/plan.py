@@ -52,6 +52,9 @@ def add_backend_flags(p):
     p.add_argument("--time-budget", type=float, help="wall-clock budget [s] (default: the scenario's)")
     p.add_argument("--start", help="start pose X,Y[,YAW_DEG] [m, m, deg] (default: the scenario's)")
     p.add_argument("--goal", help="goal X,Y[,RADIUS] [m] (default: the scenario's)")
+    p.add_argument("--horizon", type=float, metavar="S", help="receding-horizon plans: every period a search S seconds "
+                   "ahead, made while the vehicle drives the period before (plan, compare: the planning vehicle "
+                   "drives at its controller rate, and the plan is that drive; run: the truth) (default: the scenario's planner.horizon_s, 0: whole-route plans; docs/planner.md#receding-horizon-plans)")
     p.add_argument("--margin", type=float, help="share of the drive's reach every edge keeps in reserve, and of "
                    "mass and grip its pessimistic twin carries more (default: the scenario's planner.margin, "
                    "0.1; 0: plans at the nominal vehicle's limit; docs/planner.md#margin)")
@@ -176,6 +179,7 @@ def summary(plan) -> str:
     return (f"{plan.scenario} [{plan.cost}]: found\n"
             f"  travel time {plan.travel_time_s:.2f} s, energy {plan.energy_J:.1f} J, length {plan.length_m:.2f} m, "
             f"{len(plan.controls)} controls\n"
+            + (f"  {plan.found_by}\n" if plan.found_by.startswith("receding horizon") else "")
             + _check_line(plan) + _margin_line(plan) + _rival_line(plan) + _coarse_line(plan) +
             f"  planning {plan.planning_time_s:.2f} s, {plan.nodes_expanded} nodes expanded, "
             f"{plan.edges_simulated} edges simulated")
@@ -248,8 +252,13 @@ def run_plan(args) -> int:
     world = _world(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
-    plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost),
-                   time_progress=Progress("time search (the energy plan is checked against it)", args.quiet, cost="time"))
+    if world.scenario.planner.horizon_s > 0.0:
+        from ..receding import horizon_plan
+        plan = horizon_plan(world, cost)
+    else:
+        plan = PL.plan(world, cost, progress=Progress(f"{cost} search", args.quiet, cost=cost),
+                       time_progress=Progress("time search (the energy plan is checked against it)", args.quiet,
+                                              cost="time"))
     if args.robustness and plan.found and plan.margin is not None:
         from ..margin import robustness
         plan.margin["robustness"] = robustness(world, cost, plan.controls, args.robustness)
@@ -289,7 +298,11 @@ def run_compare(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     compile_note(args.quiet)
     t0 = time.perf_counter()
-    plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, cost=c))
+    if world.scenario.planner.horizon_s > 0.0:
+        from ..receding import horizon_plan
+        plans = {c: horizon_plan(world, c) for c in ("time", "energy")}
+    else:
+        plans = PL.plan_both(world, progress=lambda c: Progress(f"{c} search", args.quiet, cost=c))
     print(f"{world.scenario.name}: {world.scenario.description}".rstrip(": "))
     print(compare_table(plans))
     for c, p in plans.items():

@@ -23,9 +23,6 @@ def add_parsers(sub):
                    "(e.g. 1.1: a 10 %% heavier payload)")
     r.add_argument("--truth-grip", type=float, metavar="F", help="the true ground's mu_sa and mu_op times F on "
                    "every terrain (e.g. 0.9: 10 %% less grip)")
-    r.add_argument("--horizon", type=float, metavar="S", help="plan receding-horizon: every period a search S "
-                   "seconds ahead, made while the vehicle drives the period before (default: the scenario's "
-                   "planner.horizon_s, 0: whole-route plans; docs/planner.md#receding-horizon)")
     r.add_argument("--vehicle", help="the vehicle the planner plans with (default: the scenario's)")
     r.add_argument("--cost", choices=("time", "energy"), help="what to minimise (default: the scenario's)")
     r.add_argument("--trigger", choices=("tolerance", "every"), help="when to re-plan (default: the scenario's "
