@@ -19,13 +19,20 @@ def add_parsers(sub):
                        "timeline, the ICP pose chained, a segment where the log is not continuous. "
                        "'borealtc': a BorealTC Clearpath Husky pro_XX.csv (github.com/norlab-ulaval/BorealTC): "
                        "wheel speeds and motor currents; it logs no commands, so the measured wheel speeds stand in "
-                       "for them, and its currents are magnitudes, signed here by the wheel's direction of travel.")
-    p.add_argument("dataset", choices=("drive", "borealtc"), help="the dataset the source comes from")
-    p.add_argument("source", type=path_arg, help="the dataset's file")
+                       "for them, and its currents are magnitudes, signed here by the wheel's direction of travel. "
+                       "'rosbag': a ROS 2 bag folder (sqlite3 or MCAP) or a ROS 1 .bag of a skid-steer robot "
+                       "(/cmd_vel, /joint_states, /odom, /battery_state by default; --topics renames them; needs "
+                       "pip install 'sbmpc[ros]'; docs/robot.md).")
+    p.add_argument("dataset", choices=("drive", "borealtc", "rosbag"), help="the dataset the source comes from")
+    p.add_argument("source", type=path_arg, help="the dataset's file (rosbag: the bag folder or .bag file)")
     p.add_argument("--out", type=path_arg, required=True, help="run CSV to write")
     p.add_argument("--terrain", help="terrain of the run: a DRIVE terrain (asphalt, gravel, sand) or a BorealTC one "
                    "(ASPHALT, FLOORING, ICE, MIXED, SANDY_LOAM, SNOW), written as the nearest shipped terrain, or any "
                    "shipped name or file (default: from the file's name, or for BorealTC its folder's)")
+    p.add_argument("--vehicle", help="rosbag: the robot, a shipped vehicle name or YAML (its track and wheel radius "
+                   "turn /cmd_vel into wheel speeds; written as # vehicle:)")
+    p.add_argument("--topics", type=path_arg, help="rosbag: a topic map YAML (cmd_vel, joint_states, odom, battery, "
+                   "left_joints, right_joints; docs/robot.md)")
     p.set_defaults(func=run_import)
 
 
@@ -49,6 +56,11 @@ def _datasets() -> dict:
 
 def run_import(args) -> int:
     from dynamics.runs import RunError, write_run
+    if args.dataset == "rosbag":
+        return _import_rosbag(args)
+    for flag in ("vehicle", "topics"):
+        if getattr(args, flag) is not None:
+            raise InputError(f"--{flag}: expected only with the rosbag dataset, found it with {args.dataset}")
     label, kind, known, named, key_of, read = _datasets()[args.dataset]
     Outputs([args.source]).file(args.out, "--out")
     if not args.source.is_file():
@@ -83,4 +95,30 @@ def run_import(args) -> int:
     segs = run.segments()
     print(f"wrote {args.out}: {len(run)} samples, {run.t[-1] - run.t[0]:.0f} s, {len(segs)} segment(s), "
           f"vehicle {run.meta['vehicle']}, terrain {shipped}")
+    return 0
+
+
+def _import_rosbag(args) -> int:
+    from dynamics import ParameterError, load_terrain, load_vehicle
+    from dynamics.runs import write_run
+    from ..rosbag import read_bag, topic_map
+    Outputs([args.source] + ([args.topics] if args.topics else [])).file(args.out, "--out")
+    for flag in ("vehicle", "terrain"):
+        if getattr(args, flag) is None:
+            raise InputError(f"--{flag}: expected the robot's {flag} (a shipped name or a YAML file) for a ROS bag, "
+                             "found nothing")
+    try:
+        vehicle = load_vehicle(args.vehicle)
+    except ParameterError as exc:
+        raise InputError(f"--vehicle: {exc}") from None
+    try:
+        load_terrain(args.terrain)
+    except ParameterError as exc:
+        raise InputError(f"--terrain: {exc}") from None
+    run = read_bag(args.source, vehicle, args.terrain, args.vehicle, topic_map(args.topics))
+    with atomic(args.out) as tmp:
+        write_run(tmp, run)
+    segs = run.segments()
+    print(f"wrote {args.out}: {len(run)} samples, {run.t[-1] - run.t[0]:.1f} s, {len(segs)} segment(s), "
+          f"vehicle {args.vehicle}, terrain {args.terrain}; {run.meta['note']}")
     return 0

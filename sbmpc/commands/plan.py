@@ -52,12 +52,42 @@ def add_backend_flags(p):
     p.add_argument("--time-budget", type=float, help="wall-clock budget [s] (default: the scenario's)")
     p.add_argument("--start", help="start pose X,Y[,YAW_DEG] [m, m, deg] (default: the scenario's)")
     p.add_argument("--goal", help="goal X,Y[,RADIUS] [m] (default: the scenario's)")
+    p.add_argument("--bag", type=path_arg, metavar="OUT", help="also write a ROS 2 bag folder (MCAP) with the plans' "
+                   "nav_msgs/Path, a run's nav_msgs/Odometry and the map as sensor_msgs/PointCloud2, for RViz or "
+                   "Foxglove (pip install 'sbmpc[ros]'; docs/robot.md)")
+    p.add_argument("--frame", default="map", help="the frame_id of the bag's messages (default: map)")
     p.add_argument("--horizon", type=float, metavar="S", help="receding-horizon plans: every period a search S seconds "
                    "ahead, made while the vehicle drives the period before (plan, compare: the planning vehicle "
                    "drives at its controller rate, and the plan is that drive; run: the truth) (default: the scenario's planner.horizon_s, 0: whole-route plans; docs/planner.md#receding-horizon-plans)")
     p.add_argument("--margin", type=float, help="share of the drive's reach every edge keeps in reserve, and of "
                    "mass and grip its pessimistic twin carries more (default: the scenario's planner.margin, "
                    "0.1; 0: plans at the nominal vehicle's limit; docs/planner.md#margin)")
+
+
+def bag_out(args) -> Path | None:
+    """The --bag folder, checked before any work: a new folder in a writable place."""
+    out = getattr(args, "bag", None)
+    if out is None:
+        return None
+    out = Path(out)
+    if out.exists():
+        raise InputError(f"--bag: expected a new folder for the ROS 2 bag, found the existing '{out}'")
+    Outputs().folder(out, "--bag")
+    if not getattr(args, "frame", "map") or any(c.isspace() for c in args.frame):
+        raise InputError(f"--frame: expected a frame id without spaces, found {args.frame!r}")
+    from ..rosbag import _rosbags
+    _rosbags()
+    return out
+
+
+def write_bag_out(args, world, plans: dict, run=None) -> None:
+    """Write --bag (when given): the plans, the run, the map (sbmpc.rosbag.write_bag)."""
+    if getattr(args, "bag", None) is None:
+        return
+    from ..rosbag import write_bag
+    counts = write_bag(args.bag, world.emap, plans, args.frame, run)
+    print(f"wrote {args.bag}: ROS 2 bag (MCAP), frame {args.frame}: "
+          + ", ".join(f"{t} ({n})" for t, n in counts.items()))
 
 
 def _numbers(text: str, flag: str, n_min: int, n_max: int, what: str) -> list:
@@ -250,6 +280,7 @@ def run_plan(args) -> int:
     if not 0 <= args.robustness <= 10_000:
         raise InputError(f"--robustness: expected a number of vehicles in [0, 10000], found {args.robustness}")
     world = _world(args)
+    bag_out(args)
     cost = args.cost or world.scenario.cost
     compile_note(args.quiet)
     if world.scenario.planner.horizon_s > 0.0:
@@ -263,6 +294,7 @@ def run_plan(args) -> int:
         from ..margin import robustness
         plan.margin["robustness"] = robustness(world, cost, plan.controls, args.robustness)
     print(summary(plan))
+    write_bag_out(args, world, {cost: plan})
     if args.json:
         write_json(args.json, plan.to_json())
     if args.rrd:
@@ -295,6 +327,7 @@ def run_compare(args) -> int:
     world = _world(args)
     from ..world import checked_cost
     checked_cost(world, "energy")       # both costs are planned: refused before the folder is made
+    bag_out(args)
     out.mkdir(parents=True, exist_ok=True)
     compile_note(args.quiet)
     t0 = time.perf_counter()
@@ -328,6 +361,7 @@ def run_compare(args) -> int:
         recording.write(tmp, world.emap, plans, app=f"sbmpc compare {world.scenario.name}",
                         scenario=world.scenario, vehicle=world.vehicle)
     print(f"wrote {out / 'compare.json'}, {out / 'compare.png'}, {out / 'compare.rrd'}")
+    write_bag_out(args, world, plans)
     if not any(p.found for p in plans.values()):
         raise NoResult(f"no path: {plans['time'].reason}")
     return 0

@@ -6,7 +6,7 @@ from dataclasses import replace
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
 from .compiling import compile_note
-from .plan import Progress, _world, add_backend_flags
+from .plan import Progress, _world, add_backend_flags, bag_out, write_bag_out
 
 
 def add_parsers(sub):
@@ -79,6 +79,7 @@ def run_run(args) -> int:
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
     world = _world(args)          # with --vehicle as its planning vehicle
+    bag_out(args)
     truth = checked_vehicle(args.truth, "--truth")
     for flag, f in (("--truth-mass", args.truth_mass), ("--truth-grip", args.truth_grip)):
         if f is not None and not 0.2 <= f <= 5.0:
@@ -95,6 +96,8 @@ def run_run(args) -> int:
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost),
                        truth_grip=grip)
     print(summary(res))
+    first = res.plans[0].plan if res.plans else None
+    write_bag_out(args, world, {cost: first} if first is not None and first.found and first.trajectory else {}, res)
     if args.json:
         write_json(args.json, res.to_json())
     if args.rrd:
