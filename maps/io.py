@@ -8,6 +8,7 @@ A map specification is the ``map:`` section of a scenario (paths relative to ``b
     map: {heights: <2-D array>, resolution: 0.25, origin: [0, 0]}     # from Python
     map: {file: dem.tif}                       # GeoTIFF / DEM (pip install 'sbmpc[geotiff]')
     map: {file: dem.tif, origin: [0, 0], nodata: wall}
+    map: {file: walk.bag, topic: /elevation_mapping/elevation_map, layer: elevation}   # maps.gridmap
 
 A GeoTIFF (read with rasterio) brings its own resolution and position: its first band
 is the heights [m], its pixels must be square and north-up, its CRS projected (metres;
@@ -40,6 +41,7 @@ import numpy as np
 
 from .generate import GeneratorError, generate, unknown_key
 from .grid import ElevationMap
+from .gridmap import is_bag, read_gridmap
 
 
 class MapError(ValueError):
@@ -190,6 +192,10 @@ def load_map(spec, base: Path | str | None = ".", where: str = "map") -> Elevati
             raise MapError(f"{where}.heights: expected a 2-D array of real heights in metres, found {found}") from None
         return _checked(H, _number(spec, "resolution", where, positive=True), _origin(spec, where),
                         f"{where}.heights", "heights")
+    if isinstance(spec.get("file"), str) and is_bag(base / spec["file"]):
+        path = base / spec["file"]
+        H, res, own = read_gridmap(path, spec, where, MapError)
+        return _checked(H, res, _origin(spec, where) if "origin" in spec else own, str(path), path.stem)
     known = {"file", "resolution", "origin", "height_range", "nodata"}
     extra = set(spec) - known
     if extra:

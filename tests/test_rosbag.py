@@ -214,3 +214,87 @@ def test_plans_and_a_run_out_as_a_ros2_bag(tmp_path, capsys):
         assert n > 100
     # an existing bag folder is not overwritten
     assert main(["plan", str(SCN / "flat.yaml"), "--bag", str(out), "--quiet"]) == 2
+
+
+def write_gridmap_bag(path: Path, H: np.ndarray, res: float, center=(0.0, 0.0), kind: str = "mcap",
+                      start=(0, 0), layers=("elevation", "variance"), messages: int = 1) -> None:
+    """A bag with elevation_mapping's grid_map_msgs/GridMap on /elevation_mapping/elevation_map:
+    ``H[j, i]`` (rows up y, columns up x) stored as grid_map does (cell (0, 0) at the
+    largest x and y, column-major, a circular buffer starting at ``start``)."""
+    from maps.gridmap import typestore
+    ros1 = kind == "ros1"
+    ts = typestore(ros1)
+    T = ts.types
+    ny, nx = H.shape
+    M = H.T[::-1, ::-1]                                    # M[i, j]: i down x, j down y
+    M = np.roll(M, start, axis=(0, 1))                     # stored from the buffer's start
+    hdr = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=0), frame_id="odom",
+                                   **({"seq": 0} if ros1 else {}))
+    pose = T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=center[0], y=center[1], z=0.0),
+                                       orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+    info = T["grid_map_msgs/msg/GridMapInfo"](resolution=res, length_x=nx * res, length_y=ny * res, pose=pose,
+                                              **({"header": hdr} if ros1 else {}))
+    D = T["std_msgs/msg/MultiArrayDimension"]
+    layout = T["std_msgs/msg/MultiArrayLayout"](dim=[D(label="column_index", size=ny, stride=nx * ny),
+                                                    D(label="row_index", size=nx, stride=nx)], data_offset=0)
+    arrays = [T["std_msgs/msg/Float32MultiArray"](layout=layout, data=(M if k == 0 else 0.01 + 0 * M).T.ravel()
+                                                  .astype(np.float32)) for k in range(len(layers))]
+    msg = T["grid_map_msgs/msg/GridMap"](info=info, layers=list(layers), basic_layers=[], data=arrays,
+                                         outer_start_index=start[0], inner_start_index=start[1],
+                                         **({} if ros1 else {"header": hdr}))
+    if ros1:
+        from rosbags.rosbag1 import Writer
+        w = Writer(path)
+        ser = ts.serialize_ros1
+    else:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        w = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+        ser = ts.serialize_cdr
+    with w:
+        c = w.add_connection("/elevation_mapping/elevation_map", "grid_map_msgs/msg/GridMap", typestore=ts)
+        for k in range(messages):
+            w.write(c, (k + 1) * 10**9, ser(msg, "grid_map_msgs/msg/GridMap"))
+
+
+@pytest.mark.parametrize("kind, start", [("mcap", (0, 0)), ("ros1", (7, 3))])
+def test_a_scenario_map_from_a_grid_map_bag(tmp_path, kind, start):
+    """An asymmetric hill (highest at the north-east) written as elevation_mapping's
+    GridMap (ROS 2 and ROS 1, a circular buffer that starts mid-map) is read back onto
+    the same nodes, positioned about the map's centre, and plans on it."""
+    from maps.io import load_map
+    ny, nx, res = 40, 60, 0.25
+    X, Y = np.meshgrid(np.arange(nx) * res, np.arange(ny) * res)
+    H = 0.5 * np.exp(-((X - 12.0) ** 2 + (Y - 7.5) ** 2) / 4.0) + 0.01 * X
+    bag = tmp_path / ("map.bag" if kind == "ros1" else "map_bag")
+    write_gridmap_bag(bag, H, res, center=(20.0, 5.0), kind=kind, start=start)
+    e = load_map({"file": bag.name}, tmp_path)
+    np.testing.assert_allclose(e.heights, H, atol=1e-6)
+    assert e.resolution == res
+    assert e.origin == pytest.approx((20.0 - 0.5 * nx * res + 0.5 * res, 5.0 - 0.5 * ny * res + 0.5 * res))
+    e0 = load_map({"file": bag.name, "layer": "elevation", "origin": [0, 0], "message": 0}, tmp_path)
+    assert e0.origin == (0.0, 0.0)
+
+
+def test_grid_map_holes_and_bad_keys_are_refused_or_walled(tmp_path, capsys):
+    from maps.io import MapError, load_map
+    H = np.zeros((20, 30))
+    H[5, 5:9] = np.nan
+    bag = tmp_path / "holes"
+    write_gridmap_bag(bag, H, 0.5, messages=2)
+    with pytest.raises(MapError, match="4 cells without data"):
+        load_map({"file": "holes"}, tmp_path)
+    e = load_map({"file": "holes", "nodata": "wall"}, tmp_path)
+    assert np.isfinite(e.heights).all() and e.heights.max() == pytest.approx(100.0)
+    with pytest.raises(MapError, match="expected one of the grid map's layers elevation, variance, found 'height'"):
+        load_map({"file": "holes", "layer": "height"}, tmp_path)
+    with pytest.raises(MapError, match=r"expected an index in \[-2, 1\]"):
+        load_map({"file": "holes", "message": 5}, tmp_path)
+    with pytest.raises(MapError, match="expected the topic /x"):
+        load_map({"file": "holes", "topic": "/x"}, tmp_path)
+    # through a scenario on the command line: one line, exit 2
+    scn = tmp_path / "s.yaml"
+    scn.write_text("name: s\nmap: {file: holes}\nterrain: grass\nvehicle: p3at\n"
+                   "start: {x: 1, y: 1, yaw_deg: 0}\ngoal: {x: 10, y: 5, radius: 1}\n")
+    assert main(["plan", str(scn), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "4 cells without data" in err[0]
