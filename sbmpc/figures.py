@@ -58,7 +58,7 @@ def plot_trajectory(traj, path, title: str = "", fmt: str | None = None) -> None
     plt.close(fig)
 
 
-PLAN_COLOURS = {"time": "tab:orange", "energy": "tab:green"}
+PLAN_COLOURS = {"time": "tab:orange", "energy": "tab:purple"}   # (the terrain map is green)
 
 
 def _relief(ax, emap):

@@ -9,7 +9,8 @@ Entities (one set per plan label, e.g. ``time`` and ``energy``)::
 
     terrain                      Mesh3D with vertex normals, static
     markers/start, markers/goal  Points3D (labelled) and the goal disc's circle, static
-    paths/<label>                LineStrips3D, static
+    paths/<label>                LineStrips3D, static; paths/<label>/label: Points3D on the path
+                                 with the plan's name, time and energy
     vehicle/<label>              Transform3D over time; vehicle/<label>/body Boxes3D
     plots/speed/<label>          Scalars [m/s]
     plots/tau_l/<label>, plots/tau_r/<label>   Scalars [N m]
@@ -28,7 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-COLOURS = {"time": (230, 120, 30), "energy": (40, 170, 80)}
+# the plans' colours: neither is found in the terrain's colour map (greens, browns, white)
+COLOURS = {"time": (240, 110, 20), "energy": (130, 50, 210)}
+MARGIN_COLOUR = (250, 215, 0)
+CAMERA_ELEVATION_DEG = 28.0   # the default eye looks down this steeply: low enough to show the relief
+ALONG = {"time": 0.35, "energy": 0.65}     # where along its path a plan's label sits (labels apart)
 # (entity, trajectory key, view title)
 SERIES = (("speed", "v", "speed [m/s]"), ("tau_l", "tau_l", "left torque [N m]"),
           ("tau_r", "tau_r", "right torque [N m]"), ("i_l", "i_l", "left current [A]"),
@@ -36,14 +41,39 @@ SERIES = (("speed", "v", "speed [m/s]"), ("tau_l", "tau_l", "left torque [N m]")
           ("energy", "energy_J", "energy used [J]"))
 
 
-def blueprint():
+def display(label: str) -> str:
+    """A plan's name in views and legends: 'time-optimal', 'energy-optimal', else the label."""
+    return f"{label}-optimal" if label in COLOURS else label
+
+
+def camera(emap) -> tuple:
+    """(eye position, look target) [m] of the default 3-D view: from the map's south-west,
+    CAMERA_ELEVATION_DEG above its mean height, far enough to see the whole map."""
+    ny, nx = emap.shape
+    ox, oy = emap.origin
+    w, h = (nx - 1) * emap.resolution, (ny - 1) * emap.resolution
+    target = np.array([ox + 0.5 * w, oy + 0.5 * h, float(np.mean(emap.heights))])
+    d = 0.9 * float(np.hypot(w, h))
+    e = np.radians(CAMERA_ELEVATION_DEG)
+    return target + d * np.array([-np.cos(e) * np.sqrt(0.5), -np.cos(e) * np.sqrt(0.5), np.sin(e)]), target
+
+
+def blueprint(emap=None):
     """The layout: the 3-D scene (terrain, paths, markers, vehicles) beside a column of
-    time-series views, one per quantity, titled with its unit."""
+    time-series views, one per quantity, titled with its unit. With a map, the 3-D view's
+    eye looks at it from the south-west, low enough to show its relief (:func:`camera`),
+    and the time panel plays from the start, looping (the vehicles move at once; a
+    recording otherwise opens at its last instant)."""
     import rerun.blueprint as rrb
     plots = [rrb.TimeSeriesView(origin=f"plots/{name}", name=title) for name, _, title in SERIES]
+    eye = None
+    if emap is not None:
+        pos, target = camera(emap)
+        eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=target, eye_up=[0.0, 0.0, 1.0])
     return rrb.Blueprint(
-        rrb.Horizontal(rrb.Spatial3DView(origin="/", name="terrain, paths and vehicles"),
+        rrb.Horizontal(rrb.Spatial3DView(origin="/", name="terrain, paths and vehicles", eye_controls=eye),
                        rrb.Vertical(rrb.Grid(*plots, grid_columns=2)), column_shares=[3, 2]),
+        rrb.TimePanel(timeline="time", play_state="playing", loop_mode="all", state="expanded"),
         collapse_panels=True)
 
 
@@ -101,10 +131,16 @@ def _log_trajectory(rec, label: str, tr: dict, col, every_s: float, vehicle=None
     import rerun as rr
     from scipy.spatial.transform import Rotation
     pts = np.c_[tr["x"], tr["y"], tr["z"] + 0.05]
-    rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.06], labels=[label]), static=True)
+    rec.log(f"paths/{label}", rr.LineStrips3D([pts], colors=[col], radii=[0.08]), static=True)
+    # the label on its path, not at the strip's centre (a hill's, for two paths round it)
+    k = min(int(ALONG.get(label, 0.5) * len(pts)), len(pts) - 1)
+    text = display(label) + (f": {tr['t'][-1] - tr['t'][0]:.1f} s, {tr['energy_J'][-1] - tr['energy_J'][0]:.0f} J"
+                             if "energy_J" in tr else "")
+    rec.log(f"paths/{label}/label", rr.Points3D([pts[k] + [0.0, 0.0, 0.3]], colors=[col], radii=[0.12],
+                                                 labels=[text], show_labels=True), static=True)
     hx, hy, hz = body_half_sizes(vehicle)
     rec.log(f"vehicle/{label}/body", rr.Boxes3D(half_sizes=[[hx, hy, hz]], centers=[[0, 0, hz]],
-                                                 colors=[col]), static=True)
+                                                 colors=[col], fill_mode="solid"), static=True)
     t = tr["t"] - tr["t"][0]
     step = max(1, int(round(every_s / max(float(np.median(np.diff(t))), 1e-9)))) if len(t) > 1 else 1
     keep = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
@@ -117,7 +153,8 @@ def _log_trajectory(rec, label: str, tr: dict, col, every_s: float, vehicle=None
     for name, key, _ in SERIES:
         if key not in tr:
             continue
-        rec.log(f"plots/{name}/{label}", rr.SeriesLines(colors=[col], names=[label], widths=[1.5]), static=True)
+        rec.log(f"plots/{name}/{label}", rr.SeriesLines(colors=[col], names=[display(label)], widths=[1.5]),
+                static=True)
         rec.send_columns(f"plots/{name}/{label}", indexes=[rr.TimeColumn("time", duration=t)],
                          columns=rr.Scalars.columns(scalars=np.asarray(tr[key], float)))
 
@@ -125,7 +162,7 @@ def _log_trajectory(rec, label: str, tr: dict, col, every_s: float, vehicle=None
 def _open(path: Path, app: str, emap, scenario=None):
     import rerun as rr
     rec = rr.RecordingStream(app)
-    rec.save(str(path), default_blueprint=blueprint())
+    rec.save(str(path), default_blueprint=blueprint(emap))
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     verts, tris, cols = terrain_mesh(emap)
     a = len(np.unique(verts[:, 1]))
@@ -178,7 +215,7 @@ def _log_margin(rec, label: str, margin: dict | None, emap) -> None:
             continue
         value = 100.0 * m["least"] if key == "drive_headroom" else m["least_deg"]
         z = float(emap.height(m["x"], m["y"])) + 0.3
-        rec.log(f"margins/{label}/{what}", rr.Points3D([[m["x"], m["y"], z]], colors=[(200, 40, 160)], radii=[0.12],
+        rec.log(f"margins/{label}/{what}", rr.Points3D([[m["x"], m["y"], z]], colors=[MARGIN_COLOUR], radii=[0.12],
                                                         labels=[f"{label}: {text.format(value)} (t = {m['t']:.1f} s)"]),
                 static=True)
 
@@ -193,7 +230,7 @@ def write_run(path: Path | str, emap, result, app: str = "sbmpc run", every_s: f
     path = Path(path)
     rec = _open(path, app, emap, scenario)
     for k, rp in enumerate(result.plans):
-        if not rp.plan.found:
+        if not rp.plan.found or not rp.plan.trajectory:     # (a horizon plan keeps no trajectory)
             continue
         tr = rp.plan.trajectory
         col = (150, 150, 230) if k else (60, 110, 220)

@@ -38,3 +38,40 @@ def test_a_plan_recording_has_markers_series_and_a_blueprint(tmp_path):
     if shutil.which("rerun"):
         out = subprocess.run(["rerun", "rrd", "print", str(path)], capture_output=True, text=True, timeout=120).stdout
         assert "Blueprint" in out
+
+
+def test_the_default_view_tells_the_story(tmp_path):
+    """What a new user saw in hill_tradeoff's compare.rrd: a green energy path lost on
+    the green terrain, labels at the hill's centre, series named 'time'/'energy', a
+    faint box, a camera from which the hill looked flat. Now: both plan colours are far
+    (RGB distance > 100) from every colour the terrain takes; each label sits on its own
+    path and names the plan; the camera looks down 28 deg at the map's centre from the
+    south-west, from far enough to see it all."""
+    from matplotlib import colormaps
+    from pathlib import Path
+    from sbmpc import plan as PL, scenario as SC, world as WO
+    ground = 255 * colormaps["terrain"](np.linspace(0.25, 0.85, 200))[:, :3]
+    for label, col in recording.COLOURS.items():
+        assert np.min(np.linalg.norm(ground - np.array(col), axis=1)) > 100, label
+    w = WO.resolve(SC.load(Path(__file__).resolve().parents[1] / "scenarios" / "hill_tradeoff.yaml"))
+    pos, target = recording.camera(w.emap)
+    d = pos - target
+    assert np.degrees(np.arctan2(d[2], np.hypot(d[0], d[1]))) == pytest.approx(recording.CAMERA_ELEVATION_DEG)
+    assert d[0] < 0 and d[1] < 0
+    ny, nx = w.emap.shape
+    assert np.linalg.norm(d) >= 0.9 * np.hypot(nx - 1, ny - 1) * w.emap.resolution - 1e-9
+    plans = {c: PL.plan(w, c) for c in ("time",)}
+    path = recording.write(tmp_path / "c.rrd", w.emap, plans, scenario=w.scenario, vehicle=w.vehicle)
+    ents = recording.entities(path)
+    assert "/paths/time/label" in ents
+    from rerun.chunk import RrdReader
+    tr = plans["time"].trajectory
+    for c in RrdReader(str(path)).stream().to_chunks():
+        if str(c.entity_path) == "/paths/time/label":
+            rb = c.to_record_batch()
+            label = rb.column(rb.schema.names.index("Points3D:labels")).to_pylist()[0][0]
+            xyz = rb.column(rb.schema.names.index("Points3D:positions")).to_pylist()[0][0]
+    assert label == f"time-optimal: {tr['t'][-1]:.1f} s, {tr['energy_J'][-1]:.0f} J"
+    # on its path: within a few centimetres of a trajectory sample, 0.3 m above it
+    gap = np.hypot(np.asarray(tr["x"]) - xyz[0], np.asarray(tr["y"]) - xyz[1])
+    assert gap.min() < 1e-4
