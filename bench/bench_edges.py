@@ -216,7 +216,7 @@ def edge_cost(baseline: str | None, rounds: int, nodes: int, search: bool = Fals
     try:
         times: dict = {k: [] for k in trees}
         extra = [str(SEARCH_EXPANSIONS)] if search else []
-        for name, tree in trees.items():      # warm-up: compile and cache each tree
+        for _name, tree in trees.items():     # warm-up: compile and cache each tree
             subprocess.run([sys.executable, "-c", TIMER, tree, scen, "4"] + extra, check=True, capture_output=True)
         for _ in range(rounds):
             for name, tree in trees.items():

@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         pose = {"nominal": pose_error(run, base0, ~train), "calibrated": pose_error(run, base1, ~train),
                 "calibrated_alpha": pose_error(run, base_a, ~train)}
         d = diagnose(run, v1, ter_a)
-        rms = lambda pred, m: {c: float(np.sqrt(np.nanmean((run[c] - pred[c])[m] ** 2))) for c in chans}
+        rms = lambda pred, m, run=run, chans=chans: {c: float(np.sqrt(np.nanmean((run[c] - pred[c])[m] ** 2))) for c in chans}
         held = ~train
         ext = replay(run, d.extended_vehicle, d.extended_terrain or ter_a) if d.cause != "none" else base_a
         res = {"samples": len(run), "segments": len(run.segments()), "noise_scales": scales,

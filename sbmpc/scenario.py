@@ -27,6 +27,7 @@ import yaml
 from dynamics.params import did_you_mean, read_yaml_text, yaml_kind
 
 from .errors import InputError
+from .schema_parts import NUM, obj
 
 COSTS = ("time", "energy")
 
@@ -560,8 +561,7 @@ def schema_problems(data) -> list:
     schema is the second, formal check of the same rules, so a file the schema refuses
     is never planned."""
     import jsonschema
-    from .schemas import scenario
-    v = jsonschema.Draft202012Validator(scenario())
+    v = jsonschema.Draft202012Validator(json_schema())
     out = []
     for e in sorted(v.iter_errors(_as_json(data)), key=lambda e: list(map(str, e.absolute_path))):
         msg = e.message
@@ -667,3 +667,59 @@ def terrain_layer(regions, default_index: int, names: list, x: np.ndarray, y: np
             inside = MplPath(np.array(r.coords)).contains_points(np.c_[X.ravel(), Y.ravel()]).reshape(X.shape)
         layer[inside] = k
     return layer
+
+
+def _ranges(table: dict) -> dict:
+    props = {}
+    for key, (typ, lo, hi) in table.items():
+        props[key] = {"type": "integer" if typ is int else "number", "minimum": lo, "maximum": hi}
+    return props
+
+
+def json_schema() -> dict:
+    """The scenario JSON Schema (``sbmpc schema scenario``): its numeric ranges are the
+    validator's own tables (``_SETTING_RANGES``, ``_RUN_RANGES``), so the two cannot
+    drift apart."""
+    point = {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2}
+    region = obj({"terrain": {"type": "string"},
+                   "rect": {"type": "array", "items": NUM, "minItems": 4, "maxItems": 4},
+                   "circle": {"type": "array", "items": NUM, "minItems": 3, "maxItems": 3},
+                   "polygon": {"type": "array", "items": point, "minItems": 3}}, ("terrain",), extra=False)
+    planner = _ranges(_SETTING_RANGES)
+    planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
+                    "hold": {"type": "boolean"},
+                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"}})
+    planner.update({key: {"enum": list(choices)} for key, choices in _SETTING_CHOICES.items()})
+    run = _ranges(_RUN_RANGES)
+    run["trigger"] = {"enum": list(TRIGGERS)}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",
+        **obj({
+            "name": {"type": "string", "minLength": 1},
+            "description": {"type": "string"},
+            "map": {"oneOf": [
+                obj({"file": {"type": "string"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
+                      "origin": point, "height_range": point, "nodata": {"enum": ["wall", "error"]},
+                      "topic": {"type": "string"}, "layer": {"type": "string"}, "message": {"type": "integer"}},
+                     ("file",), extra=False),
+                obj({"generate": {"type": "object"}}, ("generate",), extra=False),
+                obj({"heights": {"type": "array"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
+                      "origin": point}, ("heights", "resolution"), extra=False)]},
+            "terrain": {"oneOf": [{"type": "string"},
+                                  obj({"default": {"type": "string"}, "regions": {"type": "array", "items": region},
+                                        "raster": obj({"file": {"type": "string"},
+                                                        "classes": {"type": "object",
+                                                                    "additionalProperties": {"type": "string"}}},
+                                                       ("file", "classes"), extra=False)},
+                                       ("default",), extra=False)]},
+            "vehicle": {"type": "string"},
+            "start": obj({"x": NUM, "y": NUM, "yaw_deg": NUM, "v": {"type": "number", "minimum": -2, "maximum": 2}},
+                          ("x", "y"), extra=False),
+            "goal": obj({"x": NUM, "y": NUM, "radius": {"type": "number", "minimum": 0.01, "maximum": 1e4,
+                                                          "default": 0.5}},
+                         ("x", "y"), extra=False),
+            "cost": {"enum": ["time", "energy"]},
+            "planner": obj(planner, extra=False),
+            "run": obj(run, extra=False),
+        }, ("map", "start", "goal"), extra=False)}

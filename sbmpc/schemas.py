@@ -6,71 +6,8 @@ apart; the output schemas are checked against real outputs by the tests.
 """
 from __future__ import annotations
 
-NUM = {"type": "number"}
-NUM_OR_NULL = {"type": ["number", "null"]}
-STR_OR_NULL = {"type": ["string", "null"]}
-
-
-def _obj(props: dict, required=(), extra: bool = True) -> dict:
-    out = {"type": "object", "properties": props}
-    if required:
-        out["required"] = list(required)
-    if not extra:
-        out["additionalProperties"] = False
-    return out
-
-
-def _ranges(table: dict) -> dict:
-    props = {}
-    for key, (typ, lo, hi) in table.items():
-        props[key] = {"type": "integer" if typ is int else "number", "minimum": lo, "maximum": hi}
-    return props
-
-
-def scenario() -> dict:
-    from .scenario import _RUN_RANGES, _SETTING_CHOICES, _SETTING_RANGES, TRIGGERS
-    point = {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2}
-    region = _obj({"terrain": {"type": "string"},
-                   "rect": {"type": "array", "items": NUM, "minItems": 4, "maxItems": 4},
-                   "circle": {"type": "array", "items": NUM, "minItems": 3, "maxItems": 3},
-                   "polygon": {"type": "array", "items": point, "minItems": 3}}, ("terrain",), extra=False)
-    planner = _ranges(_SETTING_RANGES)
-    planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
-                    "hold": {"type": "boolean"},
-                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"}})
-    planner.update({key: {"enum": list(choices)} for key, choices in _SETTING_CHOICES.items()})
-    run = _ranges(_RUN_RANGES)
-    run["trigger"] = {"enum": list(TRIGGERS)}
-    return {
-        "$schema": "https://json-schema.org/draft/2020-12/schema",
-        "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",
-        **_obj({
-            "name": {"type": "string", "minLength": 1},
-            "description": {"type": "string"},
-            "map": {"oneOf": [
-                _obj({"file": {"type": "string"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
-                      "origin": point, "height_range": point, "nodata": {"enum": ["wall", "error"]}},
-                     ("file",), extra=False),
-                _obj({"generate": {"type": "object"}}, ("generate",), extra=False),
-                _obj({"heights": {"type": "array"}, "resolution": {"type": "number", "exclusiveMinimum": 0},
-                      "origin": point}, ("heights", "resolution"), extra=False)]},
-            "terrain": {"oneOf": [{"type": "string"},
-                                  _obj({"default": {"type": "string"}, "regions": {"type": "array", "items": region},
-                                        "raster": _obj({"file": {"type": "string"},
-                                                        "classes": {"type": "object",
-                                                                    "additionalProperties": {"type": "string"}}},
-                                                       ("file", "classes"), extra=False)},
-                                       ("default",), extra=False)]},
-            "vehicle": {"type": "string"},
-            "start": _obj({"x": NUM, "y": NUM, "yaw_deg": NUM, "v": {"type": "number", "minimum": -2, "maximum": 2}},
-                          ("x", "y"), extra=False),
-            "goal": _obj({"x": NUM, "y": NUM, "radius": {"type": "number", "minimum": 0.01, "maximum": 1e4,
-                                                          "default": 0.5}},
-                         ("x", "y"), extra=False),
-            "cost": {"enum": ["time", "energy"]},
-            "planner": _obj(planner, extra=False),
-            "run": _obj(run, extra=False),
-        }, ("map", "start", "goal"), extra=False)}
+from .scenario import json_schema as scenario
+from .schema_parts import NUM, NUM_OR_NULL, STR_OR_NULL, obj as _obj
 
 
 def _trajectory() -> dict:

@@ -509,11 +509,11 @@ def summary_table(rows: list) -> str:
     for (s, c, v), rs in sorted(groups.items(), key=lambda kv: tuple(str(x) for x in kv[0])):
         f = [r for r in rs if r["status"] == "found"]
 
-        def med(key):
+        def med(key, f=f):
             x = np.array([r[key] for r in f if r[key] is not None], float)
             return f"{np.median(x):.1f} ({x.min():.1f}-{x.max():.1f})" if x.size else "-"
 
-        def mean(key):
+        def mean(key, f=f):
             x = np.array([r[key] for r in f if r.get(key) is not None], float)
             return f"{x.mean():.2f}" if x.size else "-"
         lines.append((s, c, v, str(len(rs)), str(len(f)), med("travel_time_s"), med("energy_J"), mean("p_stall"),

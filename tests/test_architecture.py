@@ -75,3 +75,28 @@ def imported_packages_of(path):
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             found.add(node.module.split(".")[0])
     return found
+
+
+def test_import_linter_contracts_hold():
+    """pyproject.toml's [tool.importlinter] contracts: the layers (commands, sweep, api,
+    problems, search, then dynamics and maps, then _jitcache), a search that knows no
+    robot, and no import cycle among a package's modules. import-linter's graph holds
+    every import, those inside functions too (the check above reads module level only)."""
+    pytest.importorskip("importlinter")
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-c", "from importlinter.cli import lint_imports_command; "
+                          "lint_imports_command()"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-2000:]
+    assert "0 broken" in out.stdout
+
+
+def test_ruff_is_clean():
+    """pyflakes and bugbear (pyproject.toml [tool.ruff.lint]) over the code, the tests and
+    the benchmarks."""
+    pytest.importorskip("ruff")
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "ruff", "check", "--no-cache", "."], cwd=ROOT, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stdout[-3000:]

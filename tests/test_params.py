@@ -25,7 +25,7 @@ def test_shipped_terrains_table():
 
 
 def test_values_are_immutable(p3at):
-    with pytest.raises(Exception):
+    with pytest.raises(AttributeError):    # a frozen dataclass
         p3at.mass = 3.0
 
 

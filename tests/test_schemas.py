@@ -54,7 +54,7 @@ def test_the_validator_runs_the_schema(monkeypatch, tmp_path, capsys):
     from sbmpc.errors import InputError
     strict = schemas.scenario()
     strict["required"] = strict["required"] + ["description"]
-    monkeypatch.setattr(schemas, "scenario", lambda: strict)
+    monkeypatch.setattr(SC, "json_schema", lambda: strict)
     doc = read_yaml_text(SCEN / "flat.yaml")
     doc.pop("description", None)
     with pytest.raises(InputError, match=r"'description' is a required property \(schema\)"):
