@@ -7,7 +7,7 @@ an update that changes ``dynamics/kernels.py`` (say, the state layout ``NS``) bu
 ``sbmpc/problems/skidsteer.py``, the search would load a skid-steer expansion compiled
 against the old layout and plan silently wrong (seen once: no path on a 2 % grade).
 So the first import of a package with compiled code (``dynamics``, ``maps``,
-``sbmpc.search``, ``sbmpc.problems``) calls :func:`refresh_once`: it hashes the sources
+``sbmpc.search``, ``sbmpc.problems``, ``sbmpc.planning``) calls :func:`refresh_once`: it hashes the sources
 of every file the compiled code is built from and, in each folder where numba may keep
 their cache (a source folder's ``__pycache__``, under ``$NUMBA_CACHE_DIR``, numba's
 user-wide cache), compares that with the stamp the last refresh left there; where it
@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(os.path.abspath(__file__)).parents[1]     # abspath, not resolve: numba's own paths
 # the files the compiled code is built from (the compiled functions and the constants
 # and helpers they read), relative to ROOT
-SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/heuristics.py")
+SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/planning/heuristics.py")
 STAMP = "sbmpc-numba-sources.sha1"
 
 _done = False

@@ -53,14 +53,14 @@ sys.path_hooks = [h for h in sys.path_hooks if "editable" not in getattr(h, "__m
 sys.path_importer_cache.clear()
 from sbmpc import scenario as SC
 try:                                   # the layout since plan.py's split
-    from sbmpc import problem as PB, world as WO
+    from sbmpc.planning import problem as PB, world as WO
     from sbmpc.problems import skidsteer as SS
 except ImportError:
     try:                               # subpackages, the problem still in plan.py
-        from sbmpc import plan as PB, world as WO
+        from sbmpc.planning import plan as PB, world as WO
         from sbmpc.problems import skidsteer as SS
     except ImportError:                # before the search's refactor (world and problem in plan.py)
-        from sbmpc import plan as PB
+        from sbmpc.planning import plan as PB
         WO = PB
         from sbmpc import skidsteer as SS
 from dynamics import kernels as K
@@ -139,7 +139,8 @@ def map_convergence(per_map: int, seed: int, period: float = 1.0) -> dict:
     error that grows with the grade's change along the way."""
     import math
     from dynamics import kernels as K
-    from sbmpc import problem as PB, scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import problem as PB, world as WO
     from sbmpc.problems import skidsteer as SS
     from dynamics.convergence import _feasible
     out, allrows = {}, []

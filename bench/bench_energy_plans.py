@@ -41,8 +41,8 @@ def _summary(p) -> dict:
 
 
 def main(argv=None) -> int:
-    from sbmpc import plan as PL
-    from sbmpc import world as WO
+    from sbmpc.planning import plan as PL
+    from sbmpc.planning import world as WO
     from sbmpc import scenario as SC
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=8)

@@ -78,7 +78,8 @@ def _save(res: dict, out: Path) -> None:
 def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:
     import numba
     from numba import cuda
-    from sbmpc import plan as PL, problem as PB, scenario as SC_, world as WO
+    from sbmpc import scenario as SC_
+    from sbmpc.planning import plan as PL, problem as PB, world as WO
     from sbmpc.problems import skidsteer as SS
     from sbmpc.problems import skidsteer_cuda as SCU
     why = SCU.unavailable()

@@ -64,7 +64,7 @@ def field_scenario(route: int):
 
 def one_run(world, cost, truth: str) -> dict:
     from sbmpc import receding as R
-    from sbmpc.world import heavier
+    from sbmpc.planning.world import heavier
     mass, grip = TRUTHS[truth]
     vehicle = heavier(world.vehicle, mass) if mass != 1.0 else None
     t0 = time.perf_counter()
@@ -100,7 +100,7 @@ def main() -> int:
         plot(json.loads(OUT.read_text()))
         return 0
     from sbmpc import scenario as SC
-    from sbmpc import world as WO
+    from sbmpc.planning import world as WO
     scns = [SC.load(ROOT / "scenarios" / f"{s}.yaml") for s in args.scenarios]
     scns += [field_scenario(r) for r in args.fields]
     rows = []

@@ -40,7 +40,7 @@ SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp
 
 def closed_loop(world, cost, mass=1.0, grip=1.0) -> dict:
     from sbmpc import receding as R
-    from sbmpc.world import heavier
+    from sbmpc.planning.world import heavier
     truth = heavier(world.vehicle, mass) if mass != 1.0 else None
     t0 = time.perf_counter()
     r = R.run(world, cost, truth, truth_grip=grip)
@@ -72,7 +72,7 @@ def main() -> int:
         args.scenarios, args.out, args.no_runs = ["hills_field", "steep_hill"], CURVE, True
         args.configs = [f"margin={m},margin_tip_deg={t}" for m, t in ((0, 0), (0.05, 5), (0.1, 5), (0.15, 5), (0.2, 5))]
     from sbmpc import api
-    from sbmpc.margin import robustness
+    from sbmpc.planning.margin import robustness
     old = json.loads(args.out.read_text()) if args.out.exists() else {}
     rows = {(r["scenario"], r["cost"], r["config"]): r for r in old.get("rows", [])}
     for name in args.scenarios:
@@ -81,7 +81,7 @@ def main() -> int:
                 over = {} if conf == "default" else {k: float(v) for k, v in (kv.split("=") for kv in conf.split(","))}
                 w = api.load_world(ROOT / "scenarios" / f"{name}.yaml", **over)
                 m = w.scenario.planner.margin
-                from sbmpc import plan as PL
+                from sbmpc.planning import plan as PL
                 t0 = time.perf_counter()
                 p = PL.plan(w, cost)
                 row = {"scenario": name, "cost": cost, "config": conf, "margin": m, "status": p.status,

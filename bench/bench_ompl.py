@@ -45,8 +45,8 @@ def ompl_plan(world, cost: str, planner_name: str, budget: float, seed: int) -> 
     from ompl import util as ou
 
     from dynamics import kernels as K
-    from sbmpc import check as CK, problem as PB
-    from sbmpc import world as WO
+    from sbmpc.planning import check as CK, problem as PB
+    from sbmpc.planning import world as WO
     from sbmpc.problems import skidsteer as SS
 
     ou.setLogLevel(ou.LOG_NONE)
@@ -154,8 +154,8 @@ def main(argv=None) -> int:
         return 2
     from dataclasses import replace
 
-    from sbmpc import plan as PL
-    from sbmpc import world as WO
+    from sbmpc.planning import plan as PL
+    from sbmpc.planning import world as WO
     from sbmpc import scenario as SC
     PL.search_plan(WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml")), "time")     # warm numba
     out = {"budget_s": args.budget, "scenarios": {}}

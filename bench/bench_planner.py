@@ -13,7 +13,7 @@ expand the same nodes: ``same_plan`` says whether the controls came out the same
 ``extra_edges`` how many more edges than the serial search a configuration simulated.
 The speed-up is the ratio of planning times within that run (these machines are noisy:
 compare ratios, not seconds across runs). Map size and branching rows use the default settings (every
-core, batch 16). Each row is one search's plan (``sbmpc.plan.search_plan``): ``sbmpc plan
+core, batch 16). Each row is one search's plan (``sbmpc.planning.plan.search_plan``): ``sbmpc plan
 --cost energy`` also runs the time search, to check its plan against
 (``planner.energy_vs_time``), and takes the time row's planning time more.
 """
@@ -43,8 +43,8 @@ def row(plan) -> dict:
 
 
 def main() -> int:
-    from sbmpc import plan as PL
-    from sbmpc import world as WO
+    from sbmpc.planning import plan as PL
+    from sbmpc.planning import world as WO
     from sbmpc import scenario as SC
     import numba
     t0 = time.perf_counter()

@@ -45,7 +45,7 @@ def timed_run(world, cost, truth=None, **kw):
 def main() -> int:
     from dynamics.discrepancy import diagnose
     from dynamics.synth import apply, synth_run
-    from sbmpc import world as WO
+    from sbmpc.planning import world as WO
     from sbmpc import scenario as SC
     from sbmpc.figures import plot_runs
 

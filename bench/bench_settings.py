@@ -1,5 +1,5 @@
 """Planner settings side by side: for every shipped scenario, both costs and Halton seeds
-0-7, each search's own plan (``sbmpc.plan.search_plan``: the energy plan without its
+0-7, each search's own plan (``sbmpc.planning.plan.search_plan``: the energy plan without its
 check against the time plan) under each configuration, in one run.
 
     python bench/bench_settings.py --config hold_periods=1 --config hold_periods=2
@@ -36,9 +36,9 @@ def _config(text: str) -> dict:
 
 
 def main(argv=None) -> int:
-    from sbmpc import plan as PL
+    from sbmpc.planning import plan as PL
     from sbmpc import scenario as SC
-    from sbmpc import world as WO
+    from sbmpc.planning import world as WO
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", action="append", required=True, help="planner overrides, e.g. hold_periods=2")
     ap.add_argument("--costs", nargs="+", default=["energy", "time"], choices=["energy", "time"])

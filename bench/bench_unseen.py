@@ -8,9 +8,9 @@ radius; ``random_hills`` with the map's number as its seed) on one shipped terra
 (asphalt, packed dirt, grass, concrete in turn), from (3, 3) heading 45 deg to a goal
 disc of 0.6 m at (27, 27). Both costs are planned with the default settings (seed 0,
 both cores) and every plan is the one driven at the 1 kHz controller rate. Per map:
-each search's own plan (``sbmpc.plan.search_plan``), whether the energy search's plan
+each search's own plan (``sbmpc.planning.plan.search_plan``), whether the energy search's plan
 costs more energy than the time search's, and the energy plan ``sbmpc plan --cost
-energy`` reports (``sbmpc.plan.plan``: checked against the time plan, the cheaper kept,
+energy`` reports (``sbmpc.planning.plan.plan``: checked against the time plan, the cheaper kept,
 ``planner.energy_vs_time``), with its planning time (both searches), and the planning
 times. The summary: on how many maps the energy search's own plan and the reported
 energy plan are no dearer than the time plan, the energy saved (median, spread), the
@@ -46,8 +46,8 @@ def main() -> int:
     ap.add_argument("--maps", type=int, default=16)
     ap.add_argument("--out", type=Path, default=OUT)
     a = ap.parse_args()
-    from sbmpc import plan as PL
-    from sbmpc import world as WO
+    from sbmpc.planning import plan as PL
+    from sbmpc.planning import world as WO
     from sbmpc import scenario as SC
     t0 = time.perf_counter()
     flat = SC.load(ROOT / "scenarios" / "flat.yaml")

@@ -86,23 +86,23 @@ def load_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **
 
 
 def load_world(scenario, heights=None, resolution=None, origin=(0.0, 0.0), **planner):
-    """The scenario made concrete (:class:`sbmpc.world.World`: map, vehicle, terrains
+    """The scenario made concrete (:class:`sbmpc.planning.world.World`: map, vehicle, terrains
     loaded and the start and goal checked against the map)."""
-    from .world import resolve
+    from .planning.world import resolve
     return resolve(load_scenario(scenario, heights, resolution, origin, **planner))
 
 
 def plan_scenario(scenario, cost: str | None = None, heights=None, resolution=None, origin=(0.0, 0.0),
                   progress=None, **planner):
     """Plan a scenario for ``cost`` ('time' or 'energy'; default the scenario's): a
-    :class:`sbmpc.plan.Plan` (``found``, ``controls`` [(wl, wr, duration_s)],
+    :class:`sbmpc.planning.plan.Plan` (``found``, ``controls`` [(wl, wr, duration_s)],
     ``trajectory`` {name: array}, ``travel_time_s``, ``energy_J``, ``reason`` when no
     path was found). An energy plan is checked against the time plan (the time search
-    runs first, in the same time budget; ``planner.energy_vs_time``, :func:`sbmpc.plan.plan`).
+    runs first, in the same time budget; ``planner.energy_vs_time``, :func:`sbmpc.planning.plan.plan`).
     ``progress(expansions, nodes, elapsed_s)`` is called while it searches, during both
     searches of an energy plan (a callback with a fourth parameter also gets the best
     plan's cost so far, or None)."""
-    from .plan import plan
+    from .planning.plan import plan
     _cost(cost)
     if progress is not None and not callable(progress):
         raise InputError(f"progress: expected a function (expansions, nodes, elapsed_s), found {type(progress).__name__}")
@@ -114,7 +114,7 @@ def compare_scenario(scenario, heights=None, resolution=None, origin=(0.0, 0.0),
     """The time- and the energy-optimal plans, {'time': Plan, 'energy': Plan} (as
     ``sbmpc compare``: a search that found nothing takes the other's plan when that one
     reaches the goal)."""
-    from .plan import plan_both
+    from .planning.plan import plan_both
     return plan_both(load_world(scenario, heights, resolution, origin, **planner))
 
 

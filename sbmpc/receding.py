@@ -18,7 +18,7 @@ the measured state when
   ``max_stalls`` times).
 
 Warm start: a re-plan hands the rest of the previous plan to the search as an
-incumbent (:func:`sbmpc.plan.plan`): replayed from the measured state with the
+incumbent (:func:`sbmpc.planning.plan.plan`): replayed from the measured state with the
 planner's model, when it still reaches the goal its cost bounds the search (no node
 that cannot beat it is opened), and it is kept when the search finds nothing cheaper
 within the re-plan budget. The cost-to-go grid of the heuristic is computed once per
@@ -42,12 +42,12 @@ import numpy as np
 from dynamics import kernels as K
 from dynamics.params import Vehicle
 
-from . import plan as PL
-from .horizon import HorizonPlanner, periods
-from . import problem as PB
+from .planning import plan as PL
+from .planning.horizon import HorizonPlanner, periods
+from .planning import problem as PB
 from . import trajectory as TR
 
-from . import world as WO
+from .planning import world as WO
 from .problems import skidsteer as SS
 from .scenario import RunSettings
 
@@ -455,7 +455,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
 
 
 def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> RunResult:
-    """:func:`run` with receding-horizon plans (``planner.horizon_s``, :mod:`sbmpc.horizon`).
+    """:func:`run` with receding-horizon plans (``planner.horizon_s``, :mod:`sbmpc.planning.horizon`).
 
     The first plan is made from the start state in ``horizon_first_budget_s``. Then, period
     by period: the vehicle (the truth, at its controller rate) drives the first period of
@@ -470,7 +470,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     whose approach lies beyond the horizon) shows as a horizon plan that finds no way on,
     or as a vehicle that makes no progress: the terminal cost at the measured state has
     not fallen for ``STUCK_HORIZONS`` horizons. Then the run falls back to whole-route
-    plans from the measured state (:func:`sbmpc.plan.search_plan` in the planner's
+    plans from the measured state (:func:`sbmpc.planning.plan.search_plan` in the planner's
     budget) and follows them, re-planning the whole route where the vehicle leaves one's
     tolerance, as :func:`run` does (``horizon.fallbacks``, their times in
     ``horizon.fallback_s``)."""

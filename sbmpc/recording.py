@@ -202,7 +202,7 @@ def write(path: Path | str, emap, plans: dict, app: str = "sbmpc", every_s: floa
 
 
 def _log_margin(rec, label: str, margin: dict | None, emap) -> None:
-    """Where a plan runs closest to the limits (plan.margin, :mod:`sbmpc.margin`), marked
+    """Where a plan runs closest to the limits (plan.margin, :mod:`sbmpc.planning.margin`), marked
     on its path: ``margins/<label>/drive`` (the least drive headroom held 0.5 s) and
     ``margins/<label>/tip`` (the least tip-over margin), labelled with how much."""
     import rerun as rr

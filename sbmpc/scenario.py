@@ -77,13 +77,13 @@ class PlannerSettings:
     the batch grows to it with the search, by one node every 32 expansions); device:
     'cpu' or 'cuda' (the edges on an NVIDIA GPU through numba-cuda; without one, a
     one-line note and the CPU); polish_time, polish_energy: after the search, polish
-    the plan of that cost by a local search over its controls (:mod:`sbmpc.polish`; on
+    the plan of that cost by a local search over its controls (:mod:`sbmpc.planning.polish`; on
     by default for energy, whose plans the sampled speeds and the seed otherwise move
     by several per cent); energy_vs_time: an energy plan is checked against the time
     plan (the time search runs too) and the one that uses less energy at the controller
-    rate is kept (:func:`sbmpc.plan.plan`); corridor_time, corridor_energy: half-width
+    rate is kept (:func:`sbmpc.planning.plan.plan`); corridor_time, corridor_energy: half-width
     [m] of the corridor round a coarse search's route that the search of that cost looks
-    in (:mod:`sbmpc.corridor`; 0: the whole map); margin: every edge is also driven by a
+    in (:mod:`sbmpc.planning.corridor`; 0: the whole map); margin: every edge is also driven by a
     pessimistic twin, mass, inertia, mu_sa and mu_op raised by this share, along the same
     path from its own drive state, and fails where the twin stalls (0: none;
     docs/planner.md#margin); margin_turn: while the commands turn, the drive keeps this
@@ -93,7 +93,7 @@ class PlannerSettings:
     along headings this far either side; horizon_s: ``sbmpc run`` (and ``plan``/``compare``
     with ``--horizon``) plans receding-horizon, each plan a search this many seconds
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
-    the period before (:mod:`sbmpc.horizon`; 0: whole-route plans); horizon_budget_s,
+    the period before (:mod:`sbmpc.planning.horizon`; 0: whole-route plans); horizon_budget_s,
     horizon_first_budget_s, horizon_expansions: each horizon plan's wall-clock budget,
     the first one's, and its node budget; horizon_weight: w of the horizon searches,
     which is also what the terminal cost is worth against the cost so far (the grid is a
@@ -146,7 +146,7 @@ class PlannerSettings:
 
     def corridor(self, cost: str) -> float:
         """Half-width [m] of the coarse route's corridor the search of ``cost`` looks in
-        (:mod:`sbmpc.corridor`; 0: the whole map)."""
+        (:mod:`sbmpc.planning.corridor`; 0: the whole map)."""
         return self.corridor_time if cost == "time" else self.corridor_energy
 
 

@@ -17,7 +17,7 @@ def _trajectory() -> dict:
 
 
 def plan() -> dict:
-    from .plan import FAILURES
+    from .planning.plan import FAILURES
     check = _obj({"dt": NUM, "reached": {"type": "boolean"}, "travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL,
                   "reason": STR_OR_NULL, "miss_m": NUM_OR_NULL, "drift_allowance_m": NUM_OR_NULL},
                  ("dt", "reached"))
@@ -51,7 +51,7 @@ def plan() -> dict:
 
 
 def _margin() -> dict:
-    """The plan JSON's ``margin`` (sbmpc.margin.report, plan.search_plan)."""
+    """The plan JSON's ``margin`` (sbmpc.planning.margin.report, plan.search_plan)."""
     where = {"t": NUM, "x": NUM, "y": NUM}
     return _obj({"margin": NUM, "margin_turn": NUM, "tip_margin_deg": NUM, "heading_deg": NUM,
                  "drive_headroom": _obj({"least": NUM, **where}, ("least", "t", "x", "y")),
@@ -79,7 +79,7 @@ def compare() -> dict:
 
 
 def run() -> dict:
-    from .plan import FAILURES
+    from .planning.plan import FAILURES
     pe = _obj({"travel_time_s": NUM_OR_NULL, "energy_J": NUM_OR_NULL, "length_m": NUM_OR_NULL},
               ("travel_time_s", "energy_J"))
     row = _obj({"t": NUM, "x": NUM, "y": NUM, "why": {"type": "string"}, "status": {"enum": ["found", "no_path"]},

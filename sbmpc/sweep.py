@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import InputError
-from .margin import drawn_worlds as _drawn_worlds     # the robustness draw
+from .planning.margin import drawn_worlds as _drawn_worlds     # the robustness draw
 
 COLUMNS = ("task_id", "scenario", "family_seed", "cost", "seed", "settings", "variant", "status", "reason",
            "failure", "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",
@@ -334,10 +334,10 @@ def _variant_world(world, variant: dict):
 
 def run_task(task: dict) -> dict:
     """Plan one task (module doc); a row of COLUMNS. Never raises."""
-    from . import check as CK
-    from . import plan as PL
+    from .planning import check as CK
+    from .planning import plan as PL
     from . import scenario as SC
-    from . import world as WO
+    from .planning import world as WO
     from .problems import skidsteer as SS
     t0 = time.perf_counter()
     row = {k: None for k in COLUMNS}

@@ -189,8 +189,9 @@ def test_an_8_bit_png_map_warns_with_its_step_and_the_remedy(tmp_path, capsys):
 
 
 def test_compare_takes_the_other_plan_when_one_search_finds_nothing():
-    from sbmpc import plan as PL, scenario as SC, world as WO
-    from sbmpc.plan import Plan, plan_both
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
+    from sbmpc.planning.plan import Plan, plan_both
     world = WO.resolve(SC.load(FLAT))
     real = PL.search_plan
 
@@ -218,7 +219,8 @@ def test_an_energy_plan_is_never_dearer_than_the_time_plan(monkeypatch):
     own plan is cheaper it stands, with the time plan's figures beside it; with the
     setting off, the own plan stands whatever it costs."""
     from dataclasses import replace
-    from sbmpc import plan as PL, scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
     world = WO.resolve(SC.load(FLAT))
     real = PL.search_plan
     calls = []
@@ -276,8 +278,9 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     """The time search runs first; the energy search gets what it left of the budget, and
     an energy search that then runs out says where the time went (and, the time search
     having found nothing either, how to leave it all to the energy search)."""
-    from sbmpc import plan as PL, scenario as SC, world as WO
-    from sbmpc.plan import Plan
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
+    from sbmpc.planning.plan import Plan
     world = WO.resolve(SC.load(FLAT))
     budgets = {}
 
@@ -314,7 +317,8 @@ def test_the_planning_functions_name_a_bad_argument():
     under the label given; a NaN time budget ran to the node budget; NaN or negative
     control durations, dt = 0, every = 0 were deep errors or skipped; a truth given by
     name or a path given to resolve were AttributeErrors."""
-    from sbmpc import check, plan, receding, scenario, world
+    from sbmpc import receding, scenario
+    from sbmpc.planning import check, plan, world
     from sbmpc.problems import skidsteer as SS
     w = world.resolve(scenario.load(FLAT))
     for call, says in [(lambda: check.replay(w, "time", [(5, 5, 2)], start=np.zeros(5)), f"start: expected a planner state of {SS.NX}"),

@@ -409,7 +409,8 @@ def test_a_search_leaves_numbas_thread_count_as_it_found_it(kw):
     the asked count for the batched one); afterwards the caller's count is back (the
     polish after a search runs its trials on numba's threads)."""
     import numba
-    from sbmpc import problem as PB, scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import problem as PB, world as WO
     from sbmpc.search.astar import Search
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("one numba thread: nothing to change")

@@ -1,4 +1,4 @@
-"""Coarse to fine (sbmpc.corridor): the search looks along a coarse search's route first."""
+"""Coarse to fine (sbmpc.planning.corridor): the search looks along a coarse search's route first."""
 import json
 import math
 from dataclasses import replace
@@ -7,9 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbmpc import corridor as CO, heuristics as HE, scenario as SC, world as WO
+from sbmpc import scenario as SC
+
+from sbmpc.planning import corridor as CO, heuristics as HE, world as WO
 from sbmpc.errors import InputError
-from sbmpc.plan import search_plan
+from sbmpc.planning.plan import search_plan
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 

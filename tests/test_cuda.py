@@ -12,7 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from sbmpc import plan as PL, problem as PB, scenario as SC, world as WO
+from sbmpc import scenario as SC
+
+from sbmpc.planning import plan as PL, problem as PB, world as WO
 from sbmpc.commands.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SIMULATED = r"""
 import numpy as np
 from dataclasses import replace
-from sbmpc import plan as PL, problem as PB, scenario as SC, world as WO
+from sbmpc import scenario as SC
+from sbmpc.planning import plan as PL, problem as PB, world as WO
 from sbmpc.problems import skidsteer as SS
 from sbmpc.problems import skidsteer_cuda as SCU
 from sbmpc.problems.skidsteer_cuda import CudaEdges

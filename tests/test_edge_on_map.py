@@ -6,9 +6,9 @@ from pathlib import Path
 import pytest
 
 from dynamics import kernels as K
-from sbmpc import check as CK
+from sbmpc.planning import check as CK
 from sbmpc import scenario as SC
-from sbmpc import world as WO
+from sbmpc.planning import world as WO
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -48,7 +48,7 @@ def test_a_replay_without_a_record_drives_the_same_and_writes_nothing(skirt):
     wrote the start into row 0 regardless) returns 0 rows and the same end state, to
     the bit, as with every step recorded."""
     import numpy as np
-    from sbmpc import problem as PB
+    from sbmpc.planning import problem as PB
     from sbmpc.problems import skidsteer as SS
     world, X = skirt
     Q, data = PB.pack_world(world, "energy")

@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sbmpc import heuristics as HE, scenario as SC, world as WO
+from sbmpc import scenario as SC
+
+from sbmpc.planning import heuristics as HE, world as WO
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -139,7 +141,7 @@ def test_the_heuristic_never_exceeds_what_the_found_path_still_costs(name, cost,
     top speed of their terrain and grade (mixed_terrain's rough field 0.85 m/s, its road
     0.91 m/s) where they took the commanded top wheel speed (1.00 m/s with its margin),
     which left 20 % of mixed_terrain's time plan unseen (86 % seen now)."""
-    from sbmpc import problem as PB
+    from sbmpc.planning import problem as PB
     from sbmpc.problems import skidsteer as SS
     from sbmpc.search.astar import Search
     from dynamics import kernels as K
@@ -159,7 +161,7 @@ def test_the_heuristic_never_exceeds_what_the_found_path_still_costs(name, cost,
 
 @functools.lru_cache(maxsize=2)
 def _hill_problem(cost):
-    from sbmpc import problem as PB
+    from sbmpc.planning import problem as PB
     world = WO.resolve(SC.load(SCEN / "hill_tradeoff.yaml"))
     return world, PB.problem(world, cost)
 
@@ -213,7 +215,7 @@ def test_the_heuristic_stays_below_a_real_drive_into_a_disc_off_the_grids_nodes(
     closed-loop model's own time or battery energy over its 1 s edges). (With the grid
     reaching the disc only through its nodes inside, 1 mm north of this disc read
     1.22 J where entering it costs 0.24 J.)"""
-    from sbmpc import problem as PB
+    from sbmpc.planning import problem as PB
     from sbmpc.problems import skidsteer as SS
     scn = SC.load(SCEN / "flat.yaml")
     goal = dict(scn.goal, x=16.125, y=8.51, radius=0.5)
@@ -292,7 +294,7 @@ def test_the_band_along_the_edge_is_off_limits_to_the_grid_and_the_reachability_
     band, cuts the goal off, and the plan is refused before any search (the cost-to-go
     grid, a lower bound, still passes there; before, so did the check, and the search
     started); a gap wider than the band leaves it reachable."""
-    from sbmpc import plan as PL
+    from sbmpc.planning import plan as PL
     world = _wall_world(2)                                    # nodes y = 0, 0.25: both in the band
     assert world.margin > 0.25
     band = HE.off_limits(world) & ~HE.blocked_cells(world)
@@ -315,7 +317,7 @@ def test_a_search_that_fails_says_where_it_came_closest_and_whether_a_run_up_is_
     (13.9 deg): every way climbs 14.9 deg or more somewhere (the grid's 8-neighbour
     steps), so a search cut short is told that only a run-up crosses it, and where it
     came closest to the goal."""
-    from sbmpc import plan as PL
+    from sbmpc.planning import plan as PL
     scn = SC.load(SCEN / "runup_ramp.yaml")
     world = WO.resolve(replace(scn, planner=replace(scn.planner, max_expansions=30)))
     need = HE.steepest_climb_needed(world)

@@ -1,4 +1,4 @@
-"""Receding-horizon SBMPC (``planner.horizon_s``, :mod:`sbmpc.horizon`, ``sbmpc run
+"""Receding-horizon SBMPC (``planner.horizon_s``, :mod:`sbmpc.planning.horizon`, ``sbmpc run
 --horizon``): searches that look a few seconds ahead with the cost-to-go grid and a
 turn cost as terminal cost, re-planned every period from the predicted state."""
 from __future__ import annotations
@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from dynamics import kernels as K
-from sbmpc import horizon as HZ
+from sbmpc.planning import horizon as HZ
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc import schemas
-from sbmpc import world as WO
+from sbmpc.planning import world as WO
 from sbmpc.commands.cli import main
 from sbmpc.problems import skidsteer as SS
 

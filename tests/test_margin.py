@@ -1,4 +1,4 @@
-"""Plans with margin (planner.margin, margin_turn, margin_tip_deg; sbmpc.margin): the
+"""Plans with margin (planner.margin, margin_turn, margin_tip_deg; sbmpc.planning.margin): the
 drive's share, the turn reserve, the pessimistic twin against the heavier vehicle's own
 drive at 1 kHz, the tip-over margin, the fallback, the report and the run's guard."""
 import json
@@ -12,11 +12,11 @@ from hypothesis import given, strategies as st
 from dynamics import kernels as K
 from dynamics.drive import current_window, window_share
 from sbmpc import api
-from sbmpc import check as CK
-from sbmpc import plan as PL
-from sbmpc import problem as PB
-from sbmpc import world as WO
-from sbmpc.margin import report, robustness
+from sbmpc.planning import check as CK
+from sbmpc.planning import plan as PL
+from sbmpc.planning import problem as PB
+from sbmpc.planning import world as WO
+from sbmpc.planning.margin import report, robustness
 from sbmpc.problems import skidsteer as SS
 
 P3AT = dict(v_max=12.0, k=1.3825, ra=0.706, imax=3.62)

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from dynamics import kernels as K
-from sbmpc import check as CK, plan as PL, problem as PB, trajectory as TR
+from sbmpc import trajectory as TR
+from sbmpc.planning import check as CK, plan as PL, problem as PB
 from sbmpc.problems import skidsteer as SS
-from sbmpc import world as WO
+from sbmpc.planning import world as WO
 from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
 
@@ -77,7 +78,7 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     The plan reported is spliced from a re-plan where the two parted, and that one holds
     at 1 kHz; without repairs the same search is not reported as found."""
     from dataclasses import replace
-    import sbmpc.repair as mod
+    import sbmpc.planning.repair as mod
     scn = SC.load(SCEN / "hills_field.yaml")
     world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0, margin=0.0, margin_tip_deg=0.0)))
     p = PL.search_plan(world, "energy")     # the energy search's own (plan() would take the time plan)
@@ -142,7 +143,7 @@ def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
     up, than the vehicle can climb even with a run-up (``heuristics.climb_limit``), so
     both plans cross x = 15 m inside the pass at ground level, within the default node
     budget."""
-    from sbmpc import heuristics
+    from sbmpc.planning import heuristics
     world, ps = plans["narrow_pass"]
     e = world.emap
     y = e.origin[1] + e.resolution * np.arange(e.shape[0])

@@ -1,4 +1,4 @@
-"""The polish of a found plan (sbmpc.polish): a local search over its controls that
+"""The polish of a found plan (sbmpc.planning.polish): a local search over its controls that
 never makes a plan dearer, keeps the wheel speeds in the sampled range, reproduces its
 own cost when replayed, and, judged at the controller rate, makes energy plans cheaper."""
 from dataclasses import replace
@@ -10,11 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dynamics import kernels as K
-from sbmpc import check as CK, plan as PL, problem as PB, repair as RP
+from sbmpc.planning import check as CK, plan as PL, problem as PB, repair as RP
 from sbmpc.problems import skidsteer as SS
-from sbmpc import polish as PO
+from sbmpc.planning import polish as PO
 from sbmpc import scenario as SC
-from sbmpc import world as WO
+from sbmpc.planning import world as WO
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 

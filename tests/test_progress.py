@@ -1,7 +1,9 @@
 """Progress lines of long searches: budget fractions, the best plan so far, time left."""
 import pytest
 
-from sbmpc import problem as PB, scenario as SC, world as WO
+from sbmpc import scenario as SC
+
+from sbmpc.planning import problem as PB, world as WO
 from sbmpc.commands.plan import Progress
 from sbmpc.search.astar import Search
 

@@ -27,7 +27,8 @@ def test_the_vehicle_box_is_the_vehicles_own():
 
 
 def test_a_plan_recording_has_markers_series_and_a_blueprint(tmp_path):
-    from sbmpc import plan as PL, scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
     from pathlib import Path
     w = WO.resolve(SC.load(Path(__file__).resolve().parents[1] / "scenarios" / "flat.yaml"))
     plan = PL.plan(w, "time")
@@ -49,7 +50,8 @@ def test_the_default_view_tells_the_story(tmp_path):
     south-west, from far enough to see it all."""
     from matplotlib import colormaps
     from pathlib import Path
-    from sbmpc import plan as PL, scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
     ground = 255 * colormaps["terrain"](np.linspace(0.25, 0.85, 200))[:, :3]
     for label, col in recording.COLOURS.items():
         assert np.min(np.linalg.norm(ground - np.array(col), axis=1)) > 100, label

@@ -272,7 +272,7 @@ def test_a_package_shadowed_by_left_over_folders_is_named_not_a_traceback(capsys
 
 
 def test_an_internal_error_is_one_line_and_exit_3_and_debug_shows_it(work, capsys, monkeypatch):
-    from sbmpc import plan as PL
+    from sbmpc.planning import plan as PL
     from sbmpc.commands import compiling
     def broken(*a, **k):
         raise ZeroDivisionError("float division by zero")

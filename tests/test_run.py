@@ -13,8 +13,8 @@ import pytest
 from dynamics.discrepancy import diagnose
 from dynamics.params import vehicle_to_yaml
 from dynamics.synth import apply, synth_run
-from sbmpc import world as WO
-from sbmpc import horizon as HZ
+from sbmpc.planning import world as WO
+from sbmpc.planning import horizon as HZ
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
@@ -42,7 +42,7 @@ def test_truth_equal_to_model_runs_the_first_plan_without_replanning(runup, cost
     """The truth is driven at the controller rate, as the plan was checked: with a
     perfect model the run is the first plan, sample for sample, to round-off until the
     first control held over two periods, which the run executes period by period
-    (:func:`sbmpc.horizon.periods`): there the map's grade is no longer extrapolated
+    (:func:`sbmpc.planning.horizon.periods`): there the map's grade is no longer extrapolated
     to the step's midpoint for the first step of the second period (an edge starts from
     the grade at its start), and the two drives part by at most a few micro-metres per
     second, 1e-6 m and 1e-4 J by the end of runup_ramp's energy plan. (A plan whose

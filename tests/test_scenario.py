@@ -135,7 +135,7 @@ def test_a_terrain_class_raster_sets_the_terrain_of_every_cell(tmp_path):
     on top; a raster of the wrong shape is refused with both shapes."""
     import numpy as np
     from PIL import Image
-    from sbmpc import world as WO
+    from sbmpc.planning import world as WO
     C = np.zeros((49, 81), np.int64)
     C[:, 41:] = 1                                   # the eastern half
     C[:10, :] = 7                                   # a class not listed: the default

@@ -139,7 +139,8 @@ def test_a_variants_vehicle_file_is_the_specs_and_changes_parse_as_they_apply(tm
     p.write_text("scenarios: [../scn/flat.yaml]\n"
                  "variants: [{name: big, vehicle: big.yaml}, {name: s, vehicle: {mass: '.5%', inertia: '1.5'}}]\n")
     spec = SW.load_spec(p)
-    from sbmpc import scenario as SC, world as WO
+    from sbmpc import scenario as SC
+    from sbmpc.planning import world as WO
     world = WO.resolve(SC.load(scn_dir / "flat.yaml"))
     assert SW._variant_world(world, spec["variants"][0]).vehicle.mass == 40.0
     w2 = SW._variant_world(world, spec["variants"][1])
@@ -209,7 +210,8 @@ def test_a_robustness_draw_outside_a_parameters_range_is_drawn_again(monkeypatch
     """patch_inner varied by 100 %: a draw above patch_outer failed the whole task (an
     error row that kept the plan's figures); draws outside the range are drawn again, and
     where none lands in it the plan stands with the reason."""
-    from sbmpc import world as WO, scenario as SC
+    from sbmpc import scenario as SC
+    from sbmpc.planning import world as WO
     world = WO.resolve(SC.load(ROOT / "scenarios" / "flat.yaml"))
     drawn = SW._drawn_worlds(world, {"samples": 20, "seed": 0, "vary": {"patch_inner": 1.0}}, "0" * 16)
     assert len(drawn) == 20 and all(w.vehicle.patch_inner < w.vehicle.patch_outer for w in drawn)

@@ -102,7 +102,7 @@ def _numbers(text: str, flag: str, n_min: int, n_max: int, what: str) -> list:
 
 def _world(args):
     from .. import scenario as SC
-    from .. import world as WO
+    from ..planning import world as WO
     scn = SC.load(args.scenario)
     if args.seed is not None:
         if not 0 <= args.seed < 2**31:
@@ -143,7 +143,7 @@ def _world(args):
         if len(v) > 2 and not 0.01 <= v[2] <= 1e4:
             raise InputError(f"--goal: expected a radius in [0.01, 10000] m, found {v[2]:g}")
         scn = replace(scn, goal=dict(scn.goal, x=v[0], y=v[1], **({"radius": v[2]} if len(v) > 2 else {})))
-    from ..problem import device_note
+    from ..planning.problem import device_note
     note = device_note(scn.planner)
     if note:
         print(f"note: {note}", file=sys.stderr)
@@ -217,7 +217,7 @@ def summary(plan) -> str:
 
 def _margin_line(plan) -> str:
     """How close the plan runs to the limits (planner.margin), and its robustness when measured."""
-    from ..margin import summary_line
+    from ..planning.margin import summary_line
     m = plan.margin
     if not m:
         return ""
@@ -272,7 +272,7 @@ def _rival_line(plan) -> str:
 
 
 def run_plan(args) -> int:
-    from .. import plan as PL
+    from ..planning import plan as PL
     from .. import recording
     outs = Outputs(scenario_inputs(args.scenario))
     outs.file(args.json, "--json")
@@ -291,7 +291,7 @@ def run_plan(args) -> int:
                        time_progress=Progress("time search (the energy plan is checked against it)", args.quiet,
                                               cost="time"))
     if args.robustness and plan.found and plan.margin is not None:
-        from ..margin import robustness
+        from ..planning.margin import robustness
         plan.margin["robustness"] = robustness(world, cost, plan.controls, args.robustness)
     print(summary(plan))
     write_bag_out(args, world, {cost: plan})
@@ -319,13 +319,13 @@ def compare_table(plans: dict) -> str:
 
 
 def run_compare(args) -> int:
-    from .. import plan as PL
+    from ..planning import plan as PL
     from .. import recording
     from ..figures import plot_compare
     out = args.out
     Outputs(scenario_inputs(args.scenario)).folder(out, "--out", ("compare.json", "compare.png", "compare.rrd"))
     world = _world(args)
-    from ..world import checked_cost
+    from ..planning.world import checked_cost
     checked_cost(world, "energy")       # both costs are planned: refused before the folder is made
     bag_out(args)
     out.mkdir(parents=True, exist_ok=True)

@@ -74,7 +74,7 @@ def summary(res) -> str:
 
 def run_run(args) -> int:
     from .. import receding, recording
-    from ..world import checked_vehicle, heavier
+    from ..planning.world import checked_vehicle, heavier
     outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")

@@ -30,9 +30,9 @@ distance d to the goal disc:
   energy the vehicle carries (eq. 5's mass matrix) and z_goal the lowest height of the
   goal disc; electrical energy is at least the mechanical work of the motors.
 
-Both are raised by a cost-to-go grid over the map (``sbmpc.heuristics.cost_to_go``): Dijkstra
+Both are raised by a cost-to-go grid over the map (``sbmpc.planning.heuristics.cost_to_go``): Dijkstra
 from the goal over the map's cells, with 8-neighbour steps that cost d / v_bound (time)
-or the least battery energy of the step (energy, ``sbmpc.heuristics.least_step_energy``:
+or the least battery energy of the step (energy, ``sbmpc.planning.heuristics.least_step_energy``:
 rolling resistance and the climb's potential energy plus the least copper loss the
 motors' currents must dissipate for them; a descent at most pays for its own rolling,
 none is banked), scaled down by the octile-to-Euclidean ratio, and avoiding cells where
@@ -44,13 +44,13 @@ diagonal over v_bound, or the energy step bound for the distance and the climb f
 corner's height to the pose's; the map is bilinear, so the cell's highest corner is never below the pose and
 its way costs no climb). The KE a node
 carries is credited there times KEGRID, the largest slope dE/dW of the grid's step
-bounds (``sbmpc.heuristics.ke_factor``: KE spent on a step saves at most that much of
+bounds (``sbmpc.planning.heuristics.ke_factor``: KE spent on a step saves at most that much of
 its bound). Its
 one approximation: kinetic energy gained in a dip and spent on the next rise is not
 credited beyond the KE the node carries now.
 
 The heuristic is the larger of the two less the goal's gap
-(``sbmpc.heuristics._goal_gap``): the grid reaches the disc at its nodes inside, a path
+(``sbmpc.planning.heuristics._goal_gap``): the grid reaches the disc at its nodes inside, a path
 ends at its edge, up to a cell before. Subtracted from every value alike, also near
 the goal where that makes it negative, it leaves the weighted search's order as it
 was; subtracted from the grid's read alone, or clamped at 0, it moved the energy plans
@@ -314,7 +314,7 @@ def step_energy(f_roll, rise, d, c):
     """Least battery energy [J] of a step of length d [m] rising by ``rise`` = m g dz [J]
     against a rolling force f_roll [N], c [1/N] the copper coefficient: 2 (W + c W^2 / L)
     at :func:`step_work`'s minimum, 0 with nothing to climb against (the derivation:
-    ``sbmpc.heuristics.least_step_energy``, its array form for the cost-to-go grid)."""
+    ``sbmpc.planning.heuristics.least_step_energy``, its array form for the cost-to-go grid)."""
     if f_roll * d + rise <= 0.0:
         return 0.0
     W, L = step_work(f_roll, rise, d, c)
@@ -341,7 +341,7 @@ def _heading_error(params, data, state, dx, dy):
     """|angle| [rad] between the heading of ``state`` and the way on: down the cost-to-go
     grid's slope where there is one (bilinear over the surrounding nodes), else towards
     the goal (dx, dy). The horizon search's terminal cost charges a turn it leaves to
-    after the horizon (:mod:`sbmpc.horizon`); the grid knows no heading."""
+    after the horizon (:mod:`sbmpc.planning.horizon`); the grid knows no heading."""
     gx = dx
     gy = dy
     offd = int(params[Q_OFFD])
@@ -451,7 +451,7 @@ def replay(params, data, start, cmd_l, cmd_r, nsteps, rec):
     return rows, S, end, -1
 
 
-# ---- control sequences (the polish of a found plan: sbmpc.polish) -----------------
+# ---- control sequences (the polish of a found plan: sbmpc.planning.polish) -----------------
 NOT_REACHED = 5.0     # returned negated: the sequence ended outside the goal disc
 PRUNED = np.inf       # returned when the cost so far already reaches the bound
 

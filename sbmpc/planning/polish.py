@@ -39,7 +39,7 @@ import numpy as np
 
 from dynamics import kernels as K
 
-from .problems import skidsteer as SS
+from ..problems import skidsteer as SS
 
 STEPS = (0.1, 0.03, 0.01)   # move sizes, x the top of the sampled wheel-speed range
 MAX_SWEEPS = 4              # sweeps over the sequence per move size

@@ -11,8 +11,8 @@ from dynamics import kernels as K
 from dynamics.resistance import friction_table
 
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
-from .problems import skidsteer as SS
-from .search.astar import Problem
+from ..problems import skidsteer as SS
+from ..search.astar import Problem
 from .world import FIXED_CONTROLS, World, _start, control_set, gripped, heavier, hold_mode
 
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
@@ -85,7 +85,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
     if on_gpu(ps):
-        from .problems.skidsteer_cuda import CudaEdges
+        from ..problems.skidsteer_cuda import CudaEdges
         batch = CudaEdges(Q, data)
     else:
         batch = SS.expand_batch
@@ -104,7 +104,7 @@ def device_note(ps) -> str | None:
     instead), else None."""
     if ps.device != "cuda":
         return None
-    from .problems.skidsteer_cuda import unavailable
+    from ..problems.skidsteer_cuda import unavailable
     why = unavailable()
     return None if why is None else f"device cuda: {why}; planning on the CPU"
 

@@ -17,10 +17,10 @@ from dynamics.simulate import Model
 from maps import ElevationMap
 from maps.io import MapError, load_class_raster, load_map
 
-from .errors import InputError
-from .problems import skidsteer as SS
-from . import scenario as SC
-from .scenario import Scenario, terrain_layer
+from ..errors import InputError
+from ..problems import skidsteer as SS
+from .. import scenario as SC
+from ..scenario import Scenario, terrain_layer
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,7 +31,7 @@ class World:
     emap: ElevationMap
     vehicle: Vehicle
     terrains: tuple
-    keep_out: np.ndarray | None = None   # (ny, nx) nodes off a corridor search's corridor (sbmpc.corridor),
+    keep_out: np.ndarray | None = None   # (ny, nx) nodes off a corridor search's corridor (sbmpc.planning.corridor),
                                          # where the cost-to-go grid adds heuristics.OFF_CORRIDOR
 
     @property
@@ -203,7 +203,7 @@ def gripped(terrains, f: float) -> tuple:
 @functools.lru_cache(maxsize=8)
 def without_margin(world: World) -> World:
     """The world planned without the margin (``planner.margin``, ``margin_tip_deg`` 0):
-    :func:`sbmpc.plan.search_plan`'s fallback where no plan keeps it. Cached per world
+    :func:`sbmpc.planning.plan.search_plan`'s fallback where no plan keeps it. Cached per world
     (worlds hash by identity), so that a run's re-plans share its cost-to-go grid."""
     ps = replace(world.scenario.planner, margin=0.0, margin_turn=0.0, margin_tip_deg=0.0)
     return replace(world, scenario=replace(world.scenario, planner=ps))

@@ -1,7 +1,7 @@
 """A searched plan made to hold at the controller rate: its polish judged at 1 kHz
 (:func:`polished`), its repair by re-planning from where the 1 kHz drive parted from
 the search's prediction (:func:`checked`), and which of two checked plans is better
-(:func:`better`). :func:`sbmpc.plan.search_plan` runs them in that order."""
+(:func:`better`). :func:`sbmpc.planning.plan.search_plan` runs them in that order."""
 from __future__ import annotations
 
 import math
@@ -15,8 +15,8 @@ from .check import Check, check_cost, controller_rate, fine_state, parting
 from .heuristics import unreachable_reason
 from .polish import polish
 from .problem import batch_size, problem, search_threads
-from .problems import skidsteer as SS
-from .search.astar import Problem, Search, numba_threads
+from ..problems import skidsteer as SS
+from ..search.astar import Problem, Search, numba_threads
 from .world import World, wheel_speed_range
 
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
@@ -47,14 +47,14 @@ def better(new: Check, old: Check, cost: str) -> bool:
 
 def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float,
               threads: int | None = None):
-    """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.polish`)
-    and the controller-rate drive (:func:`sbmpc.check.controller_rate`'s result, for
+    """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.planning.polish`)
+    and the controller-rate drive (:func:`sbmpc.planning.check.controller_rate`'s result, for
     :func:`checked`) of the controls that stand: the polish's, or, where the polish is
     None, the searched ones' when they were driven to judge it (else None). The polish
     is None when it gained nothing, or when its controls, driven at the controller rate,
     do not reach the goal (or only pass it where the searched ones entered it) or cost
     more there than the searched ones: the polish is judged where every plan is. ``missed``: (polish, drive) when the drive
-    misses the goal (or only passes it) at the controller rate, for :func:`sbmpc.plan.search_plan` to
+    misses the goal (or only passes it) at the controller rate, for :func:`sbmpc.planning.plan.search_plan` to
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, none gains there or it
     is no cheaper at the controller rate, the disc): a cheapest

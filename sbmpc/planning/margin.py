@@ -27,9 +27,9 @@ import numpy as np
 from dynamics.drive import window_share
 
 from .check import check
-from .errors import InputError
-from .problems import skidsteer as SS
-from .problems.skidsteer import MARGIN_TIME
+from ..errors import InputError
+from ..problems import skidsteer as SS
+from ..problems.skidsteer import MARGIN_TIME
 
 
 def _sustained_max(t: np.ndarray, x: np.ndarray, span: float) -> tuple:

@@ -1,13 +1,13 @@
 """Receding-horizon SBMPC: a search that looks ``planner.horizon_s`` seconds ahead.
 
-The whole-route search (:mod:`sbmpc.plan`) ends in the goal disc; its answer costs the
+The whole-route search (:mod:`sbmpc.planning.plan`) ends in the goal disc; its answer costs the
 whole route, and a robot waits for it. A horizon search is the same graph search over
 the same closed-loop model and the same sampled wheel speeds, stopped at a horizon: a
 node whose planner time reaches ``start time + horizon_s`` (or that enters the goal disc)
 is terminal (:func:`sbmpc.problems.skidsteer.is_goal`). The open set is ordered by
 f = g + w h, so the first terminal node taken out is the one of least cost over the
 horizon plus the heuristic's cost to go from where it ends: the admissible cost-to-go
-grid over the whole map (:func:`sbmpc.heuristics.cost_to_go`, computed once per world
+grid over the whole map (:func:`sbmpc.planning.heuristics.cost_to_go`, computed once per world
 and cost and kept between plans) is the terminal cost. What the horizon cannot see the
 grid does: a hill the vehicle cannot climb is a detour in the grid's values only where
 its cells tip the vehicle over (the grid knows no drive limits); a run-up is found only
@@ -29,8 +29,8 @@ import numpy as np
 from dynamics import kernels as K
 
 from .problem import batch_size, problem, search_threads
-from .problems import skidsteer as SS
-from .search.astar import Search
+from ..problems import skidsteer as SS
+from ..search.astar import Search
 from .world import World, _start, start_state, wheel_speed_range
 
 

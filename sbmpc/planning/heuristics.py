@@ -15,7 +15,7 @@ from dynamics.params import G
 from maps import ElevationMap
 from maps.grid import pitch_roll_at
 
-from .problems import skidsteer as SS
+from ..problems import skidsteer as SS
 from .world import World, wheel_speed_range
 
 
@@ -229,7 +229,7 @@ def _node(world: World, x: float, y: float) -> tuple:
 
 
 CTG_MAX_CELLS = 1_000_000    # larger maps get a cost-to-go window around start and goal
-OFF_CORRIDOR = 1e6           # s or J: what the grid adds off a corridor search's corridor (sbmpc.corridor)
+OFF_CORRIDOR = 1e6           # s or J: what the grid adds off a corridor search's corridor (sbmpc.planning.corridor)
 
 
 def ctg_window(world: World, max_cells: int = CTG_MAX_CELLS) -> tuple:
@@ -299,7 +299,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     its kinetic-energy credit takes (:func:`ke_factor` over the grid's steps; 1 for
     time) and the goal's gap [s or J] the heuristic subtracts (:func:`_goal_gap`). Unreachable
     nodes get a large finite cost. With ``world.keep_out`` (a corridor search,
-    :mod:`sbmpc.corridor`) a node in the corridor gets the least cost of the ways that
+    :mod:`sbmpc.planning.corridor`) a node in the corridor gets the least cost of the ways that
     stay in it, one off it (or with no way that stays in it) the whole map's value plus
     OFF_CORRIDOR: the search expands every node of the corridor it would open before
     any other, and goes on over the whole map, guided as without a corridor, where the
@@ -403,7 +403,7 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
         return D
     D = solve(np.ones(src.size, bool), goal_nodes)
     if world.keep_out is not None:
-        # a corridor search (sbmpc.corridor): inside the corridor the least cost of the ways
+        # a corridor search (sbmpc.planning.corridor): inside the corridor the least cost of the ways
         # that stay in it; off it (or where none stays in it) the whole map's plus OFF_CORRIDOR
         off = np.r_[world.keep_out[j0:j1, i0:i1].ravel(), False]      # (the source node S is in)
         inside = solve(~(off[src] | off[dst]), goal_nodes[~off[goal_nodes]])

@@ -12,9 +12,9 @@ import numpy as np
 from dynamics import ParameterError, kernels as K
 from dynamics.simulate import check_step
 
-from .errors import InputError
+from ..errors import InputError
 from .problem import pack_world
-from .problems import skidsteer as SS
+from ..problems import skidsteer as SS
 from .world import MAX_REPLAY_STEPS, World, _start, checked_controls, checked_cost
 
 

@@ -1,11 +1,11 @@
-"""Planning a scenario: search the problem of a world (:mod:`sbmpc.problem`), polish
-energy plans (:mod:`sbmpc.polish`), check the plan at the controller rate
-(:mod:`sbmpc.check`) and repair it (:mod:`sbmpc.repair`), check an energy plan against
+"""Planning a scenario: search the problem of a world (:mod:`sbmpc.planning.problem`), polish
+energy plans (:mod:`sbmpc.planning.polish`), check the plan at the controller rate
+(:mod:`sbmpc.planning.check`) and repair it (:mod:`sbmpc.planning.repair`), check an energy plan against
 the time plan, say why where nothing is found, and report the drive at the controller
 rate.
 
 ``plan(world, cost)`` returns a :class:`Plan` whose controls, replayed through the
-closed-loop model over the map (:func:`sbmpc.check.replay`), reproduce its trajectory
+closed-loop model over the map (:func:`sbmpc.planning.check.replay`), reproduce its trajectory
 and end in the goal; the plan's trajectory *is* that replay.
 """
 from __future__ import annotations
@@ -23,11 +23,11 @@ from .corridor import Coarse, narrowed
 from .heuristics import _max_rise, steepest_climb_needed, unreachable_reason
 from .polish import Polished
 from .problem import batch_size, problem, search_threads
-from .problems import skidsteer as SS
+from ..problems import skidsteer as SS
 from .repair import better, checked, polished
-from .search.astar import Search, SearchResult
-from .search.counters import budget_text
-from .trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
+from ..search.astar import Search, SearchResult
+from ..search.counters import budget_text
+from ..trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
 from . import world as WO
 from .margin import report
 from .world import World, _start, capability
@@ -63,11 +63,11 @@ class Plan:
     found_by: str = ""            # the search that produced the controls (compare may adopt the other's)
     check: Check | None = None    # the controls replayed at the controller rate
     repairs: int = 0              # re-plans from where the controller-rate replay parted from the search
-    polish: Polished | None = None     # the local search over the found controls (sbmpc.polish)
+    polish: Polished | None = None     # the local search over the found controls (sbmpc.planning.polish)
     rival: dict | None = None     # the time plan an energy plan was checked against (plan())
     failure: str | None = None    # for no_path, the kind of failure: one of FAILURES
-    coarse: Coarse | None = None  # the coarse search whose corridor the search looked in (sbmpc.corridor)
-    margin: dict | None = None    # how close the plan runs to the limits (sbmpc.margin.report), "kept", "note"
+    coarse: Coarse | None = None  # the coarse search whose corridor the search looked in (sbmpc.planning.corridor)
+    margin: dict | None = None    # how close the plan runs to the limits (sbmpc.planning.margin.report), "kept", "note"
 
     @property
     def found(self) -> bool:
@@ -305,7 +305,7 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
                 incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
     search (:func:`_search_plan`), keeping the planner's margin (``planner.margin``,
-    :mod:`sbmpc.margin`). Where no plan keeps it (the search found nothing and edges
+    :mod:`sbmpc.planning.margin`). Where no plan keeps it (the search found nothing and edges
     failed on the margin), the search runs again without it in what is left of the time
     budget: a plan at the nominal vehicle's limit, which says so (``margin.kept`` false,
     ``margin.note``); a vehicle stalled on a slope needs every bit of its drive to get
@@ -371,7 +371,7 @@ def _search_plan(world: World, cost: str | None = None, progress=None, start: np
     coarse = None
     sworld = world
     if ps.corridor(cost) > 0.0 and inc is None:
-        # coarse to fine: the search looks along a coarse search's route (sbmpc.corridor)
+        # coarse to fine: the search looks along a coarse search's route (sbmpc.planning.corridor)
         sworld, coarse = narrowed(world, cost, X0, ps.corridor(cost), t0 + budget)
     prob = problem(sworld, cost, X0)
     search = Search(prob)

@@ -32,7 +32,7 @@ from dynamics import kernels as K
 
 from .check import replay
 from .problem import problem
-from .search.astar import Search
+from ..search.astar import Search
 from .world import World
 
 COARSE_WEIGHT = 1.3            # the coarse search's least weight of h
