@@ -147,6 +147,8 @@ def test_a_topic_map_renames_topics_and_names_the_joints(short, tmp_path):
     ("truncated", "expected a ROS 2 bag folder (sqlite3 or MCAP) or a ROS 1 .bag file, found one that cannot be read"),
     ("nothing", "found no such file"),
     ("badmap", "key 'cmd': expected one of cmd_vel"),
+    ("wrongtype", "topic /cmd_vel: expected geometry_msgs/msg/Twist or geometry_msgs/msg/TwistStamped, found "
+                  "sensor_msgs/msg/JointState"),
 ])
 def test_bad_bags_get_one_line_and_exit_2(short, tmp_path, capsys, case, message):
     bag = tmp_path / "robot.bag"
@@ -173,6 +175,8 @@ def test_bad_bags_get_one_line_and_exit_2(short, tmp_path, capsys, case, message
         args = ["--topics", str(m)]
     elif case == "nothing":
         bag = tmp_path / "none.bag"
+    elif case == "wrongtype":        # the joint states recorded under /cmd_vel
+        write_robot_bag(bag, short, "ros1", topics={"joint_states": "/cmd_vel", "cmd_vel": "/twist"})
     out = tmp_path / "run.csv"
     assert main(["import", "rosbag", str(bag), "--out", str(out), "--vehicle", "p3at", "--terrain", "vinyl",
                  *args]) == 2
