@@ -175,9 +175,19 @@ def run_diagnose(args) -> int:
 def cause_line(d) -> str:
     """'cause: NAME (why)': the verdict and what it rests on, as the terminal and the
     report both say it."""
-    from dynamics.discrepancy import EVIDENCE, MARGIN, TRAINING_EVIDENCE
+    from dynamics.discrepancy import EVIDENCE, MARGIN, SHARE_MIN, TRAINING_EVIDENCE
     named = next((c for c in d.candidates if c.effect == d.cause), None)
     in_pose = named is not None and named.fitted_on == "pose"
+    if d.cause == "unexplained":
+        r = d.residual
+        sides = r.get("sides", {})
+        side = ""
+        if len(sides) == 2 and max(sides.values()) > 1.5 * min(sides.values()):
+            side = f", most on the {max(sides, key=sides.get)} side"
+        return (f"cause: unexplained (the model misses {r['excess']:.1f} noise units over the noise (held-out error "
+                f"{r['heldout_error']:.1f}) that no candidate explains: the best, {d.hint}, explains "
+                f"{100 * (d.share or 0.0):.0f} % of it, under the {100 * SHARE_MIN:.0f} % that names a cause; "
+                f"it sits most in {r.get('most_in') or 'the whole run'}{side})")
     if d.cause == "none":
         why = (f" (no candidate gains {100 * MARGIN:.0f} % on held-out data with very strong evidence (BIC "
                f"falls by more than {EVIDENCE:g} on both parts, or by more than {TRAINING_EVIDENCE:g} on the one "
@@ -269,7 +279,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     for a, c in zip(np.atleast_1d(ax), d.channels):
         a.plot(t, run[c], ".", ms=1.5, color="0.5", label="measured")
         a.plot(t, base[c], lw=1, label="baseline model")
-        if d.cause != "none":
+        if d.cause not in ("none", "unexplained"):
             a.plot(t, ext[c], lw=1, label=f"extended ({d.cause})")
         a.set_ylabel(c)
         a.axvline(t[0] + TRAIN_FRACTION * (t[-1] - t[0]), color="k", ls=":", lw=1)
@@ -281,7 +291,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.2))
     for c in d.channels[:2]:
         ax[0].plot(t, (run[c] - base[c]) / d.scales[c], lw=0.6, label=f"{c} baseline")
-        if d.cause != "none":
+        if d.cause not in ("none", "unexplained"):
             ax[0].plot(t, (run[c] - ext[c]) / d.scales[c], lw=0.6, label=f"{c} extended")
     ax[0].set_ylabel("residual [noise units]")
     ax[0].set_xlabel("t [s]")
