@@ -45,7 +45,7 @@ def _rosbags():
 def topic_map(path: Path | None) -> dict:
     """The topic map: :data:`TOPICS` updated from a YAML file of ``key: value`` lines
     (keys :data:`MAP_KEYS`; ``left_joints``, ``right_joints``: lists of joint names)."""
-    out = dict(TOPICS, left_joints=None, right_joints=None)
+    out = dict(TOPICS, left_joints=None, right_joints=None, named=())
     if path is None:
         return out
     from dynamics.params import read_yaml_text
@@ -64,6 +64,7 @@ def topic_map(path: Path | None) -> dict:
         elif not (isinstance(v, str) and v.startswith("/")):
             raise InputError(f"{path}: key '{k}': expected a topic name starting with '/', found {v!r:.60}")
         out[k] = v
+    out["named"] = tuple(d)           # the keys the map names: an optional topic it names must be there
     return out
 
 
@@ -126,8 +127,11 @@ def read_bag(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: 
 
         cmd = need("cmd_vel", CMD_TYPES)
         js = need("joint_states", ("sensor_msgs/msg/JointState",))
-        odom = topics["odom"] if have.get(topics["odom"]) == "nav_msgs/msg/Odometry" else None
-        batt = topics["battery"] if have.get(topics["battery"]) == "sensor_msgs/msg/BatteryState" else None
+        # the optional topics: skipped where the bag lacks them, unless the topic map names them
+        odom = need("odom", ("nav_msgs/msg/Odometry",)) if "odom" in topics.get("named", ()) else \
+            (topics["odom"] if have.get(topics["odom"]) == "nav_msgs/msg/Odometry" else None)
+        batt = need("battery", ("sensor_msgs/msg/BatteryState",)) if "battery" in topics.get("named", ()) else \
+            (topics["battery"] if have.get(topics["battery"]) == "sensor_msgs/msg/BatteryState" else None)
         want = [t for t in (cmd, js, odom, batt) if t]
         rows = {t: [] for t in want}
         conns = [c for c in reader.connections if c.topic in want]

@@ -149,6 +149,7 @@ def test_a_topic_map_renames_topics_and_names_the_joints(short, tmp_path):
     ("badmap", "key 'cmd': expected one of cmd_vel"),
     ("wrongtype", "topic /cmd_vel: expected geometry_msgs/msg/Twist or geometry_msgs/msg/TwistStamped, found "
                   "sensor_msgs/msg/JointState"),
+    ("mappedodom", "expected the topic /odometry/filtered (nav_msgs/msg/Odometry) for odom, found the topics"),
 ])
 def test_bad_bags_get_one_line_and_exit_2(short, tmp_path, capsys, case, message):
     bag = tmp_path / "robot.bag"
@@ -175,6 +176,11 @@ def test_bad_bags_get_one_line_and_exit_2(short, tmp_path, capsys, case, message
         args = ["--topics", str(m)]
     elif case == "nothing":
         bag = tmp_path / "none.bag"
+    elif case == "mappedodom":       # a topic map that names an odometry topic the bag lacks
+        write_robot_bag(bag, short, "ros1")
+        m = tmp_path / "map.yaml"
+        m.write_text("odom: /odometry/filtered\n")
+        args = ["--topics", str(m)]
     elif case == "wrongtype":        # the joint states recorded under /cmd_vel
         write_robot_bag(bag, short, "ros1", topics={"joint_states": "/cmd_vel", "cmd_vel": "/twist"})
     out = tmp_path / "run.csv"
