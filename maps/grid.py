@@ -185,3 +185,20 @@ class ElevationMap:
         """Steepest slope [deg] of every cell (from the gradient of the grid)."""
         gy, gx = np.gradient(self.heights, self.resolution)
         return np.degrees(np.arctan(np.hypot(gx, gy)))
+
+
+def wall_nodata(H: np.ndarray, mode, what: str, why: str, where: str, error) -> np.ndarray:
+    """Heights ``H`` with their cells without data (NaN) refused or walled: ``mode``
+    'wall' (a map's ``nodata: wall``) raises them to a wall 100 m above the highest cell,
+    which no plan crosses; anything else makes ``error`` (the exception class to raise)
+    name ``what`` (the file, the layer), how many cells, ``why`` they have none, and the
+    remedy ``where.nodata: wall``. All cells without data is an error either way."""
+    bad = ~np.isfinite(H)
+    if bad.any():
+        if mode != "wall":
+            raise error(f"{what}: {int(bad.sum())} cells without data ({why}); expected none, or "
+                        f"'{where}.nodata: wall' to make them impassable")
+        if bad.all():
+            raise error(f"{what}: expected some cells with data, found none")
+        H[bad] = float(np.nanmax(H)) + 100.0
+    return H

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .grid import wall_nodata
+
 GRID_MAP_MSG_ROS2 = {
     "grid_map_msgs/msg/GridMapInfo": """float64 resolution
 float64 length_x
@@ -140,15 +142,8 @@ def read_gridmap(path: Path, spec: dict, where: str, error) -> tuple:
     H = M[::-1, ::-1].T.copy()                              # H[j, i] up y and up x
     px, py = info.pose.position.x, info.pose.position.y
     own = (px - 0.5 * info.length_x + 0.5 * res, py - 0.5 * info.length_y + 0.5 * res)
-    bad = ~np.isfinite(H)
-    if bad.any():
-        if spec.get("nodata", "error") != "wall":
-            raise error(f"{path}: layer {layer}: {int(bad.sum())} cells without data (NaN: not observed); expected "
-                        f"none, or '{where}.nodata: wall' to make them impassable")
-        if bad.all():
-            raise error(f"{path}: layer {layer}: expected some cells with data, found none")
-        H[bad] = float(np.nanmax(H)) + 100.0
-    return H, res, own
+    return wall_nodata(H, spec.get("nodata", "error"), f"{path}: layer {layer}", "NaN: not observed", where,
+                       error), res, own
 
 
 __all__ = ["GRID_MAP_MSG_ROS1", "GRID_MAP_MSG_ROS2", "is_bag", "read_gridmap", "typestore"]

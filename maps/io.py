@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from .generate import GeneratorError, generate, unknown_key
-from .grid import ElevationMap
+from .grid import ElevationMap, wall_nodata
 from .gridmap import is_bag, read_gridmap
 
 
@@ -301,16 +301,7 @@ def read_geotiff(path: Path, spec: dict, where: str) -> tuple:
     H = np.flipud(H)                                  # row 0 = the southern edge
     ny = H.shape[0]
     origin = _origin(spec, where) if "origin" in spec else (float(tr.c + 0.5 * tr.a), float(tr.f + (ny - 0.5) * tr.e))
-    bad = ~np.isfinite(H)
-    if bad.any():
-        mode = spec.get("nodata", "error")
-        if mode != "wall":
-            raise MapError(f"{path}: {int(bad.sum())} cells without data (nodata); expected none, or "
-                           f"'{where}.nodata: wall' to make them impassable")
-        if bad.all():
-            raise MapError(f"{path}: expected some cells with data, found none")
-        H[bad] = float(np.nanmax(H)) + 100.0
-    return H, res, origin
+    return wall_nodata(H, spec.get("nodata", "error"), str(path), "nodata", where, MapError), res, origin
 
 
 def load_class_raster(file: str, base: Path | str, shape: tuple, where: str = "terrain.raster") -> np.ndarray:

@@ -271,6 +271,36 @@ def _aim(world: WO.World) -> WO.World:
     return replace(world, scenario=replace(world.scenario, goal=dict(g, radius=g["radius"] - m)))
 
 
+def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None) -> RunResult:
+    """The run's outcome, its executed trajectory (the recorded pieces, every
+    ``every``-th row and the last) set on ``out``."""
+    out.status, out.reason = status, reason
+    rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
+    idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
+    out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
+    return out
+
+
+def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", name: str) -> str | None:
+    """A stall of the true vehicle at the measured state X: counted and placed; the
+    failure reason once there are more than ``run.max_stalls``, else None, with the
+    stalled drive restarted from where its wheels are, as a stall protection would: its
+    references set to the measured speeds, commands still in the pipe dropped. Left at
+    the commands that stalled, the rate limit (ref_accel) keeps the drive saturated for a
+    second or more whatever the next plan commands, and every control of a re-plan
+    stalls again."""
+    out.stalls += 1
+    stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
+    if out.stalls > out.settings.max_stalls:
+        return _weaker(stalls, name)
+    X[K.S_STALLT] = 0.0
+    X[K.S_STALLED] = 0.0
+    X[K.S_REFL] = X[K.S_WL]
+    X[K.S_REFR] = X[K.S_WR]
+    real.pipe = None
+    return None
+
+
 def _weaker(stalls: list, name: str) -> str:
     """The failure of a run whose vehicle stalled at ``stalls`` [(x, y)] where every plan
     of the planning model ``name`` predicted it would get through."""
@@ -316,11 +346,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     stalls = []
 
     def finish(status, reason):
-        out.status, out.reason = status, reason
-        rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
-        idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
-        out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
-        return out
+        return _finish(out, pieces, every, status, reason)
 
     while True:
         if why is not None:
@@ -410,20 +436,9 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if end == -SS.STALL:
-            out.stalls += 1
-            stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
-            if out.stalls > rs.max_stalls:
-                return finish("failed", _weaker(stalls, world.vehicle.name))
-            X[K.S_STALLT] = 0.0
-            X[K.S_STALLED] = 0.0
-            # the stalled drive is restarted from where its wheels are, as a stall
-            # protection would: its references set to the measured speeds, commands
-            # still in the pipe dropped. Left at the commands that stalled, the rate
-            # limit (ref_accel) keeps the drive saturated for a second or more whatever
-            # the next plan commands, and every control of a re-plan stalls again.
-            X[K.S_REFL] = X[K.S_WL]
-            X[K.S_REFR] = X[K.S_WR]
-            real.pipe = None
+            failed = _stalled(out, stalls, X, real, world.vehicle.name)
+            if failed:
+                return finish("failed", failed)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
@@ -496,11 +511,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     guide = None                        # [(wl, wr, d)]: the whole-route plan followed after a fallback
 
     def finish(status, reason):
-        out.status, out.reason = status, reason
-        rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
-        idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
-        out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
-        return out
+        return _finish(out, pieces, every, status, reason)
 
     def made(h, why, X0):
         stats.seconds.append(h.seconds)
@@ -556,15 +567,9 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
         dxy, dyaw, dv = deviation(X, P)
         off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
         if end == -SS.STALL:
-            out.stalls += 1
-            stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
-            if out.stalls > rs.max_stalls:
-                return finish("failed", _weaker(stalls, world.vehicle.name))
-            X[K.S_STALLT] = 0.0
-            X[K.S_STALLED] = 0.0
-            X[K.S_REFL] = X[K.S_WL]          # as in run(): the stalled drive restarted where its wheels are
-            X[K.S_REFR] = X[K.S_WR]
-            real.pipe = None
+            failed = _stalled(out, stalls, X, real, world.vehicle.name)
+            if failed:
+                return finish("failed", failed)
             off = True
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "

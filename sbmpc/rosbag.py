@@ -139,8 +139,6 @@ def read_bag(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: 
             for conn, t_bag, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
                 rows[conn.topic].append((_stamp(msg, t_bag), msg))
-        except InputError:
-            raise
         except Exception as exc:
             raise InputError(f"{path}: expected readable messages, found a bag that breaks off or holds a message "
                              f"that cannot be decoded ({' '.join(str(exc).split())[:200]})") from None

@@ -55,7 +55,7 @@ def _datasets() -> dict:
 
 
 def run_import(args) -> int:
-    from dynamics.runs import RunError, write_run
+    from dynamics.runs import RunError
     if args.dataset == "rosbag":
         return _import_rosbag(args)
     for flag in ("vehicle", "topics"):
@@ -90,17 +90,11 @@ def run_import(args) -> int:
         raise InputError(str(exc)) from None
     if key in known:
         run.meta["note"] = f"{run.meta.get('note', '')}; {label} terrain {key}, nearest shipped terrain {shipped}"
-    with atomic(args.out) as tmp:
-        write_run(tmp, run)
-    segs = run.segments()
-    print(f"wrote {args.out}: {len(run)} samples, {run.t[-1] - run.t[0]:.0f} s, {len(segs)} segment(s), "
-          f"vehicle {run.meta['vehicle']}, terrain {shipped}")
-    return 0
+    return _written(args.out, run, f"{run.t[-1] - run.t[0]:.0f} s", f"vehicle {run.meta['vehicle']}, terrain {shipped}")
 
 
 def _import_rosbag(args) -> int:
     from dynamics import ParameterError, load_terrain, load_vehicle
-    from dynamics.runs import write_run
     from ..rosbag import read_bag, topic_map
     Outputs([args.source] + ([args.topics] if args.topics else [])).file(args.out, "--out")
     for flag in ("vehicle", "terrain"):
@@ -116,9 +110,14 @@ def _import_rosbag(args) -> int:
     except ParameterError as exc:
         raise InputError(f"--terrain: {exc}") from None
     run = read_bag(args.source, vehicle, args.terrain, args.vehicle, topic_map(args.topics))
-    with atomic(args.out) as tmp:
+    return _written(args.out, run, f"{run.t[-1] - run.t[0]:.1f} s",
+                    f"vehicle {args.vehicle}, terrain {args.terrain}; {run.meta['note']}")
+
+
+def _written(out, run, span: str, about: str) -> int:
+    """Write the run CSV atomically and say what it holds: samples, ``span``, segments, ``about``."""
+    from dynamics.runs import write_run
+    with atomic(out) as tmp:
         write_run(tmp, run)
-    segs = run.segments()
-    print(f"wrote {args.out}: {len(run)} samples, {run.t[-1] - run.t[0]:.1f} s, {len(segs)} segment(s), "
-          f"vehicle {args.vehicle}, terrain {args.terrain}; {run.meta['note']}")
+    print(f"wrote {out}: {len(run)} samples, {span}, {len(run.segments())} segment(s), {about}")
     return 0
