@@ -5,15 +5,16 @@ et al. (2010), written from the paper and the default parameters by a helper tha
 not read the project's model (dynamics/): RK4 at 1 ms, shear-displacement friction by
 Gauss-Legendre quadrature over the contact patches, its own discrete PID and motor
 limits. It writes 90 s P3-AT runs on vinyl at 100 Hz with sensor noise: two with no
-effect and nine with one hidden effect each (a tyre 7 % and 5 % small on either side, a
+effect and ten with one hidden effect each (a tyre 7 % and 5 % small on either side, a
 voltage sag of 1 V/kJ, a shear relaxation of 0.15 s, command delays of 0.08 and 0.05 s,
-a viscous drag of 0.3 N m s/rad, a turning friction x 0.75, a 4 deg grade). Each run is
+a viscous drag of 0.3 N m s/rad, a turning friction x 0.75, a 4 deg grade along the
+body, a plane rising 2.5 deg towards heading 30 deg). Each run is
 diagnosed as ``sbmpc diagnose`` does; the named cause and its fitted parameter are set
 against the hidden truth.
 
     python bench/bench_independent.py [--base-seeds 20240 31000]
 
-Each base seed is one batch of the eleven runs with its own command sequences and
+Each base seed is one batch of the twelve runs with its own command sequences and
 noise. Writes ``bench/results/independent.json`` (the runs themselves go to a temporary
 folder; ``python bench/independent/sim.py --out DIR`` writes them where you like).
 """

@@ -28,6 +28,11 @@ pose error of the baseline and of the extended model on the held-out part
 (:func:`pose_error`: the predicted motion over 2 s windows against the measured one;
 the replay starts each segment at its measured pose). The pose is reported, not fitted:
 dead-reckoned pose errors grow with time and would outweigh the drive's channels.
+
+Candidates that depend on where the vehicle points use the logged heading where the run
+has one: with a pose, ``grade`` is also fitted as a plane fixed in the world
+(:func:`heading_pitch`: the grade felt along the logged heading, never a predicted
+heading that drifts), and the form with the lower training BIC is kept.
 """
 from __future__ import annotations
 
@@ -73,6 +78,47 @@ CANDIDATES = {
     # sbmpc's own candidate: one scale on the terrain's mu_sa and mu_op (turning friction)
     "turning_friction": (("mu_scale",), (0.1,), (3.0,), (1.0,), 0.0),
 }
+# ``grade`` as a plane fixed in the world (runs with a pose): its rise per metre east and
+# north [-] (tangents; +-0.36 is 20 deg), the pitch from the logged heading (heading_pitch)
+WORLD_GRADE = "grade (world)"
+WORLD_GRADE_SPEC = (("slope_east", "slope_north"), (-0.36, -0.36), (0.36, 0.36), (0.0, 0.0), 0.0)
+
+
+def _spec(key: str) -> tuple:
+    """A candidate's (parameter names, lower bounds, upper bounds, start, grid step)."""
+    return WORLD_GRADE_SPEC if key == WORLD_GRADE else CANDIDATES[key]
+
+
+def has_pose(run: Run) -> bool:
+    """Whether the run logs a pose (x, y, yaw) with at least one heading."""
+    return all(c in run for c in ("x", "y", "yaw")) and bool(np.isfinite(run["yaw"]).any())
+
+
+def heading_pitch(yaw, slope_east: float, slope_north: float) -> np.ndarray:
+    """The grade beta [rad] of eq. 24 that a vehicle feels along its heading ``yaw``
+    [rad] (counter-clockwise from east), shape of ``yaw``, on a plane z = slope_east x +
+    slope_north y (tangents [-]): the plane's rise per metre along the heading is
+    slope_east cos(yaw) + slope_north sin(yaw), so beta = atan of that. Driving up its
+    steepest direction the vehicle feels atan(hypot(slope_east, slope_north)), across it
+    nothing."""
+    yaw = np.asarray(yaw, float)
+    return np.arctan(slope_east * np.cos(yaw) + slope_north * np.sin(yaw))
+
+
+def world_grade(slope_east: float, slope_north: float, se=(math.nan, math.nan)) -> tuple:
+    """The plane's steepest grade and the heading that climbs it, {"grade_deg",
+    "toward_deg"} [deg] (toward in [0, 360)), and their standard errors from those of the
+    slopes ``se`` (first-order propagation; the heading's is NaN on a flat plane)."""
+    h = math.hypot(slope_east, slope_north)
+    g = math.degrees(math.atan(h))
+    toward = math.degrees(math.atan2(slope_north, slope_east)) % 360.0 if h > 0 else 0.0
+    se_e, se_n = se
+    if h > 1e-12:
+        se_g = math.degrees(math.hypot(slope_east * se_e, slope_north * se_n) / h / (1.0 + h * h))
+        se_t = math.degrees(math.hypot(slope_north * se_e, slope_east * se_n) / (h * h))
+    else:
+        se_g, se_t = math.degrees(max(se_e, se_n)), math.nan
+    return {"grade_deg": g, "toward_deg": toward}, {"grade_deg": se_g, "toward_deg": se_t}
 
 
 def _least_squares(fun, x0, lo, hi, diff_step: float, max_nfev: int, with_cost: bool = False) -> tuple:
@@ -167,9 +213,12 @@ def noise_scale(y: np.ndarray) -> float:
     return s if s > 1e-9 else 1e-9
 
 
-def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt: float = REPLAY_DT) -> dict:
-    """Predicted channels at the run's times (NaN where no segment covers them)."""
+def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch=0.0, dt: float = REPLAY_DT) -> dict:
+    """Predicted channels at the run's times (NaN where no segment covers them).
+    ``pitch`` [rad]: the grade, one for the run or one per sample (each step of the
+    replay takes the last sample's)."""
     model = Model(vehicle, terrain, dt)
+    per_sample = np.ndim(pitch) > 0
     n = len(run)
     out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw")}
     pose = all(c in run for c in ("x", "y", "yaw"))
@@ -189,8 +238,9 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0, dt:
         if measured and white:         # (a held or quantised log's noise is its own steps)
             w0l, w0r = start_speeds(float(w0l), float(w0r), *noise)
         p0 = [float(run[c][a]) if pose and np.isfinite(run[c][a]) else 0.0 for c in ("x", "y", "yaw")]
-        S = model.state(float(w0l), float(w0r), pitch, p0[0], p0[1], p0[2])
-        tr = simulate(model, cl[j], cr[j], state=S, pitch=pitch, record_dt=dt, dt=dt)
+        p = _ffill(np.asarray(pitch, float)[a:b])[j] if per_sample else pitch
+        S = model.state(float(w0l), float(w0r), float(p[0]) if per_sample else p, p0[0], p0[1], p0[2])
+        tr = simulate(model, cl[j], cr[j], state=S, pitch=p, record_dt=dt, dt=dt)
         ts = t[0] + tr.t
         for c in out:
             out[c][a:b] = np.interp(t, ts, tr.data[c])
@@ -250,13 +300,16 @@ class Candidate:
     train_evidence: float = math.nan   # as ``evidence``, on the training part
     train_reach: float = math.nan      # as ``reach``, on the training part
     train_error: float = math.nan      # as ``heldout_error``, on the training part
+    key: str = ""             # the fitted form (CANDIDATES' name, or WORLD_GRADE; "": the effect's)
+    x: tuple = ()             # and its parameters in that form's units (_model_for; (): params' values)
 
 
 def at_bound(effect: str, params: dict) -> tuple:
     """The parameters of a fitted candidate that ended at (within AT_BOUND of its range
     from) a bound: the fit may want a value the candidate does not allow. A bound of 0
-    (no delay, no lag, no sag) is the model without the effect, not a limit."""
-    names, lo, hi, _, _ = CANDIDATES[effect]
+    (no delay, no lag, no sag) is the model without the effect, not a limit. ``effect``
+    may be WORLD_GRADE with its slopes as ``params``."""
+    names, lo, hi, _, _ = _spec(effect)
     out = []
     for n, a, b in zip(names, lo, hi):
         x = params[n]
@@ -298,6 +351,13 @@ class Diagnosis:
     share: float | None = None      # the share of the excess over the noise the best candidate explains
     hint: str | None = None         # cause "unexplained": the candidate that explains the most of it
     residual: dict = field(default_factory=dict)   # what is left to explain: size and where it sits
+    extended_slope: tuple | None = None   # cause grade as a plane fixed in the world: (slope_east,
+                                          # slope_north) [-]; extended_pitch_deg is then its steepest grade
+
+    def extended_pitch(self, run: Run):
+        """The grade [rad] of the extended model on ``run``: one number, or one per sample
+        from the logged heading for a grade fixed in the world."""
+        return _extended_pitch(run, self.extended_pitch_deg, self.extended_slope)
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -327,11 +387,21 @@ class Diagnosis:
             "noise_scales": self.scales,
             "extended_vehicle": extended_path,
             "extended_grade_deg": self.extended_pitch_deg,
+            "extended_grade_toward_deg": None if self.extended_slope is None else
+            world_grade(*self.extended_slope)[0]["toward_deg"],
             "pose_error": self.pose,
             "extended_terrain": None if self.extended_terrain is None else
             {"name": self.extended_terrain.name, "mu_sa": self.extended_terrain.mu_sa,
              "mu_op": self.extended_terrain.mu_op},
         }
+
+
+def _extended_pitch(run: Run, grade_deg: float, slope):
+    """The grade [rad] of an extended model: ``grade_deg`` along the body, or the plane
+    ``slope`` (slope_east, slope_north) felt along the run's logged heading."""
+    if slope is None:
+        return math.radians(grade_deg)
+    return heading_pitch(_ffill(run["yaw"]), float(slope[0]), float(slope[1]))
 
 
 def _residuals(run, pred, chans, scales, mask):
@@ -470,7 +540,7 @@ def _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, ba
     return Candidate("wheel_radius", params, {n: float(a) for n, a in zip(names, se)}, err, gain,
                      _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
                      ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound("wheel_radius", params),
-                     "pose", float(pose_gain))
+                     "pose", float(pose_gain), key="wheel_radius", x=tuple(float(a) for a in x))
 
 
 def fit_wheel_radius_to_pose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float, train) -> tuple:
@@ -514,8 +584,11 @@ def ljung_box(r: np.ndarray, lags: int = 20) -> float:
     return n * (n + 2) * q
 
 
-def _model_for(effect, x, vehicle, terrain, names):
-    """(vehicle, terrain, pitch) of a candidate at parameters x."""
+def _model_for(effect, x, vehicle, terrain, names, run=None):
+    """(vehicle, terrain, pitch) of a candidate at parameters x; WORLD_GRADE's pitch is
+    one per sample of ``run``, from its logged heading (:func:`heading_pitch`)."""
+    if effect == WORLD_GRADE:
+        return vehicle, terrain, heading_pitch(_ffill(run["yaw"]), float(x[0]), float(x[1]))
     return apply(vehicle, effect, dict(zip(names, x)), terrain)
 
 
@@ -532,14 +605,14 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train, window_s:
     log-spaced from PROFILED's smallest value, and 0); the standard error from the
     curvature of that sum at the optimum. Two parameters: least squares, the
     standard errors from its Jacobian."""
-    names, lo, hi, x0, step = CANDIDATES[effect]
+    names, lo, hi, x0, step = _spec(effect)
     last = int(np.flatnonzero(train)[-1]) + 1
     last = min(last, int(np.searchsorted(run.t, run.t[0] + window_s)) + 1)
     part = run.slice(0, last)
     tmask = train[:last]
 
     def fun(x):
-        v, ter, pitch = _model_for(effect, x, vehicle, terrain, names)
+        v, ter, pitch = _model_for(effect, x, vehicle, terrain, names, part)
         return _residuals(part, replay(part, v, ter, pitch), chans, scales, tmask)
 
     if len(names) == 1:
@@ -574,7 +647,26 @@ def fit_candidate(effect, run, vehicle, terrain, chans, scales, train, window_s:
         m = fun([x]).size
         se = math.sqrt(2.0 * c0 / max(m - 1, 1) / curv) if curv > 0 else math.nan
         return np.array([x]), np.array([se])
+    if effect == WORLD_GRADE:
+        # the residual has local minima over the drive's saturation (a fit from a level
+        # plane stopped at 0.4 deg on a 2.5 deg one): start from the best of a polar grid
+        # and difference steps of 0.01 (0.6 deg): steps of 0.001 stopped at 2.7 deg, 17 deg off
+        x0 = min(_slope_grid(), key=lambda x: float(np.sum(fun(x) ** 2)))
+        return _least_squares(fun, x0, lo, hi, 1e-2, 40)
     return _least_squares(fun, x0, lo, hi, 1e-3, 40)
+
+
+SLOPE_GRID_DEG = (1.5, 4.0, 8.0, 14.0)   # grades [deg] of the world grade's starting grid, 8 headings each
+
+
+def _slope_grid() -> list:
+    """(slope_east, slope_north) of a level plane and of planes rising SLOPE_GRID_DEG
+    towards 8 headings 45 deg apart."""
+    out = [(0.0, 0.0)]
+    for g in SLOPE_GRID_DEG:
+        s = math.tan(math.radians(g))
+        out.extend((s * math.cos(a), s * math.sin(a)) for a in np.arange(8) * (math.pi / 4))
+    return out
 
 
 def _bic(r, k):
@@ -763,15 +855,20 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     todo = effects or tuple(CANDIDATES)
 
     def candidate(eff, x, se, fitted_on="channels"):
-        names = CANDIDATES[eff][0]
-        v, ter, p = _model_for(eff, x, vehicle, terrain, names)
+        names = _spec(eff)[0]
+        v, ter, p = _model_for(eff, x, vehicle, terrain, names, run)
         pred = replay(run, v, ter, p + pitch)
         err = _error(run, pred, chans, scales, held)
-        params = {n: float(a) for n, a in zip(names, x)}
+        raw = {n: float(a) for n, a in zip(names, x)}
+        if eff == WORLD_GRADE:               # reported as the plane's grade and its heading
+            params, stderr = world_grade(float(x[0]), float(x[1]), tuple(map(float, se)))
+            bound = ("grade_deg",) if at_bound(eff, raw) else ()
+        else:
+            params, stderr, bound = raw, {n: float(a) for n, a in zip(names, se)}, at_bound(eff, raw)
         gain = _gain(err, base_err)
-        return Candidate(eff, params, {n: float(a) for n, a in zip(names, se)}, err, gain,
+        return Candidate("grade" if eff == WORLD_GRADE else eff, params, stderr, err, gain,
                          _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
-                         ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), at_bound(eff, params),
+                         ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), bound,
                          fitted_on=fitted_on,
                          evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
                          reach=_error(base, pred, chans, scales, held),
@@ -779,18 +876,28 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
                                                          _gain(_error(run, pred, chans, scales, train), base_train),
                                                          len(names)),
                          train_reach=_error(base, pred, chans, scales, train),
-                         train_error=_error(run, pred, chans, scales, train))
+                         train_error=_error(run, pred, chans, scales, train), key=eff,
+                         x=tuple(float(a) for a in x))
 
-    for i, eff in enumerate(todo):
-        if progress is not None:
-            progress(i, len(todo), eff)
-        c = candidate(eff, *fit_candidate(eff, run, vehicle, terrain, chans, scales, train))
+    def fitted(key):
+        c = candidate(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, train))
         if c.train_reach < REACH_MIN <= c.reach and _decides(c) is None:
             # the training part cannot see it (a voltage sag that limits the drive only
             # late in the run): its fit there is uninformed; fit it on the held-out part,
             # replaying the whole run (_decides judges it as data the fit has seen)
-            c = candidate(eff, *fit_candidate(eff, run, vehicle, terrain, chans, scales, held, math.inf),
+            c = candidate(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, held, math.inf),
                           fitted_on="heldout")
+        return c
+
+    for i, eff in enumerate(todo):
+        if progress is not None:
+            progress(i, len(todo), eff)
+        c = fitted(eff)
+        if eff == "grade" and has_pose(run):
+            # a grade depends on where the vehicle points: with a logged heading, also as
+            # a plane fixed in the world; the form the training part supports better
+            w = fitted(WORLD_GRADE)
+            c = w if w.bic_delta < c.bic_delta else c
         cands.append(c)
     cands.sort(key=lambda c: -c.gain)
     best, decided = _pick(cands)
@@ -835,16 +942,20 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     if named:                                  # the named cause heads the list
         cands.remove(best)
         cands.insert(0, best)
-    ext_v, ext_t, ext_p = vehicle, terrain, 0.0
+    ext_v, ext_t, ext_p, slope = vehicle, terrain, 0.0, None
     if named:
-        ext_v, ext_t, p = _model_for(best.effect, [best.params[n] for n in CANDIDATES[best.effect][0]], vehicle,
-                                     terrain, CANDIDATES[best.effect][0])
-        ext_p = math.degrees(p)
+        key = best.key or best.effect
+        x = best.x or tuple(best.params[n] for n in _spec(key)[0])
+        ext_v, ext_t, p = _model_for(key, x, vehicle, terrain, _spec(key)[0], run)
+        if key == WORLD_GRADE:
+            slope, ext_p = best.x, best.params["grade_deg"]
+        else:
+            ext_p = math.degrees(p)
     pose = {}
     pe = pose_error(run, base, held)
     if pe is not None:
         pose["baseline"] = pe
-        ext = replay(run, ext_v, ext_t, math.radians(ext_p) + pitch) if named else base
+        ext = replay(run, ext_v, ext_t, _extended_pitch(run, ext_p, slope) + pitch) if named else base
         pose["extended"] = pose_error(run, ext, held)
     rivals = tuple(c.effect for c in cands[1:] if named and _decides(c) and best.gain - c.gain < TIE
                    and (c.fitted_on == "heldout") == (best.fitted_on == "heldout"))   # like with like
@@ -852,4 +963,4 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     cause = best.effect if named else ("unexplained" if residual else "none")
     return Diagnosis(chans, scales, base_err, rmse, q0, cands, cause,
                      gain, _where(run, base, chans, scales), _xcorr(run, base, scales),
-                     ext_v, ext_p, ext_t, pose, rivals, decided, share, hint, residual)
+                     ext_v, ext_p, ext_t, pose, rivals, decided, share, hint, residual, slope)

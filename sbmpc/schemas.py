@@ -133,7 +133,8 @@ def diagnosis() -> dict:
                     "decided_on": {"enum": ["heldout", "heldout_only", "training", "pose", None]},
                     "rivals": {"type": "array", "items": {"type": "string"}},
                     "channels": {"type": "array", "items": {"type": "string"}},
-                    "extended_vehicle": STR_OR_NULL, "run": {"type": "string"}, "diagnosis_time_s": NUM},
+                    "extended_vehicle": STR_OR_NULL, "extended_grade_deg": NUM,
+                    "extended_grade_toward_deg": NUM_OR_NULL, "run": {"type": "string"}, "diagnosis_time_s": NUM},
                    ("schema", "baseline", "candidates", "cause", "gain"))}
 
 

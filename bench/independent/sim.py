@@ -17,7 +17,9 @@ against which `sbmpc diagnose` is checked (bench/bench_independent.py).
                        integral gives the lateral force and the turning-resistance moment
                        (reported only: in the paper's wheel-space model they are absorbed by
                        the kinematic constraint, eq. 1).
-  gravity (eq. 24)     G_i = m g r_i sin(beta) / 2 (constant grade beta along the body axis)
+  gravity (eq. 24)     G_i = m g r_i sin(beta) / 2: a constant grade beta along the body axis
+                       or, with grade_dir_deg, a plane rising grade_deg towards the heading
+                       grade_dir_deg: beta = atan(tan(grade) cos(psi - dir)) at heading psi
   motor (eq. 26, 27)   current-controlled; |I| <= I_max and |R_a I + k w| <= V_max (torque-speed
                        line); tau = k I
   PID (Fig. 4)         discrete at 1 kHz, derivative on the (rate-limited) reference,
@@ -54,17 +56,17 @@ TERRAINS = {
 
 # effect parameters (defaults = the paper's model)
 EFFECT_DEFAULTS = dict(scale_left=1.0, scale_right=1.0, sag_V_per_kJ=0.0, tau_s=0.0,
-                       c_Nms=0.0, grade_deg=0.0, mu_scale=1.0, delay_s=0.0)
+                       c_Nms=0.0, grade_deg=0.0, mu_scale=1.0, delay_s=0.0, grade_dir_deg=math.nan)
 
 # numerical regularisations (documented choices)
 T_CAP = 1.0      # s: longest time a tread particle is counted in contact (wheel at rest)
 W_EPS = 0.02     # rad/s: rolling resistance sign(w) -> clip(w / W_EPS, -1, 1)
 V_EPS = 1e-4     # m/s: sliding direction v/|v| -> v / sqrt(|v|^2 + V_EPS^2)
 
-NP = 27
+NP = 28
 (iM, iI, iR, iB, iL, iC, iBW, iVMAX, iK, iRA, iIMAX, iKP, iKI, iKD, iAREF,
  iALPHA, iMUROLL, iMUSA, iMUOP, iKS,
- iSCL, iSCR, iSAG, iTAU, iVISC, iBETA, iMUSC) = range(NP)
+ iSCL, iSCR, iSAG, iTAU, iVISC, iBETA, iMUSC, iGDIR) = range(NP)
 
 
 def pack(vehicle, terrain, eff):
@@ -78,6 +80,7 @@ def pack(vehicle, terrain, eff):
     P[iSAG], P[iTAU], P[iVISC] = eff['sag_V_per_kJ'], eff['tau_s'], eff['c_Nms']
     P[iBETA] = math.radians(eff['grade_deg'])
     P[iMUSC] = eff['mu_scale']
+    P[iGDIR] = math.radians(eff['grade_dir_deg'])      # NaN: the grade is along the body axis
     return P
 
 
@@ -160,6 +163,8 @@ def deriv(s, Icl, Icr, P, gy, wy, gx, wx, ds):
     B = P[iB]
     alpha = P[iALPHA]
     beta = P[iBETA]
+    if P[iGDIR] == P[iGDIR]:                      # a plane fixed in the world: the grade felt
+        beta = math.atan(math.tan(beta) * math.cos(psi - P[iGDIR]))   # along the heading
     k = P[iK]
     Ra = P[iRA]
     rl = r * P[iSCL]
@@ -421,6 +426,8 @@ CASES = [
     ('viscous_0.3', 'viscous_friction', {'c_Nms': 0.3}, {'c_Nms': 0.3}),
     ('turning_friction_0.75', 'turning_friction', {'mu_scale': 0.75}, {'mu_scale': 0.75}),
     ('grade_4deg', 'grade', {'grade_deg': 4.0}, {'grade_deg': 4.0}),
+    ('grade_2.5deg_world', 'grade', {'grade_deg': 2.5, 'grade_dir_deg': 30.0},
+     {'grade_deg': 2.5, 'toward_deg': 30.0}),
 ]
 
 

@@ -150,7 +150,9 @@ def run_diagnose(args) -> int:
     if out_vehicle is not None:
         note = f"extended by sbmpc diagnose from {args.run}: cause {d.cause}"
         if d.cause == "grade":
-            note += f" (the run was on a {d.extended_pitch_deg:.2f} deg grade; the vehicle is unchanged)"
+            on = ("" if d.extended_slope is None else
+                  f" rising towards heading {d.to_json()['extended_grade_toward_deg']:.0f} deg")
+            note += f" (the run was on a {d.extended_pitch_deg:.2f} deg grade{on}; the vehicle is unchanged)"
         if d.cause == "turning_friction":
             note += (f" (the terrain's mu_sa, mu_op are {d.extended_terrain.mu_sa:.3f}, {d.extended_terrain.mu_op:.3f};"
                      " the vehicle is unchanged)")
@@ -273,7 +275,7 @@ def write_report(folder: Path, run, vehicle, terrain, pitch, d, doc, replay) -> 
 
     from dynamics.discrepancy import MARGIN, TRAIN_FRACTION
     base = replay(run, vehicle, terrain, pitch)
-    ext = replay(run, d.extended_vehicle, d.extended_terrain or terrain, pitch + math.radians(d.extended_pitch_deg))
+    ext = replay(run, d.extended_vehicle, d.extended_terrain or terrain, pitch + d.extended_pitch(run))
     t = run.t
     fig, ax = plt.subplots(len(d.channels), 1, figsize=(11, 2.2 * len(d.channels)), sharex=True)
     for a, c in zip(np.atleast_1d(ax), d.channels):
