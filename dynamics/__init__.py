@@ -19,7 +19,7 @@ module                    holds
 ``identify``              eq. 28: terrain parameters from steady torques
 ========================  ===========================================================
 """
-from _jitcache import refresh_once
+from ._jitcache import refresh_once
 
 refresh_once()     # numba's cache, consistent across files, before anything compiled loads
 

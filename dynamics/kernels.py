@@ -345,6 +345,179 @@ def step_slope(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O):
             _step(P, table, S, cmd_l, cmd_r, sp, cp, h, open_loop, O, False)
 
 
+@jit_inline
+def _reference(ref_l, ref_r, cmd_l, cmd_r, aref, dt):
+    """Step 1 (Fig. 4's reference): the wheel-speed references (ref_l, ref_r) approach
+    the commands [rad/s] at the rate limit ``aref`` [rad/s^2] (0: at once). Returns
+    their changes over the step (dl, dr) [rad/s]. (Scalars in and out, as the other
+    pieces of the step where they can: an array passed into an inlined function costs
+    reference counting that the compiled step does not otherwise pay.)"""
+    dl = cmd_l - ref_l
+    dr = cmd_r - ref_r
+    if aref > 0.0:
+        dl = _clip(dl, -aref * dt, aref * dt)
+        dr = _clip(dr, -aref * dt, aref * dt)
+    return dl, dr
+
+
+@jit_inline
+def _digital_pid(el, er, int_l, int_r, rdl, rdr, wl0, wr0, vmax, k, ra, imax, kp, ki, kd, dt):
+    """Step 2 at the controller period: the paper's digital PID (Fig. 4, gains kp, ki,
+    kd) on the speed errors el, er [rad/s] of the measured wheel speeds wl0, wr0 gives
+    the current commands (icl, icr) [A], held over the step; ``rdl``, ``rdr`` are the
+    references' rates [rad/s^2]. The integrals int_l, int_r [rad] grow only while they
+    would not drive a command further beyond the current window it violates (eq. 27's,
+    voltage ``vmax`` [V], current ``imax`` [A]; conditional integration, as in
+    :func:`_loop_current`). Returns (icl, icr, int_l, int_r)."""
+    icl = pid_current(el, int_l, rdl, kp, ki, kd)
+    icr = pid_current(er, int_r, rdr, kp, ki, kd)
+    lo, hi = current_window(wl0, vmax, k, ra, imax)
+    if el * (icl - _clip(icl, lo, hi)) <= 0.0:
+        int_l += el * dt
+    lo, hi = current_window(wr0, vmax, k, ra, imax)
+    if er * (icr - _clip(icr, lo, hi)) <= 0.0:
+        int_r += er * dt
+    return icl, icr, int_l, int_r
+
+
+@jit_inline
+def _euler_rates(il, ir, wl0, wr0, wl, wr, k, ra, regen, scl, scr, r, b, alpha, inv_dt):
+    """After step 3 at the controller period (backward Euler from wl0, wr0 to wl, wr
+    [rad/s] under the held currents il, ir [A]): the battery power pb [W] (the held
+    current against the wheel speed, linear over the step; eq. 26's motor constant k,
+    resistance ra), eq. 1's speed v [m/s] and yaw rate [rad/s] at the end, their means
+    over the step, and the wheel accelerations [rad/s^2]."""
+    pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
+    v0, yr0 = alpha_model(scl * wl0, scr * wr0, r, b, alpha)
+    v, yaw_rate = alpha_model(scl * wl, scr * wr, r, b, alpha)
+    return pb, v, yaw_rate, 0.5 * (v0 + v), 0.5 * (yr0 + yaw_rate), (wl - wl0) * inv_dt, (wr - wr0) * inv_dt
+
+
+@jit_inline
+def _stage1_start(wl0, wr0, dwl, dwr, h):
+    """Where the SDIRK's stage 1 (length h [s]) starts its solve: the speeds the last
+    step's end accelerations dwl, dwr [rad/s^2] predict, or wl0, wr0 [rad/s] where that
+    goes through (or to) rest (the friction turns over there)."""
+    gl = wl0 + h * dwl
+    gr = wr0 + h * dwr
+    if gl * wl0 <= 0.0 or gr * wr0 <= 0.0:
+        return wl0, wr0
+    return gl, gr
+
+
+@jit_inline
+def _stage2_setup(wl0, wr0, w1l, w1r, z1l, z1r, int_l, int_r, m11, m12, inv_dt):
+    """Between the SDIRK's stages: stage 1 ended at w1l, w1r [rad/s] with integrals z1l,
+    z1r. Returns stage 1's slopes in stage 2's equation (off_l, off_r: M (w1 - w0) (1 -
+    gamma) / gamma with eq. 5's M = [[m11, m12], [m12, m11]]), stage 2's integrals' start
+    (zbl, zbr), where stage 2's solve starts (gl, gr: stage 1's slope carried over the
+    whole step, or stage 1's speeds where that goes through rest, then ``known``) and
+    stage 1's slopes f1l, f1r [rad/s^2]."""
+    sl = (1.0 - SDIRK_GAMMA) / SDIRK_GAMMA
+    off_l = sl * (m11 * (w1l - wl0) + m12 * (w1r - wr0))
+    off_r = sl * (m12 * (w1l - wl0) + m11 * (w1r - wr0))
+    zbl = int_l + sl * (z1l - int_l)
+    zbr = int_r + sl * (z1r - int_r)
+    gl = wl0 + (w1l - wl0) * (1.0 / SDIRK_GAMMA)
+    gr = wr0 + (w1r - wr0) * (1.0 / SDIRK_GAMMA)
+    known = gl * wl0 <= 0.0 or gr * wr0 <= 0.0
+    if known:
+        gl = w1l
+        gr = w1r
+    f1l = (w1l - wl0) * inv_dt * (1.0 / SDIRK_GAMMA)
+    f1r = (w1r - wr0) * inv_dt * (1.0 / SDIRK_GAMMA)
+    return off_l, off_r, zbl, zbr, gl, gr, known, f1l, f1r
+
+
+@jit_inline
+def _sdirk_rates(i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, k, ra, regen, scl, scr, r, b, alpha,
+                 inv_dt):
+    """After the SDIRK's two stages (stage 1 at gamma dt: w1l, w1r [rad/s], i1l, i1r
+    [A]; stage 2 at dt: wl, wr, il, ir): the battery power pb [W] by the stages'
+    quadrature (weights 1 - gamma, gamma), eq. 1's speed v [m/s] and yaw rate [rad/s] at
+    the end, their means over the step by the same quadrature, and the wheel
+    accelerations at the end [rad/s^2] from stage 2's equation w = w0 + dt ((1 - gamma)
+    f1 + gamma f2)."""
+    gam = SDIRK_GAMMA
+    pb = ((1.0 - gam) * _battery_power(i1l, i1r, w1l, w1r, k, ra, regen)
+          + gam * _battery_power(il, ir, wl, wr, k, ra, regen))
+    v1, yr1 = alpha_model(scl * w1l, scr * w1r, r, b, alpha)
+    v, yaw_rate = alpha_model(scl * wl, scr * wr, r, b, alpha)
+    return (pb, v, yaw_rate, (1.0 - gam) * v1 + gam * v, (1.0 - gam) * yr1 + gam * yaw_rate,
+            ((wl - wl0) * inv_dt - (1.0 - gam) * f1l) * (1.0 / SDIRK_GAMMA),
+            ((wr - wr0) * inv_dt - (1.0 - gam) * f1r) * (1.0 / SDIRK_GAMMA))
+
+
+@jit_inline
+def _advance_pose(x, y, z, yaw, vm, ym, sp, cp, dt):
+    """Step 4, the kinematics (eq. 1 gave the mean speed vm [m/s] and yaw rate ym [rad/s]
+    over the step): the speed is along the slope (sine sp, cosine cp of the pitch), the
+    map position advances by vm cp along the midpoint heading. Returns the pose (x, y,
+    z [m], yaw [rad]) at the step's end."""
+    head = yaw + 0.5 * ym * dt
+    return (x + vm * cp * math.cos(head) * dt, y + vm * cp * math.sin(head) * dt, z + vm * sp * dt,
+            yaw + ym * dt)
+
+
+@jit_inline
+def _stall_test(win, ws_l, ws_r, wc_l, wc_r, stall_t, stalled, cmd_l, cmd_r, wl0, wr0, wl, wr, saturated, r, dt):
+    """The stall test: the drive saturated, the commanded motion (driving or turning) not
+    achieved and not being approached. The progress is the rim-speed vector along the
+    commanded one (for a straight command the speed v, for a pivot the rim speed of the
+    turn); the approach is how fast the rim speeds close in on the command (a vehicle
+    that reverses, brakes or turns around closes in; one held by a hill does not). The
+    test runs on windows of STALL_WINDOW whatever the step (a coarser step is its own
+    window; one command per window): the approach is taken over the whole window, from
+    the wheel speeds at its start, and the progress read at its end, so a 1 ms step and
+    a 20 ms step see the same windows and a timer near STALL_TIME gives the same
+    verdict. The time below the threshold is interpolated within the window.
+
+    The window: ``win`` [s] into it, the wheel speeds at its start (ws_l, ws_r) and its
+    commands (wc_l, wc_r) [rad/s]; the stall timer ``stall_t`` [s] and flag ``stalled``
+    (1.0 once stalled); this step's commands, wheel speeds at its start and end
+    [rad/s], whether the drive saturated, the wheel radius ``r`` [m]. Returns the seven
+    first, advanced (the state's S_SWT ... S_STALLED)."""
+    if win == 0.0 or cmd_l != wc_l or cmd_r != wc_r:
+        # a new window: at the first step, after the last window, or where the
+        # command changed within one (the part before the change is dropped, so a
+        # window is never judged against a command it did not have throughout)
+        win = 0.0
+        ws_l = wl0
+        ws_r = wr0
+        wc_l = cmd_l
+        wc_r = cmd_r
+    win += dt
+    if win + 0.5 * dt >= STALL_WINDOW:
+        # the window is complete (at the step nearest its length where a step does
+        # not divide it: 15 ms steps give 15 ms windows, 30 ms steps 30 ms ones):
+        # test it as one step of its length, from the wheel speeds at its start (the
+        # steps' approaches telescope: their sum is the distance to the command at
+        # the window's start less that at its end)
+        stalling = False
+        cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r)) if saturated else 0.0
+        if r * cn > 0.05:
+            q = r / (2.0 * cn)
+            p1 = q * (cmd_l * wl + cmd_r * wr)
+            if p1 < STALL_SPEED:
+                d0 = r * math.sqrt(0.5 * ((cmd_l - ws_l) ** 2 + (cmd_r - ws_r) ** 2))
+                d1 = r * math.sqrt(0.5 * ((cmd_l - wl) ** 2 + (cmd_r - wr) ** 2))
+                if d0 - d1 < STALL_ACCEL * win:
+                    stalling = True
+                    p0 = q * (cmd_l * ws_l + cmd_r * ws_r)
+                    frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
+                    stall_t += frac * win
+                    if stall_t >= STALL_TIME:
+                        stalled = 1.0
+        if not stalling:
+            # the timer leaks at the rate it fills: dT/dt = +1 stalling, -1 not. A
+            # stuck wheel's stick-slip at the regularised friction (a few steps of
+            # apparent approach in every few ms at 1 kHz) does not reset it; real
+            # progress does
+            stall_t = max(0.0, stall_t - win)
+        win = 0.0
+    return win, ws_l, ws_r, wc_l, wc_r, stall_t, stalled
+
+
 @jit
 def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     """One step of :func:`step_slope` (the pitch by its sine sp and cosine cp). With
@@ -352,16 +525,19 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     was and the result is False (else True).
 
     Closed loop: the commands are desired wheel speeds [rad/s]; the reference approaches
-    them at the rate limit ``ref_accel``. At the controller period (dt <= 1 /
-    controller_rate) the step *is* the paper's digital PID (Fig. 4): the current command
-    is computed from the measured speeds and held over the step (zero-order hold); the
-    integral does not wind up while the output is saturated; the wheels advance by
-    backward Euler (:func:`_solve`). A coarser step cannot represent a 1 kHz controller
-    sample by sample: it takes the loop's continuous-time limit and integrates the whole
-    closed loop, PID, current window, friction and body, with an L-stable second-order
-    implicit method (two-stage SDIRK): stable at any step, free of the current chatter
+    them at the rate limit ``ref_accel`` (:func:`_reference`). At the controller period
+    (dt <= 1 / controller_rate) the step *is* the paper's digital PID (Fig. 4,
+    :func:`_digital_pid`): the current command is computed from the measured speeds and
+    held over the step (zero-order hold); the integral does not wind up while the output
+    is saturated; the wheels advance by backward Euler (:func:`_solve`, then
+    :func:`_euler_rates`). A coarser step cannot represent a 1 kHz controller sample by
+    sample: it takes the loop's continuous-time limit and integrates the whole closed
+    loop, PID, current window, friction and body, with an L-stable second-order implicit
+    method (two-stage SDIRK: :func:`_stage1_start`, :func:`_solve`, :func:`_stage2_setup`,
+    :func:`_solve`, :func:`_sdirk_rates`): stable at any step, free of the current chatter
     an explicit PID shows at coarse steps, and converging to the controller-rate
-    solution (``dynamics.convergence`` measures how closely).
+    solution (``dynamics.convergence`` measures how closely). Then the kinematics
+    (:func:`_advance_pose`) and the stall test (:func:`_stall_test`).
 
     Open loop (``open_loop`` true): the commands are current commands [A] to the motor
     controllers (the paper's Fig. 16 drives the open-loop model with tau = K_tau V).
@@ -370,8 +546,6 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     wr0 = S[S_WR]
     k = P[P_K]
     ra = P[P_RA]
-    m11 = P[P_M11]
-    m12 = P[P_M12]
     regen = P[P_REGEN] != 0.0
     vmax = P[P_VMAX] - P[P_SAG] * S[S_E]
     if vmax < 0.0:
@@ -385,17 +559,14 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     ref_l0 = S[S_REFL]
     ref_r0 = S[S_REFR]
     if not open_loop:
-        aref = P[P_AREF]
-        dl = cmd_l - ref_l0
-        dr = cmd_r - ref_r0
-        if aref > 0.0:
-            dl = _clip(dl, -aref * dt, aref * dt)
-            dr = _clip(dr, -aref * dt, aref * dt)
+        dl, dr = _reference(ref_l0, ref_r0, cmd_l, cmd_r, P[P_AREF], dt)
         S[S_REFL] += dl
         S[S_REFR] += dr
     inv_dt = 1.0 / dt
     rdl = dl * inv_dt
     rdr = dr * inv_dt
+    scl = P[P_SCL]
+    scr = P[P_SCR]
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
         u0 = _cached_friction(P, table, S)
         # 2: the digital PID samples the measured speeds; the command is held
@@ -403,62 +574,29 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
             icl = cmd_l
             icr = cmd_r
         else:
-            el = S[S_REFL] - wl0
-            er = S[S_REFR] - wr0
-            icl = pid_current(el, S[S_INTL], rdl, P[P_KP], P[P_KI], P[P_KD])
-            icr = pid_current(er, S[S_INTR], rdr, P[P_KP], P[P_KI], P[P_KD])
-            # conditional integration: the integral holds only while it would drive
-            # the command further beyond the bound it violates (as in _loop_current)
-            lo, hi = current_window(wl0, vmax, k, ra, P[P_IMAX])
-            if el * (icl - _clip(icl, lo, hi)) <= 0.0:
-                S[S_INTL] += el * dt
-            lo, hi = current_window(wr0, vmax, k, ra, P[P_IMAX])
-            if er * (icr - _clip(icr, lo, hi)) <= 0.0:
-                S[S_INTR] += er * dt
-        # 3: backward Euler on eq. 25
+            icl, icr, S[S_INTL], S[S_INTR] = _digital_pid(
+                S[S_REFL] - wl0, S[S_REFR] - wr0, S[S_INTL], S[S_INTR], rdl, rdr, wl0, wr0, vmax, k, ra, P[P_IMAX],
+                P[P_KP], P[P_KI], P[P_KD], dt)
+        # 3: backward Euler on eq. 25 (resistance, gravity, mass matrix: _solve)
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
             P, table, S, wl0, wr0, wl0, wr0, u0, True, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, vmax, cp, g_l, g_r)
-        # the held current against the wheel speed, linear over the step
-        pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
-        v0, yr0 = alpha_model(P[P_SCL] * wl0, P[P_SCR] * wr0, P[P_R], P[P_B], P[P_ALPHA])
-        v, yaw_rate = alpha_model(P[P_SCL] * wl, P[P_SCR] * wr, P[P_R], P[P_B], P[P_ALPHA])
-        vm = 0.5 * (v0 + v)
-        ym = 0.5 * (yr0 + yaw_rate)
-        S[S_DWL] = (wl - wl0) * inv_dt
-        S[S_DWR] = (wr - wr0) * inv_dt
+        pb, v, yaw_rate, vm, ym, S[S_DWL], S[S_DWR] = _euler_rates(
+            il, ir, wl0, wr0, wl, wr, k, ra, regen, scl, scr, P[P_R], P[P_B], P[P_ALPHA], inv_dt)
     else:
         # 2-3: the continuous loop, two-stage SDIRK: stage 1 ends at gamma dt, stage 2
-        # at dt, each solved implicitly for the speeds with the PID current at them
+        # at dt, each solved implicitly (_solve) for the speeds with the PID current at them
         gam = SDIRK_GAMMA
         h = gam * dt
-        # stage 1 starts from the speeds the last step's end acceleration predicts
-        gl = wl0 + h * S[S_DWL]
-        gr = wr0 + h * S[S_DWR]
-        if gl * wl0 <= 0.0 or gr * wr0 <= 0.0:
-            gl = wl0                     # not through (or to) rest: the friction turns over there
-            gr = wr0
+        gl, gr = _stage1_start(wl0, wr0, S[S_DWL], S[S_DWR], h)
         # the friction there extrapolated from the step's start (its slopes)
-        u0 = _extrapolated_friction(_cached_friction(P, table, S), P[P_SCL] * (gl - wl0), P[P_SCR] * (gr - wr0))
+        u0 = _extrapolated_friction(_cached_friction(P, table, S), scl * (gl - wl0), scr * (gr - wr0))
         w1l, w1r, i1l, i1r, z1l, z1r, s1l, s1r, fl, fr, u = _solve(
             P, table, S, wl0, wr0, gl, gr, u0, True, 0.0, 0.0, h, False, 0.0, 0.0,
             ref_l0 + gam * dl, ref_r0 + gam * dr, S[S_INTL], S[S_INTR], rdl, rdr, vmax, cp,
             g_l, g_r)
-        # stage 1's slopes, from its own equation: M (w1 - w0) = h F1
-        sl = (1.0 - gam) / gam
-        off_l = sl * (m11 * (w1l - wl0) + m12 * (w1r - wr0))
-        off_r = sl * (m12 * (w1l - wl0) + m11 * (w1r - wr0))
-        zbl = S[S_INTL] + sl * (z1l - S[S_INTL])
-        zbr = S[S_INTR] + sl * (z1r - S[S_INTR])
-        # stage 2 starts from stage 1's slope carried over the whole step
-        gl = wl0 + (w1l - wl0) * (1.0 / SDIRK_GAMMA)
-        gr = wr0 + (w1r - wr0) * (1.0 / SDIRK_GAMMA)
-        known = gl * wl0 <= 0.0 or gr * wr0 <= 0.0
-        if known:
-            gl = w1l                     # not through (or to) rest: from stage 1's speeds
-            gr = w1r
-        f1l = (w1l - wl0) * inv_dt * (1.0 / SDIRK_GAMMA)     # stage 1's slopes [rad/s^2]
-        f1r = (w1r - wr0) * inv_dt * (1.0 / SDIRK_GAMMA)
+        off_l, off_r, zbl, zbr, gl, gr, known, f1l, f1r = _stage2_setup(
+            wl0, wr0, w1l, w1r, z1l, z1r, S[S_INTL], S[S_INTR], P[P_M11], P[P_M12], inv_dt)
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
             P, table, S, wl0, wr0, gl, gr, u, known, off_l, off_r, h, False, 0.0, 0.0, S[S_REFL],
             S[S_REFR], zbl, zbr, rdl, rdr, vmax, cp, g_l, g_r)
@@ -468,18 +606,11 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
             return False
         S[S_INTL] = zl
         S[S_INTR] = zr
-        # the stages' quadrature (weights 1 - gamma, gamma at gamma dt and dt)
-        pb = ((1.0 - gam) * _battery_power(i1l, i1r, w1l, w1r, k, ra, regen)
-              + gam * _battery_power(il, ir, wl, wr, k, ra, regen))
-        v1, yr1 = alpha_model(P[P_SCL] * w1l, P[P_SCR] * w1r, P[P_R], P[P_B], P[P_ALPHA])
-        v, yaw_rate = alpha_model(P[P_SCL] * wl, P[P_SCR] * wr, P[P_R], P[P_B], P[P_ALPHA])
-        vm = (1.0 - gam) * v1 + gam * v
-        ym = (1.0 - gam) * yr1 + gam * yaw_rate
         sat_l = sat_l or s1l
         sat_r = sat_r or s1r
-        # the slopes at the step's end, from stage 2's equation w = w0 + dt ((1 - gamma) f1 + gamma f2)
-        S[S_DWL] = ((wl - wl0) * inv_dt - (1.0 - gam) * f1l) * (1.0 / SDIRK_GAMMA)
-        S[S_DWR] = ((wr - wr0) * inv_dt - (1.0 - gam) * f1r) * (1.0 / SDIRK_GAMMA)
+        pb, v, yaw_rate, vm, ym, S[S_DWL], S[S_DWR] = _sdirk_rates(
+            i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, k, ra, regen, scl, scr, P[P_R], P[P_B],
+            P[P_ALPHA], inv_dt)
     S[S_E] += pb * dt
     S[S_IL] = il
     S[S_IR] = ir
@@ -490,78 +621,21 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     S[S_CWL] = wl
     S[S_CWR] = wr
     S[S_CFL], S[S_CFR], S[S_CLL], S[S_CLR], S[S_CRL], S[S_CRR] = u
-    tau_l = k * il
-    tau_r = k * ir
-    p_l = electrical_power(il, wl, k, ra)
-    p_r = electrical_power(ir, wr, k, ra)
-    # 4: kinematics (eq. 1) and pose: the mean rates over the step, midpoint heading
-    r = P[P_R]
-    head = S[S_YAW] + 0.5 * ym * dt
-    S[S_X] += vm * cp * math.cos(head) * dt
-    S[S_Y] += vm * cp * math.sin(head) * dt
-    S[S_Z] += vm * sp * dt
-    S[S_YAW] += ym * dt
+    # 4: kinematics (eq. 1) and pose
+    S[S_X], S[S_Y], S[S_Z], S[S_YAW] = _advance_pose(S[S_X], S[S_Y], S[S_Z], S[S_YAW], vm, ym, sp, cp, dt)
     S[S_DIST] += abs(vm) * dt
     S[S_S] += vm * dt
     S[S_T] += dt
-    # stall: the drive saturated, the commanded motion (driving or turning) not achieved
-    # and not being approached. The progress is the rim-speed vector along the commanded
-    # one (for a straight command the speed v, for a pivot the rim speed of the turn);
-    # the approach is how fast the rim speeds close in on the command (a vehicle that
-    # reverses, brakes or turns around closes in; one held by a hill does not). The test
-    # runs on windows of STALL_WINDOW whatever the step (a coarser step is its own
-    # window; one command per window): the approach is taken over the whole window,
-    # from the wheel speeds at its start, and the progress read at its end, so a 1 ms
-    # step and a 20 ms step see the same windows and a timer near STALL_TIME gives the
-    # same verdict. The time below the threshold is interpolated within the window.
     if not open_loop:
-        if S[S_SWT] == 0.0 or cmd_l != S[S_SWCL] or cmd_r != S[S_SWCR]:
-            # a new window: at the first step, after the last window, or where the
-            # command changed within one (the part before the change is dropped, so a
-            # window is never judged against a command it did not have throughout)
-            S[S_SWT] = 0.0
-            S[S_SWL] = wl0
-            S[S_SWR] = wr0
-            S[S_SWCL] = cmd_l
-            S[S_SWCR] = cmd_r
-        S[S_SWT] += dt
-        if S[S_SWT] + 0.5 * dt >= STALL_WINDOW:
-            # the window is complete (at the step nearest its length where a step does
-            # not divide it: 15 ms steps give 15 ms windows, 30 ms steps 30 ms ones):
-            # test it as one step of its length, from the wheel speeds at its start (the
-            # steps' approaches telescope: their sum is the distance to the command at
-            # the window's start less that at its end)
-            win = S[S_SWT]
-            stalling = False
-            cn = math.sqrt(0.5 * (cmd_l * cmd_l + cmd_r * cmd_r)) if (sat_l or sat_r) else 0.0
-            if r * cn > 0.05:
-                q = r / (2.0 * cn)
-                p1 = q * (cmd_l * wl + cmd_r * wr)
-                if p1 < STALL_SPEED:
-                    ws_l = S[S_SWL]
-                    ws_r = S[S_SWR]
-                    d0 = r * math.sqrt(0.5 * ((cmd_l - ws_l) ** 2 + (cmd_r - ws_r) ** 2))
-                    d1 = r * math.sqrt(0.5 * ((cmd_l - wl) ** 2 + (cmd_r - wr) ** 2))
-                    if d0 - d1 < STALL_ACCEL * win:
-                        stalling = True
-                        p0 = q * (cmd_l * ws_l + cmd_r * ws_r)
-                        frac = 1.0 if p0 <= STALL_SPEED else (STALL_SPEED - p1) / (p0 - p1)
-                        S[S_STALLT] += frac * win
-                        if S[S_STALLT] >= STALL_TIME:
-                            S[S_STALLED] = 1.0
-            if not stalling:
-                # the timer leaks at the rate it fills: dT/dt = +1 stalling, -1 not. A
-                # stuck wheel's stick-slip at the regularised friction (a few steps of
-                # apparent approach in every few ms at 1 kHz) does not reset it; real
-                # progress does
-                S[S_STALLT] = max(0.0, S[S_STALLT] - win)
-            S[S_SWT] = 0.0
-    O[O_TAUL] = tau_l
-    O[O_TAUR] = tau_r
+        (S[S_SWT], S[S_SWL], S[S_SWR], S[S_SWCL], S[S_SWCR], S[S_STALLT], S[S_STALLED]) = _stall_test(
+            S[S_SWT], S[S_SWL], S[S_SWR], S[S_SWCL], S[S_SWCR], S[S_STALLT], S[S_STALLED], cmd_l, cmd_r, wl0, wr0,
+            wl, wr, sat_l or sat_r, P[P_R], dt)
+    O[O_TAUL] = k * il
+    O[O_TAUR] = k * ir
     O[O_IL] = il
     O[O_IR] = ir
-    O[O_PL] = p_l
-    O[O_PR] = p_r
+    O[O_PL] = electrical_power(il, wl, k, ra)
+    O[O_PR] = electrical_power(ir, wr, k, ra)
     O[O_PB] = pb
     O[O_V] = v
     O[O_YAWRATE] = yaw_rate

@@ -32,8 +32,8 @@ def imported_packages_of(path):
 
 def test_import_linter_contracts_hold():
     """pyproject.toml's [tool.importlinter] contracts: the layers (commands, sweep, api,
-    problems, search, then dynamics and maps, then _jitcache), a search that knows no
-    robot, and no import cycle among a package's modules. import-linter's graph holds
+    problems, search, then dynamics and maps), a search that knows no robot (but
+    numba's cache guard, dynamics._jitcache), and no import cycle among a package's modules. import-linter's graph holds
     every import, those inside functions too (the check above reads module level only)."""
     pytest.importorskip("importlinter")
     import subprocess

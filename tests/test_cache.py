@@ -1,8 +1,8 @@
-"""numba's cache kept consistent across files (_jitcache)."""
+"""numba's cache kept consistent across files (dynamics._jitcache)."""
 import ast
 from pathlib import Path
 
-import _jitcache as C
+from dynamics import _jitcache as C
 
 
 def _tree(root: Path) -> dict:
@@ -99,17 +99,28 @@ def test_every_file_with_compiled_code_is_a_source():
 
 
 def test_the_guard_imports_no_layer_and_every_layer_calls_it_first():
-    """_jitcache sits below dynamics, maps and sbmpc (it imports none of them), and each
-    package with compiled code calls it before any of its compiled modules load."""
+    """The guard lives in dynamics (the lowest layer whose compiled code spans files) and
+    imports nothing of dynamics, maps or sbmpc (relative imports included); each package
+    whose compiled code spans files calls it before any of its compiled modules load.
+    maps needs none: its compiled code is one file that imports nothing compiled from
+    another (numba's own per-file index keeps it right)."""
+    assert Path(C.__file__).parent == C.ROOT / "dynamics"
     tree = ast.parse(Path(C.__file__).read_text())
+    assert not any(isinstance(n, ast.ImportFrom) and n.level > 0 for n in ast.walk(tree))
     imported = {(n.module or "").split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     imported |= {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert not imported & {"dynamics", "maps", "sbmpc"}
-    for init in ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/planning"):
+    for init, module in (("dynamics", "_jitcache"), ("sbmpc/search", "dynamics._jitcache"),
+                         ("sbmpc/problems", "dynamics._jitcache"), ("sbmpc/planning", "dynamics._jitcache")):
         body = ast.parse((C.ROOT / init / "__init__.py").read_text()).body
         stmts = [s for s in body if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
-        assert isinstance(stmts[0], ast.ImportFrom) and stmts[0].module == "_jitcache", init
+        assert isinstance(stmts[0], ast.ImportFrom) and stmts[0].module == module, init
         assert ast.unparse(stmts[1]) == "refresh_once()", init
+    compiled = [p for p in (C.ROOT / "maps").glob("*.py") if "njit" in p.read_text()]
+    assert compiled == [C.ROOT / "maps" / "grid.py"]
+    tree = ast.parse(compiled[0].read_text())
+    assert {(n.module or "") for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} <= {"__future__", "dataclasses", "numba"}
+    assert {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names} <= {"math", "numpy"}
 
 
 def test_a_cold_cache_is_announced_by_every_command_that_compiles(monkeypatch, capsys, tmp_path):

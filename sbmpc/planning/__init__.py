@@ -13,9 +13,9 @@ Entry points: :func:`plan.plan` (a world and a cost to a :class:`Plan`; not re-e
 the name is its module's), :func:`plan_both`, :func:`search_plan`, :class:`HorizonPlanner`,
 :func:`resolve` (a scenario to a world).
 """
-from _jitcache import refresh_once
+from dynamics._jitcache import refresh_once
 
-refresh_once()     # numba's cache, consistent across files (_jitcache): heuristics compiles
+refresh_once()     # numba's cache, consistent across files (dynamics._jitcache): heuristics compiles
 
 from .horizon import HorizonPlan, HorizonPlanner  # noqa: E402
 from .plan import Plan, plan_both, search_plan  # noqa: E402

@@ -1,3 +1,3 @@
-from _jitcache import refresh_once
+from dynamics._jitcache import refresh_once
 
-refresh_once()     # numba's cache, consistent across files (_jitcache)
+refresh_once()     # numba's cache, consistent across files (dynamics._jitcache)

@@ -1,12 +1,17 @@
-"""numba's on-disk cache, kept consistent across files (for ``dynamics``, ``maps`` and
-``sbmpc``; it imports none of them, so each layer may import it).
+"""numba's on-disk cache, kept consistent across files (for ``dynamics`` and the compiled
+parts of ``sbmpc``; it imports nothing of ``dynamics``, ``maps`` nor ``sbmpc``).
+
+It lives in ``dynamics``, the lowest layer whose compiled code spans files. ``maps``
+needs no guard: its compiled queries are one file (``maps/grid.py``, importing nothing
+compiled from elsewhere), which numba's own per-file index keeps right; the compiled
+code *above* it that inlines them (``sbmpc.problems``) is guarded.
 
 numba keys a cached function on its own file only: a compiled function keeps the
 module constants and the inlined callees of *other* files it was compiled with. After
 an update that changes ``dynamics/kernels.py`` (say, the state layout ``NS``) but not
 ``sbmpc/problems/skidsteer.py``, the search would load a skid-steer expansion compiled
 against the old layout and plan silently wrong (seen once: no path on a 2 % grade).
-So the first import of a package with compiled code (``dynamics``, ``maps``,
+So the first import of a package with compiled code that spans files (``dynamics``,
 ``sbmpc.search``, ``sbmpc.problems``, ``sbmpc.planning``) calls :func:`refresh_once`: it hashes the sources
 of every file the compiled code is built from and, in each folder where numba may keep
 their cache (a source folder's ``__pycache__``, under ``$NUMBA_CACHE_DIR``, numba's
@@ -24,7 +29,7 @@ import hashlib
 import os
 from pathlib import Path
 
-ROOT = Path(os.path.abspath(__file__)).parents[1]     # abspath, not resolve: numba's own paths
+ROOT = Path(os.path.abspath(__file__)).parents[1]     # the source tree (abspath, not resolve: numba's own paths)
 # the files the compiled code is built from (the compiled functions and the constants
 # and helpers they read), relative to ROOT
 SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/planning/heuristics.py")
