@@ -90,8 +90,8 @@ def _spec(key: str) -> tuple:
 
 
 def has_pose(run: Run) -> bool:
-    """Whether the run logs a pose (x, y, yaw) with at least one heading."""
-    return all(c in run for c in ("x", "y", "yaw")) and bool(np.isfinite(run["yaw"]).any())
+    """Whether the run logs a pose: x, y and yaw, each with a value (``Run.__contains__``)."""
+    return all(c in run for c in ("x", "y", "yaw"))
 
 
 def heading_pitch(yaw, slope_east: float, slope_north: float) -> np.ndarray:
@@ -221,7 +221,7 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch=0.0, dt: float = 
     per_sample = np.ndim(pitch) > 0
     n = len(run)
     out = {c: np.full(n, np.nan) for c in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw")}
-    pose = all(c in run for c in ("x", "y", "yaw"))
+    pose = has_pose(run)
     t_all = run.t
     noise = (noise_scale(run["wl"]), noise_scale(run["wr"]))
     white = not (is_held(run["wl"]) or is_held(run["wr"]))
@@ -300,8 +300,8 @@ class Candidate:
     train_evidence: float = math.nan   # as ``evidence``, on the training part
     train_reach: float = math.nan      # as ``reach``, on the training part
     train_error: float = math.nan      # as ``heldout_error``, on the training part
-    key: str = ""             # the fitted form (CANDIDATES' name, or WORLD_GRADE; "": the effect's)
-    x: tuple = ()             # and its parameters in that form's units (_model_for; (): params' values)
+    key: str = ""             # the fitted form (CANDIDATES' name, or WORLD_GRADE) and its parameters
+    x: tuple = ()             # in that form's units (_model_for); set by diagnose
 
 
 def at_bound(effect: str, params: dict) -> tuple:
@@ -357,7 +357,14 @@ class Diagnosis:
     def extended_pitch(self, run: Run):
         """The grade [rad] of the extended model on ``run``: one number, or one per sample
         from the logged heading for a grade fixed in the world."""
-        return _extended_pitch(run, self.extended_pitch_deg, self.extended_slope)
+        if self.extended_slope is None:
+            return math.radians(self.extended_pitch_deg)
+        return _world_pitch(run, self.extended_slope)
+
+    @property
+    def extended_toward_deg(self) -> float | None:
+        """For a grade fixed in the world, the heading [deg] that climbs it; else None."""
+        return None if self.extended_slope is None else world_grade(*self.extended_slope)[0]["toward_deg"]
 
     def to_json(self, extended_path: str | None = None) -> dict:
         return {
@@ -387,8 +394,7 @@ class Diagnosis:
             "noise_scales": self.scales,
             "extended_vehicle": extended_path,
             "extended_grade_deg": self.extended_pitch_deg,
-            "extended_grade_toward_deg": None if self.extended_slope is None else
-            world_grade(*self.extended_slope)[0]["toward_deg"],
+            "extended_grade_toward_deg": self.extended_toward_deg,
             "pose_error": self.pose,
             "extended_terrain": None if self.extended_terrain is None else
             {"name": self.extended_terrain.name, "mu_sa": self.extended_terrain.mu_sa,
@@ -396,11 +402,9 @@ class Diagnosis:
         }
 
 
-def _extended_pitch(run: Run, grade_deg: float, slope):
-    """The grade [rad] of an extended model: ``grade_deg`` along the body, or the plane
-    ``slope`` (slope_east, slope_north) felt along the run's logged heading."""
-    if slope is None:
-        return math.radians(grade_deg)
+def _world_pitch(run: Run, slope) -> np.ndarray:
+    """The grade [rad] per sample of ``run`` on the plane ``slope`` (slope_east,
+    slope_north), felt along the run's logged heading (:func:`heading_pitch`)."""
     return heading_pitch(_ffill(run["yaw"]), float(slope[0]), float(slope[1]))
 
 
@@ -463,7 +467,7 @@ POSE_WINDOW_S = 2.0   # s: window of the relative pose error
 def pose_residuals(run: Run, pred: dict, mask=None, window_s: float = POSE_WINDOW_S):
     """Per window (see :func:`pose_error`): the translation error [m], the heading error
     [rad] and the distance driven [m] of the measured motion, or None without a pose."""
-    if not all(c in run for c in ("x", "y", "yaw")):
+    if not has_pose(run):
         return None
     t = run.t
     seg = np.zeros(len(t), int)
@@ -588,7 +592,7 @@ def _model_for(effect, x, vehicle, terrain, names, run=None):
     """(vehicle, terrain, pitch) of a candidate at parameters x; WORLD_GRADE's pitch is
     one per sample of ``run``, from its logged heading (:func:`heading_pitch`)."""
     if effect == WORLD_GRADE:
-        return vehicle, terrain, heading_pitch(_ffill(run["yaw"]), float(x[0]), float(x[1]))
+        return vehicle, terrain, _world_pitch(run, x)
     return apply(vehicle, effect, dict(zip(names, x)), terrain)
 
 
@@ -942,20 +946,19 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     if named:                                  # the named cause heads the list
         cands.remove(best)
         cands.insert(0, best)
-    ext_v, ext_t, ext_p, slope = vehicle, terrain, 0.0, None
+    ext_v, ext_t, ext_pitch, ext_p, slope = vehicle, terrain, 0.0, 0.0, None
     if named:
-        key = best.key or best.effect
-        x = best.x or tuple(best.params[n] for n in _spec(key)[0])
-        ext_v, ext_t, p = _model_for(key, x, vehicle, terrain, _spec(key)[0], run)
+        key, x = best.key, best.x             # (every candidate diagnose makes has its form)
+        ext_v, ext_t, ext_pitch = _model_for(key, x, vehicle, terrain, _spec(key)[0], run)
         if key == WORLD_GRADE:
-            slope, ext_p = best.x, best.params["grade_deg"]
+            slope, ext_p = x, best.params["grade_deg"]
         else:
-            ext_p = math.degrees(p)
+            ext_p = math.degrees(ext_pitch)
     pose = {}
     pe = pose_error(run, base, held)
     if pe is not None:
         pose["baseline"] = pe
-        ext = replay(run, ext_v, ext_t, _extended_pitch(run, ext_p, slope) + pitch) if named else base
+        ext = replay(run, ext_v, ext_t, ext_pitch + pitch) if named else base
         pose["extended"] = pose_error(run, ext, held)
     rivals = tuple(c.effect for c in cands[1:] if named and _decides(c) and best.gain - c.gain < TIE
                    and (c.fitted_on == "heldout") == (best.fitted_on == "heldout"))   # like with like

@@ -150,8 +150,8 @@ def run_diagnose(args) -> int:
     if out_vehicle is not None:
         note = f"extended by sbmpc diagnose from {args.run}: cause {d.cause}"
         if d.cause == "grade":
-            on = ("" if d.extended_slope is None else
-                  f" rising towards heading {d.to_json()['extended_grade_toward_deg']:.0f} deg")
+            on = ("" if d.extended_toward_deg is None else
+                  f" rising towards heading {d.extended_toward_deg:.0f} deg")
             note += f" (the run was on a {d.extended_pitch_deg:.2f} deg grade{on}; the vehicle is unchanged)"
         if d.cause == "turning_friction":
             note += (f" (the terrain's mu_sa, mu_op are {d.extended_terrain.mu_sa:.3f}, {d.extended_terrain.mu_op:.3f};"
