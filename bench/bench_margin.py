@@ -46,7 +46,8 @@ def closed_loop(world, cost, mass=1.0, grip=1.0) -> dict:
     r = R.run(world, cost, truth, truth_grip=grip)
     d = r.to_json()
     return {"status": d["status"], "reason": (d["reason"] or "")[:300] or None, "travel_time_s": d["travel_time_s"],
-            "energy_J": d["energy_J"], "replans": d["replans"], "stalls": d["stalls"], "wall_s": round(time.perf_counter() - t0, 1)}
+            "energy_J": d["energy_J"], "replans": d["replans"], "stalls": d["stalls"], "guarded": d["guarded"],
+            "weaker_from_t": d["weaker_from_t"], "wall_s": round(time.perf_counter() - t0, 1)}
 
 
 def main() -> int:
@@ -57,6 +58,8 @@ def main() -> int:
                     help="planner settings to compare, each 'key=value,key=value' or 'default'")
     ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--no-runs", action="store_true", help="skip the closed-loop runs")
+    ap.add_argument("--runs-only", action="store_true",
+                    help="run again only the closed-loop runs of --out's rows (the plans' rows kept as they are)")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--curve", action="store_true", help="the README figure's sweep over the margin (module doc)")
     ap.add_argument("--replot", action="store_true", help="redraw docs/margin.png from bench/results/margin_curve.json")
@@ -80,6 +83,16 @@ def main() -> int:
             for conf in args.configs:
                 over = {} if conf == "default" else {k: float(v) for k, v in (kv.split("=") for kv in conf.split(","))}
                 w = api.load_world(ROOT / "scenarios" / f"{name}.yaml", **over)
+                if args.runs_only:
+                    row = rows.get((name, cost, conf))
+                    if row is None or row["status"] != "found":
+                        continue
+                    row["run_mass_1.1"] = closed_loop(w, cost, mass=1.1)
+                    row["run_grip_0.9"] = closed_loop(w, cost, grip=0.9)
+                    print(json.dumps({k: row[k] for k in ("scenario", "cost", "config", "run_mass_1.1", "run_grip_0.9")}),
+                          flush=True)
+                    _write(args, rows)
+                    continue
                 m = w.scenario.planner.margin
                 from sbmpc.planning import plan as PL
                 t0 = time.perf_counter()
@@ -96,12 +109,16 @@ def main() -> int:
                         row["run_grip_0.9"] = closed_loop(w, cost, grip=0.9)
                 rows[(name, cost, conf)] = row
                 print(json.dumps(row), flush=True)
-                args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
-                                                "python": sys.version.split()[0], "samples": args.samples,
-                                                "rows": list(rows.values())}, indent=1))
+                _write(args, rows)
     if args.curve:
         figure(list(rows.values()), FIG)
     return 0
+
+
+def _write(args, rows: dict) -> None:
+    args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
+                                    "python": sys.version.split()[0], "samples": args.samples,
+                                    "rows": list(rows.values())}, indent=1))
 
 
 def table(rows: list) -> str:

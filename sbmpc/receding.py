@@ -114,6 +114,7 @@ class RunResult:
     stalls: int = 0
     periods: int = 0
     guarded: int = 0                  # periods held back: their prediction came within the tip-over margin
+    weaker_from: float | None = None  # t [s] from which the margin's twin planned (the vehicle proved weaker)
     horizon: HorizonStats | None = None   # receding-horizon planning (planner.horizon_s > 0)
     driven: list = field(default_factory=list)    # the controls (wl, wr, duration_s) driven, period by period
 
@@ -170,6 +171,7 @@ class RunResult:
             "stalls": self.stalls,
             "periods": self.periods,
             "guarded": self.guarded,
+            "weaker_from_t": self.weaker_from,
             "trigger": s.trigger,
             "tolerance": {"xy_m": s.tol_xy, "yaw_deg": s.tol_yaw_deg, "v_m_s": s.tol_v},
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
@@ -253,6 +255,7 @@ class _Executor:
 
 
 STUCK_HORIZONS = 2   # a horizon run falls back to whole-route plans where its terminal cost did not fall for this many horizons
+HELD = "the next period would come within half the tip-over margin"   # a re-plan's why after the guard
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
 
@@ -269,6 +272,71 @@ def _aim(world: WO.World) -> WO.World:
     g = world.scenario.goal
     m = min(AIM_MARGIN, 0.25 * g["radius"])
     return replace(world, scenario=replace(world.scenario, goal=dict(g, radius=g["radius"] - m)))
+
+
+def _guards(world: WO.World, cost: str) -> list:
+    """The tip-over guard of a run's periods (``planner.margin_tip_deg`` > 0; else none):
+    controller-rate executors of the planning vehicle and, with a margin
+    (``planner.margin``), of its pessimistic twin (:func:`sbmpc.planning.world.pessimistic`),
+    each with half the tip-over margin (:class:`_Executor`)."""
+    ps = world.scenario.planner
+    if ps.margin_tip_deg <= 0.0:
+        return []
+    out = [_Executor(world, cost, tip_guard=True)]
+    if ps.margin > 0.0:
+        out.append(_Executor(WO.pessimistic(world), cost, tip_guard=True))
+    return out
+
+
+def _held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
+    """Whether the guards (:func:`_guards`: the world's vehicle, then its twin) hold back
+    the period ``control`` from the measured state X. The world's vehicle's prediction holds it back where it tips over, or, for a plan
+    that keeps the margin (``kept``), where it comes within half the tip-over margin; a
+    plan made without the margin (none kept it: it says so) rides within the margin by
+    design, and its drive would be held back at every period. The pessimistic twin's
+    prediction (a vehicle weaker than the planning one: it falls behind, and meets the
+    flank of a pass where the plan has passed it) holds it back where it comes within
+    half the margin: the one prediction of a fallback plan's periods on a vehicle the
+    plan did not allow for. Once the twin plans (the vehicle proved weaker), the run
+    passes ``kept`` False."""
+    for j, g in enumerate(guards):
+        _, end, _ = g.step(X, control, record=False)
+        if end == -SS.TIP or (end == -SS.MARGIN and (kept or j > 0)):
+            return True
+    return False
+
+
+def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray) -> tuple:
+    """(planning world, its executor) once the run has seen the vehicle weaker than the
+    planning one (a stall where its plans drove it, or a fresh plan whose first period
+    the twin's guard holds back): the margin's pessimistic twin
+    (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) plans from the
+    measured state X on, and the run records when (``RunResult.weaker_from``)."""
+    out.weaker_from = float(X[K.S_T])
+    tw = _twin_planner(world)
+    return tw, _Executor(tw, cost)
+
+
+@functools.lru_cache(maxsize=16)
+def _twin_planner(world: WO.World, tip: bool = False) -> WO.World:
+    """The margin's pessimistic twin as a run's planning model. It is the margin, so it
+    plans with no twin or turn reserve of its own, and, unless ``tip``, without the
+    tip-over margin, which the run's guard keeps at 1 kHz: with it, hills_field's energy
+    search took 174 000 expansions (98 s) for the plan the search without it finds in
+    24 000 (10 s). A re-plan after the guard held a period back plans with it (``tip``).
+    Cached per world, so that the re-plans share its cost-to-go grids."""
+    tw = WO.pessimistic(world)
+    ps = replace(tw.scenario.planner, margin=0.0, margin_turn=0.0,
+                 margin_tip_deg=world.scenario.planner.margin_tip_deg if tip else 0.0)
+    return replace(tw, scenario=replace(tw.scenario, planner=ps))
+
+
+def _named(world: WO.World, planner: WO.World) -> str:
+    """The planning model's name in a run's messages (``planner``: the world's, or its
+    margin's twin)."""
+    if planner is world:
+        return world.vehicle.name
+    return f"{world.vehicle.name} as the margin's twin, x{1.0 + world.scenario.planner.margin:g} mass and grip"
 
 
 def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None) -> RunResult:
@@ -327,13 +395,13 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     twin = world if truth is None else replace(world, vehicle=truth)
     if truth_grip is not None and truth_grip != 1.0:
         twin = replace(twin, terrains=WO.gripped(twin.terrains, truth_grip))
-    aim = _aim(world)
     truth_name = twin.vehicle.name + (f", grip x{truth_grip:g}" if truth_grip not in (None, 1.0) else "")
     out = RunResult(world.scenario.name, cost, world.vehicle.name, truth_name, rs)
     if ps.horizon_s > 0.0:
         return _run_horizon(world, cost, twin, out)
     model = _Executor(world, cost)
-    guard = _Executor(world, cost, tip_guard=True) if ps.margin_tip_deg > 0.0 else None
+    guards = _guards(world, cost)
+    planner = world                    # the planning model: the world's vehicle, its margin's twin after a stall
     guarded = False                    # the last plan's first period was held back by the guard
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)           # the measured state
@@ -356,10 +424,15 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             first = not out.plans
             tail = steps[k:] if (current is not None and warm) else None
             label = "first plan" if first else f"re-plan {len(out.plans)}"
-            budget = None if first else rs.replan_time_budget_s
+            # a re-plan the vehicle waits for (it stalled, or the guard held its period back)
+            # has a budget of its own; after the guard, the plan keeps the tip-over margin
+            held = why.startswith(HELD)
+            budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
+                      else rs.replan_time_budget_s)
+            model_world = _twin_planner(world, tip=True) if held and planner is not world else planner
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
-            target = world if first else aim
+            target = model_world if first else _aim(model_world)
             # the first plan is sbmpc plan's (an energy plan checked against the time plan);
             # a re-plan is the search's alone (it must come quickly, and holds the rest of
             # the checked plan as its incumbent when warm)
@@ -370,7 +443,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                             if progress and cost == "energy" else None)
             else:
                 p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
-                if not p.found and why.startswith("stalled") and PL.margin_on(ps):
+                if not p.found and why.startswith("stalled") and PL.margin_on(target.scenario.planner):
                     # stalled where the margin's plans drove it: the vehicle is weaker than
                     # the margin allows for, and needs all of its drive to get away (search_plan
                     # falls back by itself only where the margin's search ends early)
@@ -384,7 +457,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
                 inner, aimed = p, world.scenario.goal["radius"]
-                again = PL.search_plan(world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
+                again = PL.search_plan(model_world, cost, progress=progress(f"{label}, the disc itself") if progress else None,
                                        start=X, incumbent=tail,
                                        time_budget_s=max(budget - inner.planning_time_s, 0.5 * budget))
                 p = PL.counting(again, inner)      # both searches count
@@ -400,7 +473,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 why = None
             else:
                 # after stalls where the plans drove it, and from where none is seen now
-                weaker = f"; {_weaker(stalls, world.vehicle.name)}" if stalls else ""
+                weaker = f"; {_weaker(stalls, _named(world, planner))}" if stalls else ""
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
         control = steps[k]
@@ -408,23 +481,27 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # the last control was cut where the prediction entered the goal: hold it
             # for a full period (the rollout stops in the goal)
             control = (control[0], control[1], max(control[2], ps.period_s))
-        if guard is not None:
+        if guards:
             # safety: a period whose prediction from the measured state comes within the
             # tip-over margin is not driven; the vehicle re-plans from where it stands
             # (and stops for good where the fresh plan's first period is held back too)
-            _, gend, _ = guard.step(X, control, record=False)
-            # a plan made without the margin (none kept it: it says so) rides within it by
-            # design: its periods are held back only where they would tip the vehicle over
+            # (once the twin plans, the planning vehicle's prediction is of a vehicle the run
+            # has seen it is not: it holds a period back only where it would tip over)
             kept = bool((current.margin or {}).get("kept", True)) if current is not None else True
-            if gend == -SS.TIP or (gend == -SS.MARGIN and kept):
-                if guarded and since == 0:
+            kept = kept and planner is world
+            if _held(guards, X, control, kept):
+                if guarded and since == 0 and planner is world and ps.margin > 0.0:
+                    # the fresh plan's first period is held back too: its model is wrong here
+                    # (the guard's twin predicts what the plan does not); plan with the twin
+                    planner, model = _weaker_model(world, cost, out, X)
+                elif guarded and since == 0:
                     return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
                                             f"every way on that the planner found comes within half the tip-over "
                                             f"margin ({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) from the "
                                             f"measured state; the run stops rather than tip over")
                 guarded = True
                 out.guarded += 1
-                why = f"the next period would come within half the tip-over margin at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 continue
         guarded = False
         _, _, P = model.step(P, control, record=False)
@@ -436,9 +513,13 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if end == -SS.STALL:
-            failed = _stalled(out, stalls, X, real, world.vehicle.name)
+            failed = _stalled(out, stalls, X, real, _named(world, planner))
             if failed:
                 return finish("failed", failed)
+            if planner is world and ps.margin > 0.0:
+                # stalled where the plans of the planning vehicle drove it: the vehicle is at
+                # least as weak as the margin's twin, which plans from here on
+                planner, model = _weaker_model(world, cost, out, X)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "

@@ -159,7 +159,8 @@ class RunSettings:
     (re-plan after every period); tol_xy [m], tol_yaw_deg [deg], tol_v [m/s]: the
     tolerance; execute_periods: periods executed before an 'every' re-plan;
     replan_time_budget_s: wall-clock budget of each re-plan (the first plan has the
-    planner's); max_replans: the run fails beyond it; max_stalls: stalls of the vehicle
+    planner's); stall_replan_time_budget_s: that of a re-plan the vehicle waits for (it
+    stalled, or the tip-over guard held its next period back); max_replans: the run fails beyond it; max_stalls: stalls of the vehicle
     (each followed by a re-plan from where it stopped) before the run fails;
     max_time_factor: the run fails when it takes longer than this times the first
     plan's travel time (plus 30 s).
@@ -171,6 +172,7 @@ class RunSettings:
     tol_v: float = 0.25
     execute_periods: int = 1
     replan_time_budget_s: float = 10.0
+    stall_replan_time_budget_s: float = 30.0
     max_replans: int = 50
     max_stalls: int = 3
     max_time_factor: float = 3.0
@@ -182,6 +184,7 @@ _RUN_RANGES = {
     "tol_v": (float, 1e-3, 10.0),
     "execute_periods": (int, 1, 1000),
     "replan_time_budget_s": (float, 0.01, 86400.0),
+    "stall_replan_time_budget_s": (float, 0.01, 86400.0),
     "max_replans": (int, 0, 100000),
     "max_stalls": (int, 0, 1000),
     "max_time_factor": (float, 1.0, 1000.0),

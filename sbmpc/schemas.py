@@ -96,6 +96,7 @@ def run() -> dict:
                     "energy_J": NUM_OR_NULL, "predicted": pe, "executed": pe,
                     "prediction_error": _obj({"travel_time": NUM_OR_NULL, "energy": NUM_OR_NULL}),
                     "stalls": {"type": "integer"}, "periods": {"type": "integer"}, "guarded": {"type": "integer"},
+                    "weaker_from_t": NUM_OR_NULL,
                     "trigger": {"enum": ["tolerance", "every"]},
                     "first_planning_time_s": NUM_OR_NULL, "replan_time_s": {"type": "array", "items": NUM},
                     "tolerance": _obj({"xy_m": NUM, "yaw_deg": NUM, "v_m_s": NUM}),

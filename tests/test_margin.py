@@ -191,3 +191,57 @@ def test_a_tip_margin_at_or_beyond_the_tip_limit_is_refused_with_the_key():
         api.load_scenario({"name": "x", "map": {"heights": [[0, 0], [0, 0]], "resolution": 1.0}, "terrain": "grass",
                            "vehicle": "p3at", "start": {"x": 0.2, "y": 0.2}, "goal": {"x": 0.8, "y": 0.8},
                            "planner": {"tip_over_deg": 20, "margin_tip_deg": 20}})
+
+
+# ---- the run's guard -----------------------------------------------------------------------
+def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
+    """The run's guard and, once the vehicle proves weaker, its planning model are the
+    twin the search drives every edge with: mass, inertia, mu_sa and mu_op times
+    1 + margin, packed to the same numbers; planned with no margin of its own, the
+    tip-over margin only after the guard held a period back."""
+    from dynamics.resistance import friction_table
+    from sbmpc import receding as R
+    w = _plane(5.0, margin=0.1, margin_turn=0.0, margin_tip_deg=5.0)
+    tw = WO.pessimistic(w)
+    assert tw.vehicle.mass == pytest.approx(1.1 * w.vehicle.mass)
+    assert tw.vehicle.inertia == pytest.approx(1.1 * w.vehicle.inertia)
+    for a, b in zip(tw.terrains, w.terrains):
+        assert (a.mu_sa, a.mu_op) == pytest.approx((1.1 * b.mu_sa, 1.1 * b.mu_op))
+    Q, data = PB.pack_world(w, "time", margin=True)
+    block = np.concatenate([K.pack(tw.vehicle, tw.terrains[0]), friction_table(tw.vehicle, tw.terrains[0])])
+    off = int(Q[SS.Q_OFFTW])
+    assert np.array_equal(data[off:off + block.size], block)
+    guards = R._guards(w, "time")
+    assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 2)
+    o = int(guards[1].Q[SS.Q_OFFT])           # the guard's twin drives as the vehicle of its own world
+    assert np.array_equal(guards[1].data[o:o + block.size], block)
+    ps = R._twin_planner(w).scenario.planner
+    assert (ps.margin, ps.margin_turn, ps.margin_tip_deg) == (0.0, 0.0, 0.0)
+    assert R._twin_planner(w, tip=True).scenario.planner.margin_tip_deg == 5.0
+    assert R._twin_planner(w).vehicle.mass == tw.vehicle.mass
+    assert len(R._guards(_plane(5.0, margin=0.0, margin_tip_deg=5.0), "time")) == 1
+    assert R._guards(_plane(5.0, margin=0.1, margin_tip_deg=0.0), "time") == []
+
+
+class _Prediction:
+    """A guard whose 1 kHz prediction of any period ends with ``end``."""
+
+    def __init__(self, end):
+        self.end = end
+
+    def step(self, X, control, record=False):
+        return None, self.end, X
+
+
+@pytest.mark.parametrize("nominal, twin, kept, held", [
+    (0, 0, True, False), (0, 0, False, False),
+    (-SS.MARGIN, 0, True, True),          # a plan that keeps the margin: the planning vehicle within half of it
+    (-SS.MARGIN, 0, False, False),        # a fallback plan rides within it by design
+    (-SS.TIP, 0, False, True),            # ... but never into a tip-over
+    (0, -SS.MARGIN, False, True),         # the twin within half of it: held, whatever the plan
+    (0, -SS.MARGIN, True, True), (0, -SS.TIP, False, True),
+    (-SS.STALL, -SS.STALL, False, False),  # a stall is the stall test's, not the guard's
+])
+def test_the_guard_holds_a_period_back_by_the_rule(nominal, twin, kept, held):
+    from sbmpc import receding as R
+    assert R._held([_Prediction(nominal), _Prediction(twin)], np.zeros(SS.NX), (1.0, 1.0, 1.0), kept) is held

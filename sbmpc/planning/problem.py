@@ -13,7 +13,7 @@ from dynamics.resistance import friction_table
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
 from ..problems import skidsteer as SS
 from ..search.astar import Problem
-from .world import FIXED_CONTROLS, World, _start, control_set, gripped, heavier, hold_mode
+from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode, pessimistic
 
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
@@ -39,9 +39,8 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     twins = []
     if margin and ps.margin > 0.0:
         # the margin's pessimistic twin (skidsteer.edge): heavier, more grip, by the margin
-        tv = heavier(v, 1.0 + ps.margin)
-        twins = [np.concatenate([K.pack(tv, tt), friction_table(tv, tt)])
-                 for tt in gripped(world.terrains, 1.0 + ps.margin)]
+        tw = pessimistic(world)
+        twins = [np.concatenate([K.pack(tw.vehicle, tt), friction_table(tw.vehicle, tt)]) for tt in tw.terrains]
     offw = offt + sum(b.size for b in blocks)
     offd = offw + sum(b.size for b in twins)
     data = np.ascontiguousarray(np.concatenate(parts + blocks + twins + [ctg.ravel()]))

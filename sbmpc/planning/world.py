@@ -201,6 +201,16 @@ def gripped(terrains, f: float) -> tuple:
 
 
 @functools.lru_cache(maxsize=8)
+def pessimistic(world: World) -> World:
+    """The world driven by the margin's pessimistic twin (``planner.margin`` = m): mass and
+    inertia, and both friction coefficients of every terrain, times 1 + m (the twin every
+    edge of a plan with margin is also driven by, :mod:`sbmpc.problems.skidsteer`). Cached
+    per world (worlds hash by identity)."""
+    f = 1.0 + world.scenario.planner.margin
+    return replace(world, vehicle=heavier(world.vehicle, f), terrains=gripped(world.terrains, f))
+
+
+@functools.lru_cache(maxsize=8)
 def without_margin(world: World) -> World:
     """The world planned without the margin (``planner.margin``, ``margin_tip_deg`` 0):
     :func:`sbmpc.planning.plan.search_plan`'s fallback where no plan keeps it. Cached per world
