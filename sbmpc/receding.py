@@ -201,7 +201,7 @@ class _Executor:
 
     def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0, tip_guard: bool = False):
         self.dt = 1.0 / world.vehicle.controller_rate
-        self.Q, self.data = PB.pack_world(world, cost, self.dt)
+        self.Q, self.data = PB.pack_world(world, cost, self.dt, grid=False)
         if tip_guard:
             # half the tip-over margin alone (planner.margin_tip_deg): the guard of a run's
             # periods. Half: a plan keeps the whole margin at the planner's step, and its
@@ -331,12 +331,13 @@ def _twin_planner(world: WO.World, tip: bool = False) -> WO.World:
     return replace(tw, scenario=replace(tw.scenario, planner=ps))
 
 
-def _named(world: WO.World, planner: WO.World) -> str:
-    """The planning model's name in a run's messages (``planner``: the world's, or its
-    margin's twin)."""
+def _named(world: WO.World, planner: WO.World, out: "RunResult") -> str:
+    """The planning model in a run's messages: the world's vehicle, and from
+    ``out.weaker_from`` on its margin's twin (``planner``)."""
     if planner is world:
         return world.vehicle.name
-    return f"{world.vehicle.name} as the margin's twin, x{1.0 + world.scenario.planner.margin:g} mass and grip"
+    return (f"{world.vehicle.name}, and from t = {out.weaker_from:.1f} s its margin's twin, "
+            f"x{1.0 + world.scenario.planner.margin:g} mass and grip")
 
 
 def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None) -> RunResult:
@@ -444,9 +445,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             else:
                 p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
                 if not p.found and why.startswith("stalled") and PL.margin_on(target.scenario.planner):
-                    # stalled where the margin's plans drove it: the vehicle is weaker than
-                    # the margin allows for, and needs all of its drive to get away (search_plan
-                    # falls back by itself only where the margin's search ends early)
+                    # stalled where plans with a tip-over margin or turn reserve (and no twin:
+                    # with one, the twin plans after a stall, keeping none) drove it: the
+                    # vehicle needs all of its drive to get away (search_plan falls back by
+                    # itself only where the margin's search ends early)
                     bare = PL.search_plan(WO.without_margin(target), cost, start=X, incumbent=tail,
                                           progress=progress(f"{label}, without the margin") if progress else None,
                                           time_budget_s=max(budget - p.planning_time_s, 0.25 * budget))
@@ -467,13 +469,17 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
                 current, k, P, since, why = p, 0, X.copy(), 0, None
                 steps = periods(p.controls, ps.period_s)
-            elif current is not None and k < len(steps) and not why.startswith("stalled"):
+            elif current is not None and k < len(steps) and not why.startswith("stalled") and not held:
                 # like any MPC: when a re-plan fails, keep driving the previous plan and try
-                # again after the next period
+                # again after the next period (not a period the guard held back)
                 why = None
+            elif held:
+                return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: the "
+                                        f"next period would come within half the tip-over margin and no re-plan "
+                                        f"from there found a way on ({p.reason}); the run stops rather than tip over")
             else:
                 # after stalls where the plans drove it, and from where none is seen now
-                weaker = f"; {_weaker(stalls, _named(world, planner))}" if stalls else ""
+                weaker = f"; {_weaker(stalls, _named(world, planner, out))}" if stalls else ""
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
         control = steps[k]
@@ -513,7 +519,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if end == -SS.STALL:
-            failed = _stalled(out, stalls, X, real, _named(world, planner))
+            failed = _stalled(out, stalls, X, real, _named(world, planner, out))
             if failed:
                 return finish("failed", failed)
             if planner is world and ps.margin > 0.0:
@@ -532,7 +538,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 ys = np.median([r.y for r in behind])
                 tail = (f": {len(behind)} re-plans after it fell behind its plans or stalled, around "
                         f"({xs:.2f}, {ys:.2f}); the vehicle is weaker there than the planning model "
-                        f"({world.vehicle.name}); plan with a model of this vehicle (sbmpc diagnose on a "
+                        f"({_named(world, planner, out)}); plan with a model of this vehicle (sbmpc diagnose on a "
                         f"run of it writes one)")
             return finish("failed", f"took longer than {t_limit:.0f} s ({rs.max_time_factor:g} x the first "
                                     f"plan's travel time + 30 s) without reaching the goal{tail}")

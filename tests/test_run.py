@@ -14,6 +14,7 @@ from dynamics.discrepancy import diagnose
 from dynamics.params import vehicle_to_yaml
 from dynamics.synth import apply, synth_run
 from sbmpc.planning import plan as PL
+from sbmpc.problems import skidsteer as SS
 from sbmpc.planning import world as WO
 from sbmpc.planning import horizon as HZ
 from sbmpc import receding as R
@@ -375,3 +376,69 @@ def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_ma
     assert res.weaker_from == pytest.approx(res.plans[1].t)
     assert res.replans == 1
     assert res.to_json()["weaker_from_t"] == pytest.approx(res.plans[1].t)
+
+
+class _Predicts:
+    """A run's guard (receding._guards) whose 1 kHz predictions end with the codes of
+    ``ends`` in turn, the last repeated."""
+
+    def __init__(self, *ends):
+        self.ends = list(ends)
+
+    def step(self, X, control, record=False):
+        return None, (self.ends.pop(0) if len(self.ends) > 1 else self.ends[0]), X
+
+
+def _searches(monkeypatch, fail_after=None):
+    """Record every re-plan's search (planning mass, tip-over margin, budget); with
+    ``fail_after`` n, the re-plans after the first n find nothing."""
+    seen = []
+    search = PL.search_plan
+
+    def spy(world, *args, **kw):
+        p = search(world, *args, **kw)
+        if "start" in kw:
+            seen.append((world.vehicle.mass, world.scenario.planner.margin_tip_deg, kw.get("time_budget_s")))
+            if fail_after is not None and len(seen) > fail_after:
+                p = replace(p, status="no_path", reason="no way (the test's)")
+        return p
+    monkeypatch.setattr(PL, "search_plan", spy)
+    return seen
+
+
+def test_where_the_twin_holds_every_period_back_the_run_re_plans_as_the_twin_then_stops(flat, monkeypatch):
+    """The guard's twin predicts every period within half the tip-over margin: the first
+    period is held back, the fresh plan's too, and the vehicle proves weaker than the
+    planning one; the twin re-plans with the tip-over margin, in the budget of a re-plan
+    the vehicle waits for, and where its first period is held back as well the run stops
+    rather than tip over, without driving a step."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(-SS.MARGIN)])
+    seen = _searches(monkeypatch)
+    res = R.run(flat, "time")
+    m, rs, tip = flat.vehicle.mass, flat.scenario.run, flat.scenario.planner.margin_tip_deg
+    assert res.status == "failed" and "the run stops rather than tip over" in res.reason
+    assert res.periods == 0 and res.guarded == 2 and res.weaker_from == 0.0
+    half = 0.5 * rs.stall_replan_time_budget_s
+    assert seen == [(m, tip, half), (pytest.approx(1.1 * m), tip, half)]
+
+
+def test_once_the_twin_plans_the_planning_vehicles_margin_no_longer_holds_its_periods(flat, monkeypatch):
+    """The planning vehicle's prediction comes within half the tip-over margin at every
+    period, the twin's never: held twice, the run plans as the twin, whose plan is driven
+    (the planning vehicle, which the run has seen it is not, holds a period back only
+    where it would tip over) to the goal."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(-SS.MARGIN), _Predicts(0)])
+    res = R.run(flat, "time")
+    assert res.status == "reached", res.reason
+    assert res.guarded == 2 and res.weaker_from == 0.0 and res.periods > 10
+
+
+def test_a_held_period_is_never_driven_when_the_re_plan_finds_nothing(flat, monkeypatch):
+    """A re-plan that finds nothing normally keeps the previous plan for one more period;
+    not a period the guard held back: the run stops there, and says why."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, 0, -SS.MARGIN, 0), _Predicts(0)])
+    _searches(monkeypatch, fail_after=0)
+    res = R.run(flat, "time")
+    assert res.status == "failed" and res.periods == 3 and res.guarded == 1
+    assert "no re-plan from there found a way on (no way (the test's))" in res.reason
+    assert "the run stops rather than tip over" in res.reason

@@ -18,12 +18,15 @@ from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode, pessim
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
 
-def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False) -> tuple:
+def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False,
+               grid: bool = True) -> tuple:
     """(params, data) flat arrays of :mod:`sbmpc.problems.skidsteer` for a world and cost, with
     the edges integrated at ``dt`` [s] (default the planner's step). ``margin``: edges
     must also keep the planner's margin (``planner.margin``, ``margin_tip_deg``: the
     search's and the polish's edges); without it an edge fails only where the vehicle
-    does (the checks, the runs' drives)."""
+    does (the checks, the runs' drives). ``grid`` False: no cost-to-go grid (a drive
+    that only replays controls, ``skidsteer.replay``, never reads it; its slot holds
+    one infinite value and the heuristic's constants 0)."""
     scn, e, v = world.scenario, world.emap, world.vehicle
     ps = scn.planner
     dt = ps.dt if dt is None else dt
@@ -35,7 +38,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
     offt = sum(p.size for p in parts)
-    ctg, frmax, kegrid, gap = cost_to_go(world, cost)
+    ctg, frmax, kegrid, gap = cost_to_go(world, cost) if grid else (np.full((1, 1), np.inf), 0.0, 0.0, 0.0)
     twins = []
     if margin and ps.margin > 0.0:
         # the margin's pessimistic twin (skidsteer.edge): heavier, more grip, by the margin
