@@ -583,6 +583,9 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     hp = HorizonPlanner(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
     setup = time.perf_counter() - t_setup   # the cost-to-go grid and the turn cost: part of the first plan's time
     model = _Executor(world, cost)
+    guards = _guards(world, cost)
+    held = False                        # the last period was held back by the guard, and nothing driven since
+    kept = True                         # the plan followed keeps the margin (a fallback whole-route one may not)
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)
     pieces = []
@@ -632,15 +635,43 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                 return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
             guide = periods(p.controls, ps.period_s)
+            kept = bool((p.margin or {}).get("kept", True))
         if guide is not None:
-            control = guide.pop(0)
-            if not guide:
+            control = guide[0]
+            if len(guide) == 1:
                 control = (control[0], control[1], max(control[2], ps.period_s))
         else:
             step = periods(h.controls, ps.period_s)
             control = step[0]
             if h.goal and len(step) == 1:
                 control = (control[0], control[1], max(control[2], ps.period_s))
+        if guards and _held(guards, X, control, kept):
+            # the guard (as in run): the period is not driven; the vehicle waits for a plan
+            # from where it stands: a horizon plan, then a whole-route one, then it stops
+            out.guarded += 1
+            where = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+            if held and guide is not None:
+                return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
+                                        f"every way on that the planner found comes within half the tip-over "
+                                        f"margin ({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) "
+                                        f"from the measured state; the run stops rather than tip over")
+            if held or guide is not None:
+                p = whole_route(f"{where}: whole-route plan")
+                if not p.found:
+                    return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
+                                            f"the next period would come within half the tip-over margin and no "
+                                            f"whole-route plan from there found a way on ({p.reason}); the run "
+                                            f"stops rather than tip over")
+                guide = periods(p.controls, ps.period_s)
+                kept = bool((p.margin or {}).get("kept", True))
+            else:
+                stats.from_measured += 1
+                h = made(hp.plan(X, previous=None), where, X)
+            held = True
+            continue
+        held = False
+        if guide is not None:
+            guide.pop(0)
         _, _, P = model.step(X, control, record=False)
         nxt = hp.plan(P, previous=h) if guide is None else None     # made while the period is driven
         rec, end, X = real.step(X, control)
@@ -668,6 +699,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                     return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
                                             f"t = {X[K.S_T]:.1f} s: {p.reason}")
                 guide = periods(p.controls, ps.period_s)
+                kept = bool((p.margin or {}).get("kept", True))
             continue
         togo.append(hp.to_go(X))
         if off:

@@ -172,3 +172,32 @@ def test_plan_and_compare_with_a_horizon_report_the_drive(tmp_path, capsys):
     assert main(["compare", str(SCN / "flat.yaml"), "--horizon", "8", "--out", str(tmp_path / "cmp"), "--quiet"]) == 0
     plans = json.loads((tmp_path / "cmp" / "compare.json").read_text())["plans"]
     assert all(p["found_by"].startswith("receding horizon") for p in plans.values())
+
+
+class _Predicts:
+    """A run's guard (receding._guards) whose 1 kHz predictions all end with ``end``."""
+
+    def __init__(self, end):
+        self.end = end
+
+    def step(self, X, control, record=False):
+        return None, self.end, X
+
+
+def test_a_horizon_run_never_drives_a_period_the_guard_holds_back(flat, monkeypatch):
+    """The tip-over guard of whole-route runs guards horizon runs too (their narrow_pass
+    runs with a 10 % heavier or less grippy truth tipped over without it,
+    bench/results/horizon_truths.json): a period whose prediction comes within half the
+    tip-over margin is not driven; the vehicle waits for a horizon plan from where it
+    stands, then for a whole-route plan, and where that one's first period is held back
+    too, the run stops rather than tip over, without driving a step."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(-SS.MARGIN)])
+    res = R.run(flat, "time")
+    assert res.status == "failed" and "the run stops rather than tip over" in res.reason
+    assert res.periods == 0 and res.guarded == 3
+    assert res.horizon.fallbacks == 1 and res.horizon.from_measured == 1
+    assert [r.why.split(" at (")[0] for r in res.plans[1:]] == [R.HELD, R.HELD]
+    # a guard that holds nothing back changes nothing
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(0)])
+    free = R.run(flat, "time")
+    assert free.status == "reached" and free.guarded == 0 and free.horizon.fallbacks == 0
