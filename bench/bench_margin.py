@@ -128,9 +128,18 @@ def table(rows: list) -> str:
     def cost(r):
         return r["travel_time_s"] if r["cost"] == "time" else r["energy_J"]
 
+    def outcome(run):
+        why = run.get("reason") or ""
+        if run.get("status") == "reached":
+            return "reached"
+        if "tipped over" in why:
+            return "**tipped over**"
+        if why.startswith("stopped at"):          # the guard: it stops rather than tip over
+            return "**stopped** (guard)"
+        return "**failed**" if run else "-"
+
     def runs(r):
-        return " / ".join({"reached": "reached", "failed": "**failed**"}.get(r.get(k, {}).get("status"), "-")
-                          for k in ("run_mass_1.1", "run_grip_0.9"))
+        return " / ".join(outcome(r.get(k, {})) for k in ("run_mass_1.1", "run_grip_0.9"))
 
     out = ["| scenario | cost | margin 0: cost, p_stall 5 % (10 %) | runs +10 % mass / -10 % grip | default: cost (price) | "
            "p_stall 5 % (10 %) | p_tip 5 % | runs +10 % mass / -10 % grip |", "|---|---|---|---|---|---|---|---|"]
