@@ -306,6 +306,14 @@ def _held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
     return False
 
 
+def _stopped(X: np.ndarray, ps) -> str:
+    """Why a run stopped at the measured state X: the guard held back the first period
+    of every plan from there (``ps``: the planner settings)."""
+    return (f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: every way on that the planner "
+            f"found comes within half the tip-over margin ({0.5 * ps.margin_tip_deg:g} deg below "
+            f"{ps.tip_over_deg:g} deg) from the measured state; the run stops rather than tip over")
+
+
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray) -> tuple:
     """(planning world, its executor) once the run has seen the vehicle weaker than the
     planning one (a stall where its plans drove it, or a fresh plan whose first period
@@ -501,10 +509,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                     # (the guard's twin predicts what the plan does not); plan with the twin
                     planner, model = _weaker_model(world, cost, out, X)
                 elif guarded and since == 0:
-                    return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
-                                            f"every way on that the planner found comes within half the tip-over "
-                                            f"margin ({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) from the "
-                                            f"measured state; the run stops rather than tip over")
+                    return finish("failed", _stopped(X, ps))
                 guarded = True
                 out.guarded += 1
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
@@ -651,10 +656,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             out.guarded += 1
             where = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
             if held and guide is not None:
-                return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
-                                        f"every way on that the planner found comes within half the tip-over "
-                                        f"margin ({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) "
-                                        f"from the measured state; the run stops rather than tip over")
+                return finish("failed", _stopped(X, ps))
             if held or guide is not None:
                 p = whole_route(f"{where}: whole-route plan")
                 if not p.found:
