@@ -420,6 +420,10 @@ def test_where_the_twin_holds_every_period_back_the_run_re_plans_as_the_twin_the
     assert res.periods == 0 and res.guarded == 2 and res.weaker_from == 0.0
     half = 0.5 * rs.stall_replan_time_budget_s
     assert seen == [(m, tip, half), (pytest.approx(1.1 * m), tip, half)]
+    from sbmpc.commands.run import summary
+    text = summary(res)
+    assert "2 periods held back by the tip-over guard" in text
+    assert "from t = 0.0 s the margin's twin planned: the vehicle proved weaker than p3at" in text
 
 
 def test_once_the_twin_plans_the_planning_vehicles_margin_no_longer_holds_its_periods(flat, monkeypatch):
