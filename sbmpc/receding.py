@@ -306,12 +306,22 @@ def _held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
     return False
 
 
-def _stopped(X: np.ndarray, ps) -> str:
-    """Why a run stopped at the measured state X: the guard held back the first period
-    of every plan from there (``ps``: the planner settings)."""
-    return (f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: every way on that the planner "
-            f"found comes within half the tip-over margin ({0.5 * ps.margin_tip_deg:g} deg below "
-            f"{ps.tip_over_deg:g} deg) from the measured state; the run stops rather than tip over")
+def _stopped(X: np.ndarray, ps, failed: tuple | None = None) -> str:
+    """Why a run stopped at the measured state X rather than tip over (``ps``: the planner
+    settings): the guard held back the first period of every plan from there, or, with
+    ``failed`` (what re-planned, its reason), the period it held back left no plan."""
+    at = f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
+    if failed is not None:
+        return (f"{at}the next period would come within half the tip-over margin and no {failed[0]} from there "
+                f"found a way on ({failed[1]}); the run stops rather than tip over")
+    return (f"{at}every way on that the planner found comes within half the tip-over margin "
+            f"({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) from the measured state; the run "
+            f"stops rather than tip over")
+
+
+def _keeps_margin(plan: PL.Plan) -> bool:
+    """Whether a plan keeps the planner's margin (a fallback made without it says so)."""
+    return bool((plan.margin or {}).get("kept", True))
 
 
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray) -> tuple:
@@ -482,9 +492,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 # again after the next period (not a period the guard held back)
                 why = None
             elif held:
-                return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: the "
-                                        f"next period would come within half the tip-over margin and no re-plan "
-                                        f"from there found a way on ({p.reason}); the run stops rather than tip over")
+                return finish("failed", _stopped(X, ps, ("re-plan", p.reason)))
             else:
                 # after stalls where the plans drove it, and from where none is seen now
                 weaker = f"; {_weaker(stalls, _named(world, planner, out))}" if stalls else ""
@@ -501,8 +509,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # (and stops for good where the fresh plan's first period is held back too)
             # (once the twin plans, the planning vehicle's prediction is of a vehicle the run
             # has seen it is not: it holds a period back only where it would tip over)
-            kept = bool((current.margin or {}).get("kept", True)) if current is not None else True
-            kept = kept and planner is world
+            kept = (current is None or _keeps_margin(current)) and planner is world
             if _held(guards, X, control, kept):
                 if guarded and since == 0 and planner is world and ps.margin > 0.0:
                     # the fresh plan's first period is held back too: its model is wrong here
@@ -640,7 +647,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                 return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
             guide = periods(p.controls, ps.period_s)
-            kept = bool((p.margin or {}).get("kept", True))
+            kept = _keeps_margin(p)
         if guide is not None:
             control = guide[0]
             if len(guide) == 1:
@@ -660,12 +667,9 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             if held or guide is not None:
                 p = whole_route(f"{where}: whole-route plan")
                 if not p.found:
-                    return finish("failed", f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
-                                            f"the next period would come within half the tip-over margin and no "
-                                            f"whole-route plan from there found a way on ({p.reason}); the run "
-                                            f"stops rather than tip over")
+                    return finish("failed", _stopped(X, ps, ("whole-route plan", p.reason)))
                 guide = periods(p.controls, ps.period_s)
-                kept = bool((p.margin or {}).get("kept", True))
+                kept = _keeps_margin(p)
             else:
                 stats.from_measured += 1
                 h = made(hp.plan(X, previous=None), where, X)
@@ -701,7 +705,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                     return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
                                             f"t = {X[K.S_T]:.1f} s: {p.reason}")
                 guide = periods(p.controls, ps.period_s)
-                kept = bool((p.margin or {}).get("kept", True))
+                kept = _keeps_margin(p)
             continue
         togo.append(hp.to_go(X))
         if off:
