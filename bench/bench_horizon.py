@@ -42,19 +42,20 @@ SIDES = {70: 60, 170: 130, 340: 250}      # route [m] -> square side [m]
 TRUTHS = {"nominal": (1.0, 1.0), "heavy": (1.1, 1.0), "slippery": (1.0, 0.9)}
 
 
-def field_scenario(route: int):
-    """A field of random hills for a route of about ``route`` m (module doc)."""
+def field_scenario(route: int, seed: int = 7):
+    """A field of random hills for a route of about ``route`` m (module doc), drawn with
+    the map generator's ``seed``."""
     import yaml
 
     from sbmpc import scenario as SC
     side = SIDES[route]
     d = yaml.safe_load((ROOT / "scenarios" / "hills_field.yaml").read_text())
-    d["name"] = f"field_{route}m"
-    d["map"]["generate"] = {"size": [side, side], "resolution": 0.5, "seed": 7, "features": [
+    d["name"] = f"field_{route}m" if seed == 7 else f"field_{route}m_seed{seed}"
+    d["map"]["generate"] = {"size": [side, side], "resolution": 0.5, "seed": seed, "features": [
         {"type": "random_hills", "count": int(round(24 * side * side / 3600)), "height": [0.5, 3.0],
          "radius": [2.5, 6.0]}]}
     d["goal"] = {"x": side - 5.0, "y": side - 5.0, "radius": 1.0}
-    path = ROOT / "bench" / "results" / f".field_{route}m.yaml"
+    path = ROOT / "bench" / "results" / f".{d['name']}.yaml"
     path.write_text(yaml.safe_dump(d))
     try:
         return SC.load(path)

@@ -81,6 +81,27 @@ def test_polish_never_makes_a_plan_dearer(flat, noise, cost):
     assert _replayed_cost(world, cost, pol.controls) == pytest.approx(pol.cost, abs=1e-9)
 
 
+def test_a_long_plans_polish_moves_its_head_and_tail_only(flat, monkeypatch):
+    """Over EXACT_UP_TO controls the moves go to the first HEAD and last TAIL controls
+    (a move at i changes i and i + 1): the middle stays as given, the result is no dearer
+    and replays to its cost; polished at every control, the same plan's middle moves."""
+    world, prob = flat
+    lo, hi = WO.wheel_speed_range(world)
+    monkeypatch.setattr(PO, "EXACT_UP_TO", 10)
+    monkeypatch.setattr(PO, "HEAD", 2)
+    monkeypatch.setattr(PO, "TAIL", 5)
+    base = np.array(BASE)
+    pol = PO.polish(prob.params, prob.data, prob.start, BASE, lo, hi)
+    c = np.array(pol.controls)
+    mid = slice(PO.HEAD + 1, len(c) - PO.TAIL)
+    assert len(c) - PO.TAIL - PO.HEAD - 1 >= 8
+    assert np.array_equal(c[mid, :2], base[mid, :2])
+    assert pol.cost < pol.cost_before
+    assert _replayed_cost(world, "energy", pol.controls) == pytest.approx(pol.cost, abs=1e-9)
+    full = np.array(PO.polish(prob.params, prob.data, prob.start, BASE, lo, hi, every=True).controls)
+    assert not np.array_equal(full[mid, :2], base[mid, :2])
+
+
 def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
     """flat.yaml's energy plans for Halton seeds 0-3, driven at 1 kHz: the polish makes
     each cheaper than the search's own plan, the median by at least 1 % (1.8 % measured

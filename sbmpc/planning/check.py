@@ -43,11 +43,15 @@ def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray 
         raise InputError(f"controls: expected at most {MAX_REPLAY_STEPS:,} steps of {dt:g} s in all, found "
                          f"{int(n.sum()):,} ({sum(c[2] for c in controls):.6g} s)")
     Q, data = pack_world(world, cost, dt)
-    rec = np.zeros((int(n.sum()) + 1, K.NR))
+    rec = np.empty((int(n.sum()) + 1, K.NR))
     X0 = _start(world, start)
     rows, S, end, early = SS.replay(Q, data, X0, cl, cr, n, rec)
-    idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
-    traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
+    if every == 1:                  # every step: one transposed copy, a contiguous row per channel
+        cols = np.ascontiguousarray(rec[:rows].T)
+        traj = {name: cols[i] for i, name in enumerate(K.CHANNELS)}
+    else:
+        idx = np.unique(np.r_[np.arange(0, rows, every), rows - 1])
+        traj = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
     return traj, int(end), S, (len(controls) if early < 0 else int(early) + 1)
 
 
