@@ -188,6 +188,25 @@ def test_a_polish_that_misses_the_goal_at_1khz_is_repaired_and_kept_when_cheaper
     assert r2.found and r2.polish is None and r2.controls == q.controls and r2.energy_J == q.energy_J
 
 
+def test_a_polish_that_parts_from_its_line_at_1khz_is_polished_once(monkeypatch):
+    """A polish aimed 10 cm inside the goal disc whose controls miss at 1 kHz (not a
+    tip-over) goes to the repair as it is: a polish aimed at the disc itself parts no
+    less (a 340 m field's energy plan spent 2.6 s on that second polish, never kept)."""
+    w = _world(0, hold=False)
+    p = PL.search_plan(w, "energy")
+    X0 = PL._start(w, None)
+    short = [tuple(c) for c in p.controls[:-2]]
+    drive = CK.controller_rate(w, "energy", short, X0)
+    assert not drive[0].reached and drive[0].end != -SS.TIP
+    fake = PO.Polished(short, 1.0, 2.0, 0, 0.0)
+    calls = []
+    monkeypatch.setattr(RP, "polish", lambda params, *a, **k: calls.append(params[SS.Q_GR]) or fake)
+    pol, searched, missed = RP.polished(w, "energy", PB.problem(w, "energy"), X0, p.controls, float("inf"))
+    assert pol is None and missed[0] is fake and not missed[1][0].reached
+    r = w.scenario.goal["radius"]
+    assert calls == [pytest.approx(r - min(RP.POLISH_GOAL_MARGIN, 0.5 * r))]
+
+
 def test_the_polish_runs_on_the_planners_threads(monkeypatch):
     """``planner.threads: 1`` plans on one core, the polish's trials included (they ran
     on every core before, so that a 'one core' planning time used two); numba's thread

@@ -57,7 +57,9 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
     misses the goal (or only passes it) at the controller rate, for :func:`sbmpc.planning.plan.search_plan` to
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, none gains there or it
-    is no cheaper at the controller rate, the disc): a cheapest
+    is no cheaper at the controller rate, the disc; not where its controls miss at the
+    controller rate other than by tipping over: aimed at the disc they miss no less, and
+    they go to the repair as they are): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
     may pass just outside it at 1 kHz. Where the polished controls tip the vehicle over
     at 1 kHz, they are polished again from the searched ones with the tip-over limit
@@ -86,9 +88,13 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
             new = drive[0]
             if not new.reached:
                 missed = (pol, drive)
-                if new.end != -SS.TIP or time.perf_counter() > deadline:
-                    break
-                continue                               # tipped at 1 kHz: again, further from the limit
+                if new.end == -SS.TIP and time.perf_counter() <= deadline:
+                    continue                           # tipped at 1 kHz: again, further from the limit
+                if new.end != -SS.TIP:
+                    # parted from its line at 1 kHz (stalled, or passed outside the disc):
+                    # a polish aimed at the disc itself parts no less; the repair takes it
+                    return None, searched, missed
+                break
             if searched is None:
                 searched = controller_rate(world, cost, controls, X0)
             old = searched[0]
