@@ -319,6 +319,27 @@ def _stopped(X: np.ndarray, ps, failed: tuple | None = None) -> str:
             f"stops rather than tip over")
 
 
+RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (_retrace)
+
+
+def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
+    """A stop (wheel speeds 0 for the last period's length), then the last ``n`` driven
+    periods ``driven`` [(wl, wr, duration_s)] backwards: each period's wheel speeds
+    negated, the latest first (from rest a skid-steered vehicle backs along the way it
+    came, up to its slip); where every one of them, predicted from the measured state X
+    by the guards, stays out of half the tip-over margin; else None (too few periods
+    driven, or one held back)."""
+    if len(driven) < n:
+        return None
+    back = [(0.0, 0.0, driven[-1][2])] + [(-wl, -wr, d) for wl, wr, d in reversed(driven[-n:])]
+    S = X
+    for c in back:
+        if _held(guards, S, c, True):
+            return None
+        _, _, S = guards[0].step(S, c, record=False)
+    return back
+
+
 def _keeps_margin(plan: PL.Plan) -> bool:
     """Whether a plan keeps the planner's margin (a fallback made without it says so)."""
     return bool((plan.margin or {}).get("kept", True))
@@ -431,11 +452,41 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     current, steps, k, P, since = None, [], 0, None, 0
     t_limit = math.inf
     stalls = []
+    driven: list = []                  # the periods driven, in order
+    retraced = 0                       # retraces made (RETRACE_PERIODS)
+    backing: list = []                 # periods of a retrace still to drive
 
     def finish(status, reason):
         return _finish(out, pieces, every, status, reason)
 
+    def retrace() -> bool:
+        """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
+        drive back along the way it came (then it re-plans from there)."""
+        nonlocal retraced, backing, why
+        while retraced < len(RETRACE_PERIODS):
+            n = RETRACE_PERIODS[retraced]
+            retraced += 1
+            back = _retrace(guards, X, driven, n)
+            if back is not None:
+                backing = back
+                del driven[-n:]
+                why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), and no way on from there: {n} periods driven back"
+                return True
+        return False
+
     while True:
+        if backing:
+            # driving back along the way it came (retrace), each period guarded before
+            control = backing.pop(0)
+            rec, end, X = real.step(X, control)
+            pieces.append(rec if not pieces else rec[1:])
+            out.periods += 1
+            if end == SS.IN_GOAL:
+                return finish("reached", None)
+            if end < 0:
+                return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                                        f"t = {X[K.S_T]:.1f} s, driving back along the way it came")
+            continue
         if why is not None:
             if len(out.plans) > rs.max_replans:
                 return finish("failed", f"re-plan limit of {rs.max_replans} reached ({why} at "
@@ -492,7 +543,9 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 # again after the next period (not a period the guard held back)
                 why = None
             elif held:
-                return finish("failed", _stopped(X, ps, ("re-plan", p.reason)))
+                if not retrace():
+                    return finish("failed", _stopped(X, ps, ("re-plan", p.reason)))
+                continue
             else:
                 # after stalls where the plans drove it, and from where none is seen now
                 weaker = f"; {_weaker(stalls, _named(world, planner, out))}" if stalls else ""
@@ -516,7 +569,11 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                     # (the guard's twin predicts what the plan does not); plan with the twin
                     planner, model = _weaker_model(world, cost, out, X)
                 elif guarded and since == 0:
-                    return finish("failed", _stopped(X, ps))
+                    if not retrace():
+                        return finish("failed", _stopped(X, ps))
+                    guarded = False
+                    out.guarded += 1
+                    continue
                 guarded = True
                 out.guarded += 1
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
@@ -524,6 +581,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         guarded = False
         _, _, P = model.step(P, control, record=False)
         rec, end, X = real.step(X, control)
+        driven.append(control)
         pieces.append(rec if not pieces else rec[1:])
         k += 1
         since += 1

@@ -439,10 +439,31 @@ def test_once_the_twin_plans_the_planning_vehicles_margin_no_longer_holds_its_pe
 
 def test_a_held_period_is_never_driven_when_the_re_plan_finds_nothing(flat, monkeypatch):
     """A re-plan that finds nothing normally keeps the previous plan for one more period;
-    not a period the guard held back: the run stops there, and says why."""
+    not a period the guard held back: the run stops the vehicle and drives back along
+    the way it came (the last two periods, wheel speeds negated, latest first: on level
+    vinyl more than a metre back, within 5 cm of the path it drove), re-plans from
+    there, and where that finds nothing either and too few periods are left to drive
+    back four, stops there and says why."""
     monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, 0, -SS.MARGIN, 0), _Predicts(0)])
     _searches(monkeypatch, fail_after=0)
     res = R.run(flat, "time")
-    assert res.status == "failed" and res.periods == 3 and res.guarded == 1
+    assert res.status == "failed" and res.periods == 3 + 1 + 2 and res.guarded == 1
+    held = res.plans[1]
+    assert res.plans[-1].why.endswith("and no way on from there: 2 periods driven back")
+    tr = res.trajectory
+    fwd = tr["t"] <= held.t + 1e-9
+    x, y = tr["x"][-1], tr["y"][-1]
+    assert math.hypot(x - held.x, y - held.y) > 0.8
+    assert np.min(np.hypot(tr["x"][fwd] - x, tr["y"][fwd] - y)) < 0.05
     assert "no re-plan from there found a way on (no way (the test's))" in res.reason
+    assert "the run stops rather than tip over" in res.reason
+
+
+def test_a_retrace_the_guard_holds_back_is_not_driven(flat, monkeypatch):
+    """Driving back is guarded like any period: where the guard holds a period of the
+    way back, the run does not drive it and stops where the held period left it."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, 0, -SS.MARGIN, -SS.MARGIN), _Predicts(0)])
+    _searches(monkeypatch, fail_after=0)
+    res = R.run(flat, "time")
+    assert res.status == "failed" and res.periods == 3 and res.guarded == 1
     assert "the run stops rather than tip over" in res.reason
