@@ -462,13 +462,16 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     def retrace() -> bool:
         """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
         drive back along the way it came (then it re-plans from there)."""
-        nonlocal retraced, backing, why
+        nonlocal retraced, backing, why, guarded
+        if len(out.plans) > rs.max_replans:
+            return False
         while retraced < len(RETRACE_PERIODS):
             n = RETRACE_PERIODS[retraced]
             retraced += 1
             back = _retrace(guards, X, driven, n)
             if back is not None:
                 backing = back
+                guarded = False                # a fresh place: its first hold gets a re-plan
                 del driven[-n:]
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), and no way on from there: {n} periods driven back"
                 return True
@@ -476,14 +479,23 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
 
     while True:
         if backing:
-            # driving back along the way it came (retrace), each period guarded before
+            # driving back along the way it came (retrace), each period guarded from the
+            # measured state before it is driven
             control = backing.pop(0)
+            if _held(guards, X, control, True):
+                return finish("failed", _stopped(X, ps))
             rec, end, X = real.step(X, control)
             pieces.append(rec if not pieces else rec[1:])
             out.periods += 1
             if end == SS.IN_GOAL:
                 return finish("reached", None)
-            if end < 0:
+            if end == -SS.STALL:
+                # it cannot back up here: re-plan from where it stalled (why is set)
+                failed = _stalled(out, stalls, X, real, _named(world, planner, out))
+                if failed:
+                    return finish("failed", failed)
+                backing = []
+            elif end < 0:
                 return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                                         f"t = {X[K.S_T]:.1f} s, driving back along the way it came")
             continue
@@ -513,17 +525,19 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                             if progress and cost == "energy" else None)
             else:
                 p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
-                if not p.found and why.startswith("stalled") and PL.margin_on(target.scenario.planner):
+                stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
+                if not p.found and stranded and not held and PL.margin_on(target.scenario.planner):
                     # stalled where plans with a tip-over margin or turn reserve (and no twin:
                     # with one, the twin plans after a stall, keeping none) drove it: the
                     # vehicle needs all of its drive to get away (search_plan falls back by
-                    # itself only where the margin's search ends early)
+                    # itself only where the margin's search ends early); likewise where the
+                    # plan ended short of the goal and no plan is left to drive on
                     bare = PL.search_plan(WO.without_margin(target), cost, start=X, incumbent=tail,
                                           progress=progress(f"{label}, without the margin") if progress else None,
                                           time_budget_s=max(budget - p.planning_time_s, 0.25 * budget))
                     if bare.found:
                         bare = replace(bare, margin=dict(bare.margin or {}, kept=False,
-                                                         note=f"no plan from the stall keeps the margin ({p.reason})"))
+                                                         note=f"no plan from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) keeps the margin ({p.reason})"))
                     p = PL.counting(bare, p)
             aimed = target.scenario.goal["radius"]
             if not p.found and not first:
@@ -571,7 +585,6 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 elif guarded and since == 0:
                     if not retrace():
                         return finish("failed", _stopped(X, ps))
-                    guarded = False
                     out.guarded += 1
                     continue
                 guarded = True

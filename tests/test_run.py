@@ -467,3 +467,27 @@ def test_a_retrace_the_guard_holds_back_is_not_driven(flat, monkeypatch):
     res = R.run(flat, "time")
     assert res.status == "failed" and res.periods == 3 and res.guarded == 1
     assert "the run stops rather than tip over" in res.reason
+
+def test_a_run_whose_plan_ends_short_of_the_goal_re_plans_without_the_margin_where_none_keeps_it(flat, monkeypatch):
+    """The first plan ends four periods short of the goal and no re-plan keeps the margin:
+    with no plan left to drive on, the re-plan runs again without the margin (as after a
+    stall), says so, and the run reaches the goal (it failed with "no path" before)."""
+    plan = PL.plan
+    monkeypatch.setattr(PL, "plan", lambda *a, **k: (lambda p: replace(p, controls=p.controls[:-4]))(plan(*a, **k)))
+    search = PL.search_plan
+    seen = []
+
+    def spy(world, *args, **kw):
+        p = search(world, *args, **kw)
+        if "start" in kw:
+            seen.append(world.scenario.planner.margin)
+            if world.scenario.planner.margin > 0:
+                p = replace(p, status="no_path", reason="no way (the test's)")
+        return p
+    monkeypatch.setattr(PL, "search_plan", spy)
+    res = R.run(flat, "time")
+    assert res.status == "reached", res.reason
+    assert res.plans[1].why == "the plan ended short of the goal"
+    assert res.plans[1].plan.found and res.plans[1].plan.margin["kept"] is False
+    assert "keeps the margin (no way (the test's))" in res.plans[1].plan.margin["note"]
+    assert seen[:2] == [flat.scenario.planner.margin, 0.0]
