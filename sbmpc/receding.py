@@ -459,6 +459,15 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     def finish(status, reason):
         return _finish(out, pieces, every, status, reason)
 
+    def drive(control) -> int:
+        """One period of the true vehicle from the measured state X: X advanced, the
+        period recorded and counted. Returns its end code."""
+        nonlocal X
+        rec, end, X = real.step(X, control)
+        pieces.append(rec if not pieces else rec[1:])
+        out.periods += 1
+        return end
+
     def retrace() -> bool:
         """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
         drive back along the way it came (then it re-plans from there)."""
@@ -484,9 +493,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             control = backing.pop(0)
             if _held(guards, X, control, True):
                 return finish("failed", _stopped(X, ps))
-            rec, end, X = real.step(X, control)
-            pieces.append(rec if not pieces else rec[1:])
-            out.periods += 1
+            end = drive(control)
             if end == SS.IN_GOAL:
                 return finish("reached", None)
             if end == -SS.STALL:
@@ -509,6 +516,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             # a re-plan the vehicle waits for (it stalled, or the guard held its period back)
             # has a budget of its own; after the guard, the plan keeps the tip-over margin
             held = why.startswith(HELD)
+            # no plan to drive on while this one is made: stalled, or the plan ran out
+            stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
             budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
                       else rs.replan_time_budget_s)
             model_world = _twin_planner(world, tip=True) if held and planner is not world else planner
@@ -525,7 +534,6 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                             if progress and cost == "energy" else None)
             else:
                 p = PL.search_plan(target, cost, time_budget_s=0.5 * budget, **common)
-                stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
                 if not p.found and stranded and not held and PL.margin_on(target.scenario.planner):
                     # stalled where plans with a tip-over margin or turn reserve (and no twin:
                     # with one, the twin plans after a stall, keeping none) drove it: the
@@ -552,7 +560,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
                 current, k, P, since, why = p, 0, X.copy(), 0, None
                 steps = periods(p.controls, ps.period_s)
-            elif current is not None and k < len(steps) and not why.startswith("stalled") and not held:
+            elif not stranded and not held:
                 # like any MPC: when a re-plan fails, keep driving the previous plan and try
                 # again after the next period (not a period the guard held back)
                 why = None
@@ -593,12 +601,10 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 continue
         guarded = False
         _, _, P = model.step(P, control, record=False)
-        rec, end, X = real.step(X, control)
+        end = drive(control)
         driven.append(control)
-        pieces.append(rec if not pieces else rec[1:])
         k += 1
         since += 1
-        out.periods += 1
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if end == -SS.STALL:

@@ -88,13 +88,13 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
             new = drive[0]
             if not new.reached:
                 missed = (pol, drive)
-                if new.end == -SS.TIP and time.perf_counter() <= deadline:
-                    continue                           # tipped at 1 kHz: again, further from the limit
                 if new.end != -SS.TIP:
                     # parted from its line at 1 kHz (stalled, or passed outside the disc):
                     # a polish aimed at the disc itself parts no less; the repair takes it
                     return None, searched, missed
-                break
+                if time.perf_counter() > deadline:
+                    break
+                continue                               # tipped at 1 kHz: again, further from the limit
             if searched is None:
                 searched = controller_rate(world, cost, controls, X0)
             old = searched[0]
