@@ -130,6 +130,73 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     assert p.repairs == 2
 
 
+def test_a_drive_replayed_from_where_it_parted_is_the_whole_drive(plans):
+    """A repaired plan keeps its controls up to where it parted and is replayed at 1 kHz
+    from there only (check.controller_rate's ``known``): that drive, its check and its
+    controls as driven are the whole replay's, to 1e-9, wherever the split falls
+    (hills_field's energy plan: 65 controls)."""
+    world, ps = plans["hills_field"]
+    controls = ps["energy"].controls
+    X0 = PL._start(world, None)
+    chk, fine, kept = CK.controller_rate(world, "energy", controls, X0)
+    assert chk.reached and len(controls) > 20
+    for j in (1, len(controls) // 3, len(controls) - 2):
+        Sj = CK.fine_state(world, "energy", controls[:j], X0)
+        chk2, fine2, kept2 = CK.controller_rate(world, "energy", controls, X0, known=(j, fine, Sj))
+        assert set(fine2) == set(fine)
+        for key in fine:
+            np.testing.assert_allclose(fine2[key], fine[key], atol=1e-9, rtol=0, err_msg=f"j={j} {key}")
+        assert chk2.reached and chk2.miss_m == chk.miss_m
+        assert chk2.energy_J == pytest.approx(chk.energy_J, abs=1e-9)
+        assert chk2.travel_time_s == pytest.approx(chk.travel_time_s, abs=1e-9)
+        assert [c[:2] for c in kept2] == [c[:2] for c in kept]
+        np.testing.assert_allclose([c[2] for c in kept2], [c[2] for c in kept], atol=1e-9)
+    # a known drive that ends before the split (cut where it entered the goal) is not used
+    chk3, fine3, _ = CK.controller_rate(world, "energy", controls, X0,
+                                         known=(len(controls) - 1, {k: v[:10] for k, v in fine.items()}, X0))
+    assert chk3 == chk and len(fine3["t"]) == len(fine["t"])
+
+
+def test_the_repairs_of_a_searched_plan_are_reused_by_its_polish(monkeypatch):
+    """The check of a polish whose controls agree with the searched ones up to where the
+    plan parts at 1 kHz re-plans from the same state: it takes the searched plan's re-plans
+    (repair.checked's ``memo``) and makes no search of its own (a 340 m field's energy
+    plan made its five re-plans twice: 24 s, 16 s after). hills_field's energy search
+    with a weight of 3 parts at 1 kHz (the repair test above); its repair's re-plans are
+    counted."""
+    from dataclasses import replace
+    from sbmpc.planning import repair as RP
+    from sbmpc.search.astar import Search
+    scn = SC.load(SCEN / "hills_field.yaml")
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0, margin=0.0, margin_tip_deg=0.0,
+                                                    polish_energy=False)))
+    ps = world.scenario.planner
+    prob = PB.problem(world, "energy")
+    res = Search(prob).run(ps.max_expansions, ps.time_budget_s)
+    assert res.status == "found"
+    T = res.states[:, K.S_T]
+    controls = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+                for i, c in enumerate(res.control_rows)]
+    pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]]
+    X0 = PL._start(world, None)
+    runs, real = [], Search.run
+    monkeypatch.setattr(Search, "run", lambda self, *a, **k: runs.append(1) or real(self, *a, **k))
+    memo = {}
+    import time
+    t0 = time.perf_counter()
+    first = RP.checked(world, "energy", controls, pred, X0, t0, 600.0, ps, None, memo)
+    made = len(runs)
+    assert first[3] >= 1 and made == first[3] and first[1].reached
+    # the 'polish': the searched controls with the last one changed (past where they part)
+    other = controls[:-1] + [(controls[-1][0] * 0.98, controls[-1][1] * 0.98, controls[-1][2])]
+    second = RP.checked(world, "energy", other, pred, X0, t0, 600.0, ps, None, memo)
+    assert len(runs) == made and second[3] == first[3]
+    assert second[0] == first[0] and second[1] == first[1]
+    # without the memo the same re-plans are made again, to the same plan
+    third = RP.checked(world, "energy", other, pred, X0, t0, 600.0, ps, None)
+    assert len(runs) == 2 * made and third[0] == first[0]
+
+
 def test_steep_hill_every_plan_goes_around(plans):
     world, ps = plans["steep_hill"]
     top = world.emap.heights.max()

@@ -92,12 +92,27 @@ def check_cost(chk: "Check", cost: str) -> float:
     return chk.travel_time_s if cost == "time" else chk.energy_J
 
 
-def controller_rate(world: World, cost: str, controls, X0: np.ndarray) -> tuple:
+def controller_rate(world: World, cost: str, controls, X0: np.ndarray, known: tuple | None = None) -> tuple:
     """The controls replayed at the controller period from X0, every step recorded.
     Returns (Check, trajectory dict, controls as driven: cut where the replay enters the
-    goal disc or passes closest to it, the last one held up to HOLD_LAST_S longer)."""
+    goal disc or passes closest to it, the last one held up to HOLD_LAST_S longer).
+    ``known``: (j, trajectory, state): the drive of the first j controls is known, a
+    trajectory of this function's (every step from X0, at least to the end of control j)
+    and the planner state after them (:func:`fine_state`); only the rest is replayed,
+    from that state (a repaired plan keeps the controls before where it parted)."""
     dt = 1.0 / world.vehicle.controller_rate
-    traj, end, S, used = replay(world, cost, controls, every=1, start=X0, dt=dt, hold_last=HOLD_LAST_S)
+    b = -1
+    if known is not None:
+        j, prev, Sj = known
+        b = int(sum(max(0, round(c[2] / dt)) for c in controls[:j])) if 0 < j < len(controls) else -1
+        if b >= len(prev["t"]):
+            b = -1
+    if b < 0:
+        traj, end, S, used = replay(world, cost, controls, every=1, start=X0, dt=dt, hold_last=HOLD_LAST_S)
+    else:
+        traj, end, S, used = replay(world, cost, controls[j:], every=1, start=Sj, dt=dt, hold_last=HOLD_LAST_S)
+        traj = {name: np.concatenate([prev[name][:b + 1], v[1:]]) for name, v in traj.items()}
+        used += j
     g = world.scenario.goal
     d = np.hypot(traj["x"] - g["x"], traj["y"] - g["y"]) - g["radius"]
     if end == SS.IN_GOAL:

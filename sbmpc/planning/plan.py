@@ -410,13 +410,14 @@ def _search_plan(world: World, cost: str | None = None, progress=None, start: np
             controls = pol.controls
             pred = predicted(world, cost, controls, X0)
     common["polish"] = pol
-    controls, chk, fine, repairs = checked(world, cost, controls, pred, X0, t0, budget, ps, drive)
+    memo = {}       # the re-plans of the searched plan's repair, reused by its polish's (repair.checked)
+    controls, chk, fine, repairs = checked(world, cost, controls, pred, X0, t0, budget, ps, drive, memo)
     if missed is not None and time.perf_counter() - t0 < budget:
         # the polished line misses the goal at 1 kHz: repaired like a searched one, it
         # is the plan when it then does better than the searched one (repair.better)
         mpol, mdrive = missed
         c2, chk2, fine2, rep2 = checked(world, cost, mpol.controls, predicted(world, cost, mpol.controls, X0),
-                                        X0, t0, budget, ps, mdrive)
+                                        X0, t0, budget, ps, mdrive, memo)
         if better(chk2, chk, cost):
             controls, chk, fine, repairs = c2, chk2, fine2, rep2
             common["polish"] = mpol

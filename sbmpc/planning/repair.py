@@ -58,8 +58,9 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
     repair (a long plan's 20 ms line drifts from the 1 kHz one). The polish aims at the goal
     disc less POLISH_GOAL_MARGIN (or, where no trial reaches that, none gains there or it
     is no cheaper at the controller rate, the disc; not where its controls miss at the
-    controller rate other than by tipping over: aimed at the disc they miss no less, and
-    they go to the repair as they are): a cheapest
+    controller rate other than by tipping over, or only pass the disc there where the
+    searched ones entered it: aimed at the disc they miss no less, and they go to the
+    repair as they are): a cheapest
     path only grazes its target, and a plan that grazes the disc at the planner's step
     may pass just outside it at 1 kHz. Where the polished controls tip the vehicle over
     at 1 kHz, they are polished again from the searched ones with the tip-over limit
@@ -99,16 +100,40 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
                 searched = controller_rate(world, cost, controls, X0)
             old = searched[0]
             if new.miss_m > 0.0 and old.reached and old.miss_m == 0.0:
-                missed = missed or (pol, drive)        # only passes the disc where the searched entered it
-                break
+                # only passes the disc where the searched entered it: aimed at the disc
+                # itself it passes no closer; the repair takes it
+                return None, searched, missed or (pol, drive)
             if old.reached and check_cost(old, cost) <= check_cost(new, cost):
                 break                                  # no cheaper at 1 kHz (aimed inside the disc, a detour)
             return pol, drive, None
     return None, searched, missed
 
 
+_OUT_OF_BUDGET = object()
+
+
+def _replanned(world: World, cost: str, prefix, X0: np.ndarray, dt: float, left: float, ps):
+    """The re-plan of :func:`checked` after the controls ``prefix`` driven at the controller
+    rate from X0, searched at step ``dt`` within ``left`` seconds: (tail controls, the
+    search's poses (x, y, yaw) at their boundaries, the state after ``prefix``, whether a
+    search ran); (None, None, state, whether a search ran) where there is no way on from
+    there (stalled, on ground no path leaves, or the search exhausted every state it
+    could reach); _OUT_OF_BUDGET where a budget ran out first."""
+    Sj = fine_state(world, cost, prefix, X0)
+    if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
+        return None, None, Sj, False
+    prob = problem(world, cost, Sj, dt)
+    res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
+    if res.status != "found":
+        return (None, None, Sj, True) if res.exhausted else _OUT_OF_BUDGET
+    T = res.states[:, K.S_T]
+    tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
+            for i, c in enumerate(res.control_rows)]
+    return tail, res.states[:, [K.S_X, K.S_Y, K.S_YAW]], Sj, True
+
+
 def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,
-             budget: float, ps, drive=None) -> tuple:
+             budget: float, ps, drive=None, memo: dict | None = None) -> tuple:
     """Check searched controls at the controller rate. Where the check fails, re-plan
     from the controller-rate state and splice, up to MAX_REPAIRS times within the time
     budget: from the first control where the replay parted from the search's prediction
@@ -121,7 +146,11 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
     planned from where it passed closest, so that the plan enters the disc (a receding-
     horizon run executes exactly that); if that fails the allowance stands. Returns
     (controls as driven, Check, the controller-rate trajectory, re-plans made). ``drive``:
-    the controls' drive at the controller rate when it is known already (the polish's)."""
+    the controls' drive at the controller rate when it is known already (the polish's).
+    ``memo``: a dict shared by the checks of one search's plans from X0 (the searched
+    controls and their polish): a re-plan after the same controls is made once (a polish
+    that changed only controls past where the plan parts gets the searched plan's repairs).
+    A repaired plan is replayed at the controller rate from where it parted."""
     rate = world.vehicle.controller_rate
     chk, fine, kept = drive if drive is not None else controller_rate(world, cost, controls, X0)
     repairs = 0
@@ -139,16 +168,16 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
         elif not parted and back == 0:
             dt = max(dt / 2.0, 1.0 / rate)
         j = max(0, j - back)
-        Sj = fine_state(world, cost, controls[:j], X0)
-        dead = Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None
-        if not dead:
-            prob = problem(world, cost, Sj, dt)
-            res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
-            repairs += 1
-            dead = res.status != "found" and res.exhausted
-            if res.status != "found" and not dead:
-                break                          # a budget ran out
-        if dead:
+        key = (tuple(tuple(c) for c in controls[:j]), dt)
+        step = memo.get(key) if memo is not None else None
+        if step is None:
+            step = _replanned(world, cost, controls[:j], X0, dt, left, ps)
+            if step is _OUT_OF_BUDGET:
+                break
+            if memo is not None:
+                memo[key] = step
+        repairs += step[3]
+        if step[0] is None:
             if chk.reached or j == 0:
                 break
             # no way on from there (the vehicle already on a flank it tips over from at
@@ -156,14 +185,12 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
             back = max(2, 2 * back)
             continue
         back = 0
-        T = res.states[:, K.S_T]
-        tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
-                for i, c in enumerate(res.control_rows)]
+        tail, poses, Sj, _ = step
         new = [tuple(c) for c in controls[:j]] + tail
-        chk2, fine2, kept2 = controller_rate(world, cost, new, X0)
+        chk2, fine2, kept2 = controller_rate(world, cost, new, X0, known=(j, fine, Sj))
         if chk.reached and not (chk2.reached and chk2.miss_m < chk.miss_m
                                 and check_cost(chk2, cost) <= (1.0 + APPROACH_SLACK) * check_cost(chk, cost)):
             break                              # the approach did not help: keep the allowance
-        controls, pred = new, np.vstack([pred[:j], res.states[:, [K.S_X, K.S_Y, K.S_YAW]]])
+        controls, pred = new, np.vstack([pred[:j], poses])
         chk, fine, kept = chk2, fine2, kept2
     return kept, chk, fine, repairs
