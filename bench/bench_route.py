@@ -63,7 +63,7 @@ def main() -> int:
     from sbmpc import scenario as SC
     if args.polish == "every":
         PO.EXACT_UP_TO = 1 << 30
-    out = args.out or (OUT if args.polish == "auto" else OUT.with_name("route_every.json"))
+    out = (args.out or (OUT if args.polish == "auto" else OUT.with_name("route_every.json"))).resolve()
     flat = SC.load(ROOT / "scenarios" / "flat.yaml")
     for cost in ("time", "energy"):                  # compile / load the cache
         PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, threads=1))), cost)

@@ -104,6 +104,42 @@ def test_a_long_plans_polish_moves_its_head_and_tail_only(flat, monkeypatch):
     assert not np.array_equal(full[fmid, :2], base[fmid, :2])
 
 
+def test_a_long_plans_polish_moves_what_its_repairs_leave_standing(monkeypatch):
+    """A plan of more than EXACT_UP_TO controls is checked at 1 kHz and repaired first,
+    and then polished from where its last re-plan starts, from the 1 kHz state there
+    (repair.polished_standing): polished first, its polish was replaced by the repairs
+    (on 170 and 340 m fields, kept on one plan of six; now on six). hills_field's energy
+    search with a weight of 3 parts from its 1 kHz drive (test_plan's repair test);
+    with EXACT_UP_TO at 10 its plan counts as long. The polish starts at the 1 kHz state
+    after the repaired plan's controls before the last re-plan, which stay as they are;
+    the plan replays to its cost and is cheaper than the repaired plan unpolished."""
+    scn = SC.load(SCEN / "hills_field.yaml")
+    planner = dict(energy_weight=3.0, margin=0.0, margin_tip_deg=0.0)
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, **planner)))
+    bare = WO.resolve(replace(scn, planner=replace(scn.planner, polish_energy=False, **planner)))
+    monkeypatch.setattr(PO, "EXACT_UP_TO", 10)
+    plain = PL.search_plan(bare, "energy")
+    assert plain.found and plain.repairs >= 1 and len(plain.controls) > 10
+    X0 = PL._start(world, None)
+    calls, real = [], RP.polish
+
+    def spy(params, data, start, controls, *a, **k):
+        calls.append((start.copy(), [tuple(c) for c in controls], k.get("every", a[3] if len(a) > 3 else None)))
+        return real(params, data, start, controls, *a, **k)
+
+    monkeypatch.setattr(RP, "polish", spy)
+    p = PL.search_plan(world, "energy")
+    assert p.found and calls
+    start, given, every = calls[0]
+    j = len(plain.controls) - len(given)
+    assert 0 < j and given == [tuple(c) for c in plain.controls[j:]] and every is False
+    np.testing.assert_allclose(start, CK.fine_state(world, "energy", plain.controls[:j], X0), atol=1e-9)
+    assert [tuple(c) for c in p.controls[:j]] == [tuple(c) for c in plain.controls[:j]]
+    chk = CK.controller_rate(world, "energy", p.controls, X0)[0]
+    assert chk.reached and chk.energy_J == pytest.approx(p.energy_J, rel=1e-9)
+    assert p.polish is not None and p.energy_J < plain.energy_J      # 5 799 J against 5 867 J
+
+
 def test_polished_energy_plans_are_cheaper_at_the_controller_rate():
     """flat.yaml's energy plans for Halton seeds 0-3, driven at 1 kHz: the polish makes
     each cheaper than the search's own plan, the median by at least 1 % (1.8 % measured

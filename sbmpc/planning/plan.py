@@ -21,10 +21,11 @@ from dynamics import kernels as K
 from .check import HOLD_LAST_S, Check, controller_rate, predicted, replay
 from .corridor import Coarse, narrowed
 from .heuristics import _max_rise, steepest_climb_needed, unreachable_reason
+from . import polish as PO
 from .polish import Polished
 from .problem import batch_size, problem, search_threads
 from ..problems import skidsteer as SS
-from .repair import better, checked, polished
+from .repair import better, checked, polished, polished_standing
 from ..search.astar import Search, SearchResult
 from ..search.counters import budget_text
 from ..trajectory import RECORD_EVERY, trajectory_json, trajectory_length, trajectory_span
@@ -403,24 +404,30 @@ def _search_plan(world: World, cost: str | None = None, progress=None, start: np
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else predicted(world, cost, controls, X0)
     pol, drive, missed = None, None, None
-    if res.status == "found" and ps.polishes(cost):
-        pol, drive, missed = polished(world, cost, prob, X0, controls, t0 + budget,
-                                      1 if res.threads_chosen == "serial" else None)
+    threads = 1 if res.threads_chosen == "serial" else None
+    polishing = res.status == "found" and ps.polishes(cost)
+    long = polishing and len(controls) > PO.EXACT_UP_TO      # polished after the check (repair.polished_standing)
+    if polishing and not long:
+        pol, drive, missed = polished(world, cost, prob, X0, controls, t0 + budget, threads)
         if pol is not None:
             controls = pol.controls
             pred = predicted(world, cost, controls, X0)
     common["polish"] = pol
     memo = {}       # the re-plans of the searched plan's repair, reused by its polish's (repair.checked)
-    controls, chk, fine, repairs = checked(world, cost, controls, pred, X0, t0, budget, ps, drive, memo)
+    done = checked(world, cost, controls, pred, X0, t0, budget, ps, drive, memo)
     if missed is not None and time.perf_counter() - t0 < budget:
         # the polished line misses the goal at 1 kHz: repaired like a searched one, it
         # is the plan when it then does better than the searched one (repair.better)
         mpol, mdrive = missed
-        c2, chk2, fine2, rep2 = checked(world, cost, mpol.controls, predicted(world, cost, mpol.controls, X0),
-                                        X0, t0, budget, ps, mdrive, memo)
-        if better(chk2, chk, cost):
-            controls, chk, fine, repairs = c2, chk2, fine2, rep2
+        other = checked(world, cost, mpol.controls, predicted(world, cost, mpol.controls, X0),
+                        X0, t0, budget, ps, mdrive, memo)
+        if better(other[1], done[1], cost):
+            done = other
             common["polish"] = mpol
+    if long:
+        done, common["polish"] = polished_standing(world, cost, prob, X0, done, t0 + budget, t0, budget, ps,
+                                                   threads, memo)
+    controls, chk, fine, repairs, _ = done
     if inc is not None and res.status == "found":
         # the search beat the incumbent at its own step; at the controller rate the new
         # plan may still cost more (a perfect-model run would then do worse than its

@@ -11,7 +11,7 @@ import numpy as np
 
 from dynamics import kernels as K
 
-from .check import Check, check_cost, controller_rate, fine_state, parting
+from .check import Check, check_cost, controller_rate, fine_state, parting, predicted
 from .heuristics import unreachable_reason
 from .polish import polish
 from .problem import batch_size, problem, search_threads
@@ -46,7 +46,7 @@ def better(new: Check, old: Check, cost: str) -> bool:
 
 
 def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, deadline: float,
-              threads: int | None = None):
+              threads: int | None = None, every: bool | None = None):
     """(polish, drive, missed): the polish of searched ``controls`` (:mod:`sbmpc.planning.polish`)
     and the controller-rate drive (:func:`sbmpc.planning.check.controller_rate`'s result, for
     :func:`checked`) of the controls that stand: the polish's, or, where the polish is
@@ -68,7 +68,8 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
     flanks of narrow_pass's pass), where the 1 kHz drive, a few centimetres off the
     20 ms line, tips (four of narrow_pass's eight seeds did). ``threads``: numba's
     threads for the polish's trials (None: planner.threads; search_plan passes 1 where
-    the search's threads "auto" measured one thread faster: cores busy elsewhere)."""
+    the search's threads "auto" measured one thread faster: cores busy elsewhere).
+    ``every``: polish.polish's (None: by the number of controls)."""
     lo, hi = wheel_speed_range(world)
     r = world.scenario.goal["radius"]
     missed = None
@@ -82,7 +83,7 @@ def polished(world: World, cost: str, prob: Problem, X0: np.ndarray, controls, d
             params[SS.Q_GR] = r - margin
             # the polish's trials: on planner.threads, or one where the search found one faster (threads auto)
             with numba_threads(threads or world.scenario.planner.threads or None):
-                pol = polish(params, prob.data, X0, controls, lo, hi, deadline)
+                pol = polish(params, prob.data, X0, controls, lo, hi, deadline, every)
             if pol is None or pol.gain <= 0.0:
                 break                                  # nothing gained at this margin
             drive = controller_rate(world, cost, pol.controls, X0)
@@ -145,7 +146,9 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
     that only passes within the drift allowance of the goal disc gets its last approach
     planned from where it passed closest, so that the plan enters the disc (a receding-
     horizon run executes exactly that); if that fails the allowance stands. Returns
-    (controls as driven, Check, the controller-rate trajectory, re-plans made). ``drive``:
+    (controls as driven, Check, the controller-rate trajectory, re-plans made, (j, state):
+    the control where the last re-plan spliced in starts and the controller-rate state
+    there, or None without one). ``drive``:
     the controls' drive at the controller rate when it is known already (the polish's).
     ``memo``: a dict shared by the checks of one search's plans from X0 (the searched
     controls and their polish): a re-plan after the same controls is made once (a polish
@@ -156,6 +159,7 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
     repairs = 0
     dt = ps.dt
     back = 0          # controls to step back from where the check failed (a dead end there)
+    at = None         # (j, state): where the last re-plan kept starts, the state there
     while repairs < MAX_REPAIRS and not (chk.reached and chk.miss_m == 0.0):
         left = budget - (time.perf_counter() - t0)
         if left <= 0:
@@ -193,4 +197,49 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
             break                              # the approach did not help: keep the allowance
         controls, pred = new, np.vstack([pred[:j], poses])
         chk, fine, kept = chk2, fine2, kept2
-    return kept, chk, fine, repairs
+        at = (j, Sj)
+    return kept, chk, fine, repairs, at
+
+
+def polished_standing(world: World, cost: str, prob: Problem, X0: np.ndarray, checked_plan: tuple,
+                      deadline: float, t0: float, budget: float, ps, threads: int | None = None,
+                      memo: dict | None = None) -> tuple:
+    """The polish of a long plan (more than polish.EXACT_UP_TO controls) after its check:
+    what the repairs leave standing. ``checked_plan`` is :func:`checked`'s result for the
+    searched controls; the polish (:func:`polished`, at the first polish.HEAD and last
+    polish.TAIL controls) moves the controls from where the last re-plan spliced in
+    starts (all of them where none was), driven from the controller-rate state there,
+    whose 20 ms line is the search's own. Polished before
+    the check, a long plan's polish was undone by the repairs: its 20 ms line parts from
+    the 1 kHz drive within 30-60 m, and every re-plan from there replaces the rest (the
+    polish of all nine field plans of 170 and 340 m, 2-3 s each, was kept on one).
+    Returns ``checked_plan`` with the polished controls where, driven at the controller
+    rate from the start, they reach the goal for less (a polish that parts from its
+    line there is repaired first, :func:`checked`, sharing ``memo``), and the polish
+    (None where none was kept)."""
+    kept, chk, fine, repairs, at = checked_plan
+    if not chk.reached or time.perf_counter() > deadline:
+        return checked_plan, None
+    j, Sj = at if at is not None else (0, X0)
+    head = [tuple(c) for c in kept[:j]]
+    pol, drive, missed = polished(world, cost, prob, Sj, kept[j:], deadline, threads, every=False)
+    rate = world.vehicle.controller_rate
+    if pol is not None:
+        new = head + list(pol.controls)
+        c2, f2, k2 = controller_rate(world, cost, new, X0, known=(j, fine, Sj))
+        if better(c2, chk, cost):
+            return (k2, c2, f2, repairs, at), pol
+        return checked_plan, None
+    if missed is None or time.perf_counter() - t0 > budget:
+        return checked_plan, None
+    mpol = missed[0]
+    new = head + list(mpol.controls)
+    # the prefix as driven at 1 kHz (it does not part from itself), the polished rest as predicted from there
+    n_f = np.cumsum([0] + [max(0, round(c[2] * rate)) for c in head])
+    pre = np.column_stack([fine["x"][n_f], fine["y"][n_f], fine["yaw"][n_f]])
+    pred = np.vstack([pre[:-1], predicted(world, cost, mpol.controls, Sj)]) if j else predicted(world, cost, new, X0)
+    out = checked(world, cost, new, pred, X0, t0, budget, ps, controller_rate(world, cost, new, X0, known=(j, fine, Sj)),
+                  memo)
+    if better(out[1], chk, cost):
+        return (out[0], out[1], out[2], repairs + out[3], out[4] or at), mpol
+    return checked_plan, None
