@@ -3,6 +3,8 @@
     python bench/bench_horizon.py                      # shipped scenarios and 70/170 m fields, both costs
     python bench/bench_horizon.py --fields --truths heavy slippery --out bench/results/horizon_truths.json
     taskset -c 0 python bench/bench_horizon.py --threads 1    # one core, as the targets are stated
+    taskset -c 0 python bench/bench_horizon.py --threads 1 --fields --costs energy --seeds 8
+                                                       # executed cost over seeds 0-7: horizon_seeds.json
 
 For every scenario, cost and truth, two closed-loop runs of ``sbmpc run`` on the same
 world: whole-route plans (today's default: a whole-route first plan, whole-route re-plans
@@ -96,6 +98,10 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=OUT, help="results file (default bench/results/horizon.json; "
                     "the figure is drawn from that one only)")
     ap.add_argument("--plot", action="store_true", help="only draw docs/horizon.png from the results file")
+    ap.add_argument("--seeds", type=int, default=0,
+                    help="N > 0: horizon runs only, for Halton seeds 0..N-1 (planner.seed), and the spread of "
+                         "their executed cost beside the whole-route energy plans' (bench/results/energy_plans.json); "
+                         "writes --out (default bench/results/horizon_seeds.json)")
     args = ap.parse_args()
     if args.plot:
         plot(json.loads(OUT.read_text()))
@@ -104,6 +110,8 @@ def main() -> int:
     from sbmpc.planning import world as WO
     scns = [SC.load(ROOT / "scenarios" / f"{s}.yaml") for s in args.scenarios]
     scns += [field_scenario(r) for r in args.fields]
+    if args.seeds > 0:
+        return seeds(scns, args)
     rows = []
     for scn in scns:
         over = {} if args.threads is None else {"threads": args.threads}
@@ -143,6 +151,41 @@ def main() -> int:
     print(json.dumps(summary, indent=1))
     if args.out == OUT:
         plot(json.loads(OUT.read_text()))
+    return 0
+
+
+def seeds(scns, args) -> int:
+    """Item 4 of issue 44: the spread over Halton seeds of executed receding-horizon runs
+    (the truth the planning model), beside the spread of the whole-route energy plans."""
+    from sbmpc.planning import world as WO
+    out = args.out if args.out != OUT else OUT.with_name("horizon_seeds.json")
+    plans = json.loads((ROOT / "bench" / "results" / "energy_plans.json").read_text())["scenarios"]
+    over = {} if args.threads is None else {"threads": args.threads}
+    rows, summary = [], {}
+    for scn in scns:
+        for cost in args.costs:
+            key = "travel_time_s" if cost == "time" else "energy_J"
+            got = []
+            for seed in range(args.seeds):
+                world = WO.resolve(replace(scn, planner=replace(scn.planner, horizon_s=args.horizon, seed=seed,
+                                                                **over)))
+                r = one_run(world, cost, "nominal")
+                rows.append({"scenario": scn.name, "cost": cost, "seed": seed, **r})
+                if r["status"] == "reached":
+                    got.append(r[key])
+                print(f"{scn.name:14} {cost:6} seed {seed} {r['status']:8} {r[key] or 0:9.1f} "
+                      f"fallbacks {r['horizon']['fallbacks']}", flush=True)
+            pl = plans.get(scn.name, {})
+            summary[f"{scn.name} {cost}"] = {
+                "reached": len(got), "runs": args.seeds,
+                "median": float(np.median(got)) if got else None,
+                "spread_pct": round(100 * (max(got) - min(got)) / min(got), 2) if got else None,
+                "whole_route_plans_spread_pct": pl.get("seed_spread_pct") if cost == "energy" else None,
+                "whole_route_plans_median_J": pl.get("seed_median_J") if cost == "energy" else None}
+    out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
+                               "threads": args.threads, "seeds": args.seeds, "summary": summary, "rows": rows},
+                              indent=1))
+    print(json.dumps(summary, indent=1))
     return 0
 
 

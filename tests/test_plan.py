@@ -140,9 +140,20 @@ def test_a_drive_replayed_from_where_it_parted_is_the_whole_drive(plans):
     X0 = PL._start(world, None)
     chk, fine, kept = CK.controller_rate(world, "energy", controls, X0)
     assert chk.reached and len(controls) > 20
+    real, replayed = CK.replay, []
+
+    def spy(w, cost, cs, *a, **k):
+        replayed.append(len(cs))
+        return real(w, cost, cs, *a, **k)
+
     for j in (1, len(controls) // 3, len(controls) - 2):
         Sj = CK.fine_state(world, "energy", controls[:j], X0)
-        chk2, fine2, kept2 = CK.controller_rate(world, "energy", controls, X0, known=(j, fine, Sj))
+        CK.replay, replayed[:] = spy, []
+        try:
+            chk2, fine2, kept2 = CK.controller_rate(world, "energy", controls, X0, known=(j, fine, Sj))
+        finally:
+            CK.replay = real
+        assert replayed == [len(controls) - j]          # only the rest was driven
         assert set(fine2) == set(fine)
         for key in fine:
             np.testing.assert_allclose(fine2[key], fine[key], atol=1e-9, rtol=0, err_msg=f"j={j} {key}")

@@ -345,7 +345,9 @@ def margin_on(ps) -> bool:
 def _search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
                  incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
-    search: search, polish, check at the controller rate and repair.
+    search: search, polish, check at the controller rate and repair (a plan of more than
+    polish.EXACT_UP_TO controls: search, check and repair, then polish what the repairs
+    leave standing, repair.polished_standing).
 
     ``start``: a planner state to plan from (default: the scenario's start; a receding-
     horizon run passes the measured state). ``incumbent``: controls [(wl, wr, duration_s)]

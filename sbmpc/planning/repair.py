@@ -1,7 +1,9 @@
 """A searched plan made to hold at the controller rate: its polish judged at 1 kHz
 (:func:`polished`), its repair by re-planning from where the 1 kHz drive parted from
 the search's prediction (:func:`checked`), and which of two checked plans is better
-(:func:`better`). :func:`sbmpc.planning.plan.search_plan` runs them in that order."""
+(:func:`better`). :func:`sbmpc.planning.plan.search_plan` runs them in that order, but for
+a long plan (more than polish.EXACT_UP_TO controls), which is checked and repaired first
+and then polished from where its last re-plan starts (:func:`polished_standing`)."""
 from __future__ import annotations
 
 import math
@@ -17,7 +19,7 @@ from .polish import polish
 from .problem import batch_size, problem, search_threads
 from ..problems import skidsteer as SS
 from ..search.astar import Problem, Search, numba_threads
-from .world import World, wheel_speed_range
+from .world import World, _start, wheel_speed_range
 
 MAX_REPAIRS = 6      # re-plans from a parted controller-rate state before a plan is given up
 POLISH_GOAL_MARGIN = 0.1   # m (at most half the goal radius): the polish aims this far inside the goal disc
@@ -117,20 +119,23 @@ def _replanned(world: World, cost: str, prefix, X0: np.ndarray, dt: float, left:
     """The re-plan of :func:`checked` after the controls ``prefix`` driven at the controller
     rate from X0, searched at step ``dt`` within ``left`` seconds: (tail controls, the
     search's poses (x, y, yaw) at their boundaries, the state after ``prefix``, whether a
-    search ran); (None, None, state, whether a search ran) where there is no way on from
-    there (stalled, on ground no path leaves, or the search exhausted every state it
-    could reach); _OUT_OF_BUDGET where a budget ran out first."""
+    search ran, whether the result is the same whatever the budget: not where a search
+    that refines its plan, planner.refine, was cut by the clock); (None, None, state,
+    whether a search ran, True) where there is no way on from there (stalled, on ground
+    no path leaves, or the search exhausted every state it could reach); _OUT_OF_BUDGET
+    where a budget ran out first."""
     Sj = fine_state(world, cost, prefix, X0)
     if Sj[K.S_STALLED] != 0.0 or unreachable_reason(world, (float(Sj[K.S_X]), float(Sj[K.S_Y]))) is not None:
-        return None, None, Sj, False
+        return None, None, Sj, False, True
     prob = problem(world, cost, Sj, dt)
     res = Search(prob).run(ps.max_expansions, left, batch=batch_size(ps), threads=search_threads(ps))
     if res.status != "found":
-        return (None, None, Sj, True) if res.exhausted else _OUT_OF_BUDGET
+        return (None, None, Sj, True, True) if res.exhausted else _OUT_OF_BUDGET
     T = res.states[:, K.S_T]
     tail = [(float(prob.controls[c, 0]), float(prob.controls[c, 1]), round(float(T[i + 1] - T[i]), 9))
             for i, c in enumerate(res.control_rows)]
-    return tail, res.states[:, [K.S_X, K.S_Y, K.S_YAW]], Sj, True
+    # a search cut by its time budget (an anytime refinement's best so far) depends on the clock
+    return tail, res.states[:, [K.S_X, K.S_Y, K.S_YAW]], Sj, True, res.planning_time_s < left
 
 
 def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray, t0: float,
@@ -146,7 +151,8 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
     that only passes within the drift allowance of the goal disc gets its last approach
     planned from where it passed closest, so that the plan enters the disc (a receding-
     horizon run executes exactly that); if that fails the allowance stands. Returns
-    (controls as driven, Check, the controller-rate trajectory, re-plans made, (j, state):
+    (controls as driven, Check, the controller-rate trajectory, re-plans made (one taken
+    from ``memo`` counts as made), (j, state):
     the control where the last re-plan spliced in starts and the controller-rate state
     there, or None without one). ``drive``:
     the controls' drive at the controller rate when it is known already (the polish's).
@@ -178,7 +184,7 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
             step = _replanned(world, cost, controls[:j], X0, dt, left, ps)
             if step is _OUT_OF_BUDGET:
                 break
-            if memo is not None:
+            if memo is not None and step[4]:
                 memo[key] = step
         repairs += step[3]
         if step[0] is None:
@@ -189,7 +195,7 @@ def checked(world: World, cost: str, controls, pred: np.ndarray, X0: np.ndarray,
             back = max(2, 2 * back)
             continue
         back = 0
-        tail, poses, Sj, _ = step
+        tail, poses, Sj = step[:3]
         new = [tuple(c) for c in controls[:j]] + tail
         chk2, fine2, kept2 = controller_rate(world, cost, new, X0, known=(j, fine, Sj))
         if chk.reached and not (chk2.reached and chk2.miss_m < chk.miss_m
@@ -214,15 +220,17 @@ def polished_standing(world: World, cost: str, prob: Problem, X0: np.ndarray, ch
     the 1 kHz drive within 30-60 m, and every re-plan from there replaces the rest (the
     polish of all nine field plans of 170 and 340 m, 2-3 s each, was kept on one).
     Returns ``checked_plan`` with the polished controls where, driven at the controller
-    rate from the start, they reach the goal for less (a polish that parts from its
-    line there is repaired first, :func:`checked`, sharing ``memo``), and the polish
-    (None where none was kept)."""
+    rate from the start, they do better (:func:`better`: they reach the goal for less, or
+    enter the disc the checked plan only passes for at most APPROACH_SLACK more; a polish
+    that parts from its line there is repaired first, :func:`checked`, sharing ``memo``),
+    and the polish (None where none was kept)."""
     kept, chk, fine, repairs, at = checked_plan
     if not chk.reached or time.perf_counter() > deadline:
         return checked_plan, None
     j, Sj = at if at is not None else (0, X0)
     head = [tuple(c) for c in kept[:j]]
-    pol, drive, missed = polished(world, cost, prob, Sj, kept[j:], deadline, threads, every=False)
+    # the margin's twin starts from the vehicle's state there (fine_state replays without it)
+    pol, drive, missed = polished(world, cost, prob, _start(world, Sj), kept[j:], deadline, threads, every=False)
     rate = world.vehicle.controller_rate
     if pol is not None:
         new = head + list(pol.controls)
