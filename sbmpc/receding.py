@@ -705,8 +705,11 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
 
     def whole_route(why):
         # the whole-route planner's own budget: where the horizon saw no way on, a
-        # re-plan's budget (run.replan_time_budget_s) was too short on narrow_pass
-        p = PL.search_plan(world, cost, start=X)
+        # re-plan's budget (run.replan_time_budget_s) was too short on narrow_pass; an
+        # energy plan checked against the time plan, as sbmpc plan's (planner.energy_vs_time):
+        # the energy search alone found nothing in 60 s from narrow_pass's start, where
+        # the time search finds a plan in 17 s
+        p = PL.plan(world, cost, start=X)
         stats.fallbacks += 1
         stats.fallback_s.append(p.planning_time_s)
         out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False, g["radius"]))

@@ -95,11 +95,12 @@ class PlannerSettings:
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
     the period before (:mod:`sbmpc.planning.horizon`; 0: whole-route plans); horizon_budget_s,
     horizon_first_budget_s, horizon_expansions: each horizon plan's wall-clock budget,
-    the first one's, and its node budget; horizon_weight: w of the horizon searches,
-    which is also what the terminal cost is worth against the cost so far (the grid is a
-    lower bound: 1.3 values the way made near what it costs; 2 drove energy plans too
-    fast, 13-55 % dearer than whole-route runs, and 1 ran out of the budget before the
-    horizon; bench/bench_horizon.py).
+    the first one's, and its node budget; horizon_weight, horizon_energy_weight: w of
+    the time and of the energy horizon searches, which is also what the terminal cost is
+    worth against the cost so far (the grid is a lower bound: 1.3 values the way made
+    near what it costs for time; 2 drove energy plans too fast, 13-55 % dearer than
+    whole-route runs, 1.3 still 3-23 % on six of nine energy runs, 1.15 within 5 % on five
+    of nine, and 1 ran out of the budget before the horizon; bench/bench_horizon.py).
     """
 
     branching: int = 16
@@ -137,6 +138,7 @@ class PlannerSettings:
     horizon_first_budget_s: float = 0.5
     horizon_expansions: int = 2000
     horizon_weight: float = 1.3
+    horizon_energy_weight: float = 1.15
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -211,6 +213,7 @@ _SETTING_RANGES = {
     "horizon_first_budget_s": (float, 0.001, 3600.0),
     "horizon_expansions": (int, 1, 10_000_000),
     "horizon_weight": (float, 1.0, 10.0),
+    "horizon_energy_weight": (float, 1.0, 10.0),
     "energy_weight": (float, 1.0, 10.0),
     "batch": (int, 0, 4096),
     "threads": (int, 0, 1024),

@@ -132,6 +132,35 @@ def test_where_the_horizon_sees_no_way_on_the_run_follows_a_whole_route_plan(fla
     assert any("whole-route" in r.why for r in res.plans)
 
 
+def test_an_energy_runs_whole_route_fallback_is_checked_against_the_time_plan(flat, monkeypatch):
+    """Where the horizon sees no way on in an energy run, its whole-route plan is the one
+    ``sbmpc plan --cost energy`` makes: the energy search's, or the time search's where
+    that one finds nothing (planner.energy_vs_time). Here every energy search finds
+    nothing (as narrow_pass's, with the margin, found nothing in 60 s from near its start,
+    two of eight seeds' runs failing there): the run follows the time plan and reaches
+    the goal; with the energy search's own plan as its fallback it failed."""
+    from sbmpc.planning import plan as PL
+    real_plan, real_search = HZ.HorizonPlanner.plan, PL.search_plan
+    calls = []
+
+    def blind(self, start, previous=None, budget_s=None):
+        calls.append(1)
+        h = real_plan(self, start, previous, budget_s)
+        return h if len(calls) <= 3 else replace(h, controls=[], found_by="", reason="blind (test)")
+
+    def no_energy(world, cost=None, *a, **k):
+        if cost == "energy":
+            return PL.Plan(world.scenario.name, "energy", "no_path", "no energy plan (test)", failure="exhausted")
+        return real_search(world, cost, *a, **k)
+
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
+    monkeypatch.setattr(PL, "search_plan", no_energy)
+    res = R.run(flat, "energy")
+    assert res.status == "reached", res.reason
+    fallbacks = [r for r in res.plans if "whole-route" in r.why]
+    assert fallbacks and fallbacks[0].plan.found and fallbacks[0].plan.found_by.startswith("time search")
+
+
 def test_cli_run_horizon(tmp_path, capsys):
     out = tmp_path / "run.json"
     assert main(["run", str(SCN / "flat.yaml"), "--horizon", "8", "--cost", "time", "--json", str(out),
@@ -144,11 +173,26 @@ def test_cli_run_horizon(tmp_path, capsys):
 
 
 def test_horizon_settings_are_validated(tmp_path):
-    text = (SCN / "flat.yaml").read_text().replace("planner:", "planner:\n  horizon_weight: 0.5", 1)
-    p = tmp_path / "bad.yaml"
-    p.write_text(text)
-    with pytest.raises(Exception, match="horizon_weight"):
-        SC.load(p)
+    for key in ("horizon_weight", "horizon_energy_weight"):
+        text = (SCN / "flat.yaml").read_text().replace("planner:", f"planner:\n  {key}: 0.5", 1)
+        p = tmp_path / "bad.yaml"
+        p.write_text(text)
+        with pytest.raises(Exception, match=key):
+            SC.load(p)
+
+
+def test_each_cost_searches_the_horizon_with_its_own_weight():
+    """The energy horizon searches weigh their terminal cost by horizon_energy_weight,
+    the time ones by horizon_weight (measured: at 1.3 the energy runs drove too fast)."""
+    from dataclasses import replace
+    scn = SC.load(SCN / "flat.yaml")
+    w = WO.resolve(replace(scn, planner=replace(scn.planner, horizon_s=5.0, horizon_weight=1.7,
+                                                horizon_energy_weight=1.2)))
+    ps = w.scenario.planner
+    weights = {c: HZ.HorizonPlanner(w, c, 5.0, ps.horizon_budget_s, ps.horizon_expansions).prob.weight
+               for c in ("time", "energy")}
+    assert weights == {"time": 1.7, "energy": 1.2}
+    assert SC.PlannerSettings().horizon_energy_weight == 1.15 and SC.PlannerSettings().horizon_weight == 1.3
 
 
 def test_plan_and_compare_with_a_horizon_report_the_drive(tmp_path, capsys):

@@ -90,7 +90,8 @@ class HorizonPlanner:
         self.max_expansions = int(max_expansions)
         ps = world.scenario.planner
         self.period_s = ps.period_s
-        self.prob = replace(problem(world, cost), weight=ps.horizon_weight)
+        self.prob = replace(problem(world, cost),
+                            weight=ps.horizon_weight if cost == "time" else ps.horizon_energy_weight)
         self.col = K.S_T if cost == "time" else K.S_E
         self.prob.params[SS.Q_TURNCOST] = self.turn_cost()
         self.batch = batch_size(ps)

@@ -218,7 +218,7 @@ def polished_standing(world: World, cost: str, prob: Problem, X0: np.ndarray, ch
     whose 20 ms line is the search's own. Polished before
     the check, a long plan's polish was undone by the repairs: its 20 ms line parts from
     the 1 kHz drive within 30-60 m, and every re-plan from there replaces the rest (the
-    polish of all nine field plans of 170 and 340 m, 2-3 s each, was kept on one).
+    polish of three 340 m field plans, 2.4-3.3 s each, was kept on none).
     Returns ``checked_plan`` with the polished controls where, driven at the controller
     rate from the start, they do better (:func:`better`: they reach the goal for less, or
     enter the disc the checked plan only passes for at most APPROACH_SLACK more; a polish
