@@ -468,6 +468,20 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         out.periods += 1
         return end
 
+    def ended(end: int, doing: str = ""):
+        """The run's result where the period just driven ended it: in the goal, stalled
+        once too often (_stalled), tipped over or off the map (``doing``: what it was
+        doing, for the reason); else None (a stall is counted)."""
+        if end == SS.IN_GOAL:
+            return finish("reached", None)
+        if end == -SS.STALL:
+            failed = _stalled(out, stalls, X, real, _named(world, planner, out))
+            return finish("failed", failed) if failed else None
+        if end < 0:
+            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                                    f"t = {X[K.S_T]:.1f} s{doing}")
+        return None
+
     def retrace() -> bool:
         """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
         drive back along the way it came (then it re-plans from there)."""
@@ -494,17 +508,11 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             if _held(guards, X, control, True):
                 return finish("failed", _stopped(X, ps))
             end = drive(control)
-            if end == SS.IN_GOAL:
-                return finish("reached", None)
+            result = ended(end, ", driving back along the way it came")
+            if result is not None:
+                return result
             if end == -SS.STALL:
-                # it cannot back up here: re-plan from where it stalled (why is set)
-                failed = _stalled(out, stalls, X, real, _named(world, planner, out))
-                if failed:
-                    return finish("failed", failed)
-                backing = []
-            elif end < 0:
-                return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                        f"t = {X[K.S_T]:.1f} s, driving back along the way it came")
+                backing = []                   # it cannot back up here: re-plan from there (why is set)
             continue
         if why is not None:
             if len(out.plans) > rs.max_replans:
@@ -605,20 +613,15 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         driven.append(control)
         k += 1
         since += 1
-        if end == SS.IN_GOAL:
-            return finish("reached", None)
+        result = ended(end)
+        if result is not None:
+            return result
         if end == -SS.STALL:
-            failed = _stalled(out, stalls, X, real, _named(world, planner, out))
-            if failed:
-                return finish("failed", failed)
             if planner is world and ps.margin > 0.0:
                 # stalled where the plans of the planning vehicle drove it: the vehicle is at
                 # least as weak as the margin's twin, which plans from here on
                 planner, model = _weaker_model(world, cost, out, X)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-        elif end < 0:
-            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                    f"t = {X[K.S_T]:.1f} s")
         elif X[K.S_T] - out.plans[0].t > t_limit:
             behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]
             tail = ""

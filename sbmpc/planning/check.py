@@ -18,6 +18,14 @@ from ..problems import skidsteer as SS
 from .world import MAX_REPLAY_STEPS, World, _start, checked_controls, checked_cost
 
 
+def boundaries(controls, dt: float) -> np.ndarray:
+    """The step [int] at which each of ``controls`` [(wl, wr, duration_s)] starts, and the
+    last one ends, replayed at step ``dt`` [s] (len(controls) + 1): :func:`replay`'s count,
+    each duration rounded to whole steps."""
+    n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
+    return np.concatenate([np.zeros(1, np.int64), np.cumsum(n)])
+
+
 def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray | None = None,
            dt: float | None = None, hold_last: float = 0.0) -> tuple:
     """Replay controls [(wl, wr, duration_s)] through the closed-loop model over the map
@@ -36,7 +44,7 @@ def replay(world: World, cost: str, controls, every: int = 1, start: np.ndarray 
         raise InputError(f"every: expected a whole number of steps >= 1, found {every!r:.40}")
     cl = np.array([c[0] for c in controls], float)
     cr = np.array([c[1] for c in controls], float)
-    n = np.array([max(0, round(c[2] / dt)) for c in controls], np.int64)
+    n = np.diff(boundaries(controls, dt))
     if len(n) and hold_last > 0:
         n[-1] += int(round(hold_last / dt))
     if n.sum() > MAX_REPLAY_STEPS:
@@ -104,7 +112,7 @@ def controller_rate(world: World, cost: str, controls, X0: np.ndarray, known: tu
     b = -1
     if known is not None:
         j, prev, Sj = known
-        b = int(sum(max(0, round(c[2] / dt)) for c in controls[:j])) if 0 < j < len(controls) else -1
+        b = int(boundaries(controls[:j], dt)[-1]) if 0 < j < len(controls) else -1
         if b >= len(prev["t"]):
             b = -1
     if b < 0:
@@ -156,7 +164,7 @@ def parting(pred: np.ndarray, controls, fine: dict, rate: float) -> tuple:
     prediction ``pred`` (poses (x, y, yaw) at the control boundaries), parted True; else
     j the control where the replay stopped (a stall or tip-over) or the number of
     controls, parted False."""
-    n_f = np.cumsum([0] + [max(0, round(c[2] * rate)) for c in controls])
+    n_f = boundaries(controls, 1.0 / rate)
     last = min(len(controls), int(np.searchsorted(n_f, len(fine["t"]) - 1, "left")) - 1)
     for j in range(1, max(last, 0) + 1):
         b = n_f[j]
@@ -178,6 +186,6 @@ def predicted(world: World, cost: str, controls, X0: np.ndarray) -> np.ndarray:
     planner's step from X0 (for controls that did not come from a search)."""
     dt = world.scenario.planner.dt
     traj, *_ = replay(world, cost, controls, every=1, start=X0)
-    b = np.cumsum([0] + [max(0, round(c[2] / dt)) for c in controls])
+    b = boundaries(controls, dt)
     b = np.minimum(b, len(traj["t"]) - 1)
     return np.column_stack([traj["x"][b], traj["y"][b], traj["yaw"][b]])

@@ -13,7 +13,7 @@ import numpy as np
 
 from dynamics import kernels as K
 
-from .check import Check, check_cost, controller_rate, fine_state, parting, predicted
+from .check import Check, boundaries, check_cost, controller_rate, fine_state, parting, predicted
 from .heuristics import unreachable_reason
 from .polish import polish
 from .problem import batch_size, problem, search_threads
@@ -231,7 +231,6 @@ def polished_standing(world: World, cost: str, prob: Problem, X0: np.ndarray, ch
     head = [tuple(c) for c in kept[:j]]
     # the margin's twin starts from the vehicle's state there (fine_state replays without it)
     pol, drive, missed = polished(world, cost, prob, _start(world, Sj), kept[j:], deadline, threads, every=False)
-    rate = world.vehicle.controller_rate
     if pol is not None:
         new = head + list(pol.controls)
         c2, f2, k2 = controller_rate(world, cost, new, X0, known=(j, fine, Sj))
@@ -243,7 +242,7 @@ def polished_standing(world: World, cost: str, prob: Problem, X0: np.ndarray, ch
     mpol = missed[0]
     new = head + list(mpol.controls)
     # the prefix as driven at 1 kHz (it does not part from itself), the polished rest as predicted from there
-    n_f = np.cumsum([0] + [max(0, round(c[2] * rate)) for c in head])
+    n_f = boundaries(head, 1.0 / world.vehicle.controller_rate)
     pre = np.column_stack([fine["x"][n_f], fine["y"][n_f], fine["yaw"][n_f]])
     pred = np.vstack([pre[:-1], predicted(world, cost, mpol.controls, Sj)]) if j else predicted(world, cost, new, X0)
     out = checked(world, cost, new, pred, X0, t0, budget, ps, controller_rate(world, cost, new, X0, known=(j, fine, Sj)),
