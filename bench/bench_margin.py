@@ -15,11 +15,13 @@ For every scenario, cost and margin (Halton seed 0, default settings otherwise):
 
 Writes bench/results/margin.json (one run, this machine; numba warm after the first plan).
 
-    python bench/bench_margin.py --curve        # the README figure: docs/margin.png
+    python bench/bench_margin.py --curve --seeds 3    # the README figure: docs/margin.png
 
 ``--curve``: time and energy plans of ``hills_field`` and ``steep_hill`` at margins 0 to
-0.2 (p_stall under the 5 % draw, no runs), written to bench/results/margin_curve.json and
-plotted as price against margin with p_stall.
+0.2 (p_stall under the 5 % draw, no runs) for Halton seeds 0 to ``--seeds`` - 1 (planner.seed),
+written to bench/results/margin_curve.json and plotted as price against margin with
+p_stall: the median over the seeds, the range as a band (each seed's price against the
+same seed's plan without margin).
 """
 from __future__ import annotations
 
@@ -29,6 +31,8 @@ import platform
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -57,6 +61,8 @@ def main() -> int:
     ap.add_argument("--configs", nargs="+", default=["margin=0,margin_tip_deg=0", "default"],
                     help="planner settings to compare, each 'key=value,key=value' or 'default'")
     ap.add_argument("--samples", type=int, default=20)
+    ap.add_argument("--seeds", type=int, default=1, help="Halton seeds 0..N-1 (planner.seed) of every plan")
+    ap.add_argument("--resume", action="store_true", help="keep the rows --out holds already; plan the others")
     ap.add_argument("--no-runs", action="store_true", help="skip the closed-loop runs")
     ap.add_argument("--runs-only", action="store_true",
                     help="run again only the closed-loop runs of --out's rows (the plans' rows kept as they are)")
@@ -69,7 +75,9 @@ def main() -> int:
         print(table(json.loads(args.out.read_text())["rows"]))
         return 0
     if args.replot:
-        figure(json.loads(CURVE.read_text())["rows"], FIG)
+        d = json.loads(CURVE.read_text())
+        CURVE.write_text(json.dumps(dict(d, curve=curve(d["rows"])), indent=1))
+        figure(d["rows"], FIG)
         return 0
     if args.curve:
         args.scenarios, args.out, args.no_runs = ["hills_field", "steep_hill"], CURVE, True
@@ -77,19 +85,27 @@ def main() -> int:
     from sbmpc import api
     from sbmpc.planning.margin import robustness
     old = json.loads(args.out.read_text()) if args.out.exists() else {}
-    rows = {(r["scenario"], r["cost"], r["config"]): r for r in old.get("rows", [])}
+    rows = {(r["scenario"], r["cost"], r["config"], r.get("seed", 0)): r for r in old.get("rows", [])}
     for name in args.scenarios:
         for cost in args.costs:
-            for conf in args.configs:
+            if not args.runs_only:
+                # rows of seeds beyond --seeds (an earlier run's) would mix into the medians
+                for key in [k for k in rows if k[:2] == (name, cost) and k[2] in args.configs and k[3] >= args.seeds]:
+                    del rows[key]
+            for conf, seed in ((c, s) for c in args.configs for s in range(args.seeds)):
+                if args.resume and not args.runs_only and (name, cost, conf, seed) in rows:
+                    continue
                 over = {} if conf == "default" else {k: float(v) for k, v in (kv.split("=") for kv in conf.split(","))}
+                over["seed"] = seed
                 w = api.load_world(ROOT / "scenarios" / f"{name}.yaml", **over)
                 if args.runs_only:
-                    row = rows.get((name, cost, conf))
+                    row = rows.get((name, cost, conf, seed))
                     if row is None or row["status"] != "found":
                         continue
                     row["run_mass_1.1"] = closed_loop(w, cost, mass=1.1)
                     row["run_grip_0.9"] = closed_loop(w, cost, grip=0.9)
-                    print(json.dumps({k: row[k] for k in ("scenario", "cost", "config", "run_mass_1.1", "run_grip_0.9")}),
+                    print(json.dumps({k: row.get(k, 0) for k in ("scenario", "cost", "config", "seed", "run_mass_1.1",
+                                                                "run_grip_0.9")}),
                           flush=True)
                     _write(args, rows)
                     continue
@@ -97,7 +113,7 @@ def main() -> int:
                 from sbmpc.planning import plan as PL
                 t0 = time.perf_counter()
                 p = PL.plan(w, cost)
-                row = {"scenario": name, "cost": cost, "config": conf, "margin": m, "status": p.status,
+                row = {"scenario": name, "cost": cost, "config": conf, "seed": seed, "margin": m, "status": p.status,
                        "planning_time_s": round(time.perf_counter() - t0, 2), "expansions": p.nodes_expanded,
                        "travel_time_s": p.travel_time_s, "energy_J": p.energy_J,
                        "margin_report": p.margin}
@@ -107,10 +123,11 @@ def main() -> int:
                     if not args.no_runs:
                         row["run_mass_1.1"] = closed_loop(w, cost, mass=1.1)
                         row["run_grip_0.9"] = closed_loop(w, cost, grip=0.9)
-                rows[(name, cost, conf)] = row
+                rows[(name, cost, conf, seed)] = row
                 print(json.dumps(row), flush=True)
                 _write(args, rows)
     if args.curve:
+        _write(args, rows)
         figure(list(rows.values()), FIG)
     return 0
 
@@ -118,11 +135,12 @@ def main() -> int:
 def _write(args, rows: dict) -> None:
     args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
                                     "python": sys.version.split()[0], "samples": args.samples,
+                                    **({"seeds": args.seeds, "curve": curve(list(rows.values()))} if args.curve else {}),
                                     "rows": list(rows.values())}, indent=1))
 
 
 def table(rows: list) -> str:
-    """docs/planner.md#margin's table: per scenario and cost, the plan without margin and
+    """docs/planner.md#margin's table (seed 0's rows): per scenario and cost, the plan without margin and
     with the default, their price, p_stall / p_tip under the 5 % and 10 % draws, and the
     closed-loop runs with a 10 % heavier vehicle and with 10 % less grip."""
     def cost(r):
@@ -143,8 +161,10 @@ def table(rows: list) -> str:
 
     out = ["| scenario | cost | margin 0: cost, p_stall 5 % (10 %) | runs +10 % mass / -10 % grip | default: cost (price) | "
            "p_stall 5 % (10 %) | p_tip 5 % | runs +10 % mass / -10 % grip |", "|---|---|---|---|---|---|---|---|"]
-    base = {(r["scenario"], r["cost"]): r for r in rows if r["margin"] == 0}
+    base = {(r["scenario"], r["cost"]): r for r in rows if r["margin"] == 0 and not r.get("seed")}
     for r in rows:
+        if r.get("seed"):
+            continue
         b = base.get((r["scenario"], r["cost"]))
         if r["margin"] == 0 or b is None or r["status"] != "found" or b["status"] != "found":
             continue
@@ -157,23 +177,45 @@ def table(rows: list) -> str:
     return "\n".join(out)
 
 
+def curve(rows: list) -> dict:
+    """Per (scenario, cost): [(margin, price median, min, max [%], p_stall median, min, max,
+    seeds)] over the seeds whose plans at that margin and at margin 0 were both found; a
+    seed's price is against its own plan without margin. Also the summary's numbers."""
+    out = {}
+    for name, cost in sorted({(r["scenario"], r["cost"]) for r in rows}):
+        key = "travel_time_s" if cost == "time" else "energy_J"
+        mine = [r for r in rows if (r["scenario"], r["cost"]) == (name, cost) and r["status"] == "found"]
+        base = {r.get("seed", 0): r[key] for r in mine if r["margin"] == 0}
+        pts = []
+        for m in sorted({r["margin"] for r in mine}):
+            at = [r for r in mine if r["margin"] == m and r.get("seed", 0) in base]
+            if not at:
+                continue
+            price = np.array([100.0 * (r[key] / base[r.get("seed", 0)] - 1.0) for r in at])
+            ps = np.array([r["draw_5pct"]["p_stall"] for r in at])
+            pts.append((m, float(np.median(price)), float(price.min()), float(price.max()),
+                        float(np.median(ps)), float(ps.min()), float(ps.max()), len(at)))
+        out[f"{name} {cost}"] = pts
+    return out
+
+
 def figure(rows: list, path: Path) -> None:
-    """Price of the margin (cost against the plan without it) and p_stall under the 5 %
-    draw, against the margin, per scenario and cost."""
+    """Price of the margin (cost against the same seed's plan without it) and p_stall under
+    the 5 % draw, against the margin, per scenario and cost: the median over the seeds,
+    the range as a band."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
-    for (name, cost), style in zip(sorted({(r["scenario"], r["cost"]) for r in rows}), ("o-", "s--", "^-", "v--")):
-        rs = sorted((r for r in rows if (r["scenario"], r["cost"]) == (name, cost) and r["status"] == "found"),
-                    key=lambda r: r["margin"])
-        key = "travel_time_s" if cost == "time" else "energy_J"
-        base = next((r[key] for r in rs if r["margin"] == 0), None)
-        if not rs or not base:
+    seeds = len({r.get("seed", 0) for r in rows})
+    for (label, pts), style in zip(curve(rows).items(), ("o-", "s--", "^-", "v--")):
+        if not pts:
             continue
-        m = [r["margin"] for r in rs]
-        a.plot(m, [100 * (r[key] / base - 1) for r in rs], style, label=f"{name}, {cost} plan")
-        b.plot(m, [r["draw_5pct"]["p_stall"] for r in rs], style, label=f"{name}, {cost} plan")
+        m, p, plo, phi, s, slo, shi, _ = (np.array(c) for c in zip(*pts))
+        line, = a.plot(m, p, style, label=f"{label} plan")
+        a.fill_between(m, plo, phi, color=line.get_color(), alpha=0.15)
+        b.plot(m, s, style, color=line.get_color(), label=f"{label} plan")
+        b.fill_between(m, slo, shi, color=line.get_color(), alpha=0.15)
     a.set_xlabel("planner.margin")
     a.set_ylabel("price: cost against margin 0 [%]")
     a.axhline(5, color="grey", lw=0.8, ls=":")
@@ -183,7 +225,8 @@ def figure(rows: list, path: Path) -> None:
     a.legend(fontsize=8)
     a.grid(alpha=0.3)
     b.grid(alpha=0.3)
-    fig.suptitle("Plans with margin: price against margin 0, and p_stall of 20 vehicles (mass, mu_sa, mu_op drawn)")
+    fig.suptitle(f"Plans with margin: price and p_stall of 20 drawn vehicles; median over {seeds} seed"
+                 f"{'s' if seeds > 1 else ''}, band: range", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 

@@ -284,7 +284,7 @@ def test_an_energy_plan_and_its_time_check_share_the_time_budget(monkeypatch):
     world = WO.resolve(SC.load(FLAT))
     budgets = {}
 
-    def fake(w, cost=None, progress=None, start=None, incumbent=None, time_budget_s=None):
+    def fake(w, cost=None, progress=None, start=None, incumbent=None, time_budget_s=None, **kw):
         budgets[cost] = time_budget_s
         spent = 2.0 if cost == "time" else time_budget_s
         return Plan(w.scenario.name, cost, "no_path", f"time budget of {time_budget_s:.3g} s used up; to try: x",

@@ -245,3 +245,54 @@ class _Prediction:
 def test_the_guard_holds_a_period_back_by_the_rule(nominal, twin, kept, held):
     from sbmpc import receding as R
     assert R._held([_Prediction(nominal), _Prediction(twin)], np.zeros(SS.NX), (1.0, 1.0, 1.0), kept) is held
+
+
+def test_a_plan_that_keeps_the_margin_ranks_before_a_cheaper_one_that_does_not():
+    """The cross-check of an energy plan against the time plan (and compare's both ways):
+    where the energy search found no plan that keeps the margin and fell back to one at the
+    nominal vehicle's limit, the time plan that keeps it is the plan, though it uses more
+    energy (hills_field: 4 013 J with the margin against 3 275 J without); between two
+    that keep it, or two that do not, the cheaper one."""
+    def made(cost, energy, seconds, kept):
+        traj = {"t": np.array([0.0, seconds]), "energy_J": np.array([0.0, energy]),
+                "x": np.array([0.0, 10.0]), "y": np.array([0.0, 0.0])}
+        return PL.Plan("s", cost, "found", None, [(1.0, 1.0, seconds)], traj, margin={"kept": kept})
+    bare = made("energy", 3275.0, 98.7, False)
+    fast = made("time", 4013.0, 97.5, True)
+    out = PL.cross_checked(bare, fast)
+    assert out.energy_J == 4013.0 and out.cost == "energy" and out.found_by.startswith("time search")
+    assert "margin" in out.found_by
+    # the other way round: the energy plan keeps it, the time plan does not
+    assert PL.cross_checked(made("energy", 3500.0, 99.0, True), made("time", 3400.0, 97.0, False)).energy_J == 3500.0
+    # both keep it (or neither does): the cheaper on the plan's own cost
+    assert PL.cross_checked(made("energy", 3500.0, 99.0, True), made("time", 3400.0, 97.0, True)).energy_J == 3400.0
+    assert PL.cross_checked(made("energy", 3500.0, 99.0, False), made("time", 3400.0, 97.0, False)).energy_J == 3400.0
+
+
+def test_an_energy_plan_searches_again_without_the_margin_only_where_the_time_plan_does_not_keep_it(monkeypatch):
+    """The energy search finds no plan that keeps the margin (its edges failed on it): where
+    the time plan keeps it, that is the plan (cross_checked would not take one without the
+    margin), so the energy search does not run a second time without it; where the time
+    plan does not keep it either, it does, and the cheaper plan without it is the plan."""
+    real = PL._search_plan
+    calls = []
+
+    def fake(world, cost=None, *a, **k):
+        calls.append((cost, world.scenario.planner.margin))
+        if cost == "energy" and world.scenario.planner.margin > 0:
+            return PL.Plan(world.scenario.name, cost, "no_path", "node budget of 10 expansions used up (the test's)",
+                           failure="node_budget", invalid_edges={SS.CODES[SS.MARGIN - 1]: 5})
+        return real(world, cost, *a, **k)
+    monkeypatch.setattr(PL, "_search_plan", fake)
+    flat = _plane(0.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0)
+    p = PL.plan(flat, "energy")
+    assert calls == [("time", 0.1), ("energy", 0.1)]
+    assert p.found and p.margin["kept"] and p.found_by.startswith("time search")
+    assert "the test's" in p.found_by and "no plan it found keeps the planner's margin" in p.found_by
+    # on the 11.5 deg ramp the time plan does not keep the margin either: the energy
+    # search runs again without it
+    calls.clear()
+    w = _plane(11.5, size=(20.0, 12.0), margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, max_expansions=4000)
+    q = PL.plan(w, "energy")
+    assert calls[:2] == [("time", 0.1), ("time", 0.0)] and ("energy", 0.0) in calls
+    assert q.found and q.margin["kept"] is False

@@ -222,10 +222,12 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     against the time plan when ``planner.energy_vs_time`` is on (the default): the time
     search runs first (``time_progress`` reports it), and where its plan, driven at the
     controller rate, uses less energy than the energy search's own, or the energy search
-    finds nothing, the time plan is the energy plan (``found_by`` says so). The search
+    finds nothing, or only it keeps the planner's margin (:func:`cross_checked`), the time
+    plan is the energy plan (``found_by`` says so). The search
     for the cheapest energy merges states on its grid and samples its own wheel speeds,
     so it can lose a way the time search kept; a user who asks for the least energy
-    never gets a plan dearer than the fastest one. The two share the time budget (the
+    never gets a plan dearer than the fastest one, unless only the dearer one keeps the
+    planner's margin. The two share the time budget (the
     energy search gets what the time search left); ``planning_time_s`` counts both;
     ``rival`` holds the time plan's figures."""
     cost = WO.checked_cost(world, cost)
@@ -237,8 +239,14 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     budget = ps.time_budget_s if time_budget_s is None else time_budget_s
     fast = search_plan(world, "time", time_progress, start, None, budget)
     left = max(budget - fast.planning_time_s, 0.0)
-    own = search_plan(world, "energy", progress, start, None, left)
-    if not own.found:
+    # where the time plan keeps the margin, an energy plan without it would not be taken
+    # (cross_checked): the energy search does not search again without it
+    own = search_plan(world, "energy", progress, start, None, left,
+                      without_margin=not (fast.found and keeps_margin(fast)))
+    if not own.found and fast.found and keeps_margin(fast) and own.invalid_edges.get(SS.CODES[SS.MARGIN - 1], 0):
+        head = (own.reason or "").split(";")[0]
+        own = replace(own, reason=f"no plan it found keeps the planner's margin ({head}); the time plan keeps it")
+    elif not own.found:
         own = _shared_budget(own, fast, budget, left)
     return checked_against_time(own, fast)
 
@@ -288,12 +296,26 @@ def _rival(p: Plan) -> dict:
             "planning_time_s": p.planning_time_s}
 
 
+def keeps_margin(p: Plan) -> bool:
+    """Whether a found plan keeps the planner's margin (``margin.kept``; False without one)."""
+    return bool((p.margin or {}).get("kept", False))
+
+
 def cross_checked(own: Plan, other: Plan) -> Plan:
     """``own`` checked against ``other`` (planned for the other cost) on own's cost, both
     as driven at the controller rate: the other plan (adopted, :func:`_adopt`) where it
-    does better, or where own's search found nothing and the other's did; else own."""
+    does better, or where own's search found nothing and the other's did; else own.
+    Keeping the planner's margin ranks before the cost: where only one of the two keeps
+    it (the other search found no plan that does and fell back to one at the nominal
+    vehicle's limit, :func:`search_plan`), that one is the plan, whatever the two cost."""
     cost = own.cost
     if own.found and other.found:
+        if keeps_margin(own) != keeps_margin(other):
+            if keeps_margin(own):
+                return own
+            mine = f"{own.energy_J:.1f} J" if cost == "energy" else f"{own.travel_time_s:.2f} s"
+            return _adopt(other, cost, own, why=f"it keeps the planner's margin; the {cost} search's own plan "
+                                                f"({mine} at the controller rate) does not")
         better = (other.energy_J < own.energy_J if cost == "energy"
                   else other.travel_time_s < own.travel_time_s)
         return _adopt(other, cost, own) if better else own
@@ -303,14 +325,16 @@ def cross_checked(own: Plan, other: Plan) -> Plan:
 
 
 def search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
-                incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
+                incumbent: list | None = None, time_budget_s: float | None = None,
+                without_margin: bool = True) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
     search (:func:`_search_plan`), keeping the planner's margin (``planner.margin``,
     :mod:`sbmpc.planning.margin`). Where no plan keeps it (the search found nothing and edges
     failed on the margin), the search runs again without it in what is left of the time
-    budget: a plan at the nominal vehicle's limit, which says so (``margin.kept`` false,
-    ``margin.note``); a vehicle stalled on a slope needs every bit of its drive to get
-    away. The plan's ``margin`` reports how close it runs to each limit."""
+    budget (unless ``without_margin`` is False): a plan at the nominal vehicle's limit,
+    which says so (``margin.kept`` false, ``margin.note``); a vehicle stalled on a slope
+    needs every bit of its drive to get away. The plan's ``margin`` reports how close it
+    runs to each limit."""
     cost = WO.checked_cost(world, cost)
     time_budget_s = WO.checked_budget(time_budget_s)
     ps = world.scenario.planner
@@ -318,7 +342,7 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     kept = True
     note = None
     failed = None
-    if (not p.found and margin_on(ps) and p.failure in ("exhausted", "node_budget")
+    if (without_margin and not p.found and margin_on(ps) and p.failure in ("exhausted", "node_budget")
             and p.invalid_edges.get(SS.CODES[SS.MARGIN - 1], 0) > 0):
         budget = ps.time_budget_s if time_budget_s is None else time_budget_s
         left = budget - p.planning_time_s
@@ -462,7 +486,8 @@ def plan_both(world: World, progress=None) -> dict:
     The implicit grid merges states, so a search can lose a path that the other search
     kept: then the energy search's plan may cost more energy than the time search's,
     or one search may find nothing where the other found a way. Each plan is checked
-    against the other on its own cost; the better one is kept, a search that found
+    against the other on its own cost (a plan that keeps the planner's margin before one
+    that does not, :func:`cross_checked`); the better one is kept, a search that found
     nothing takes the other's plan (its own reason is kept in ``found_by``), and
     ``found_by`` says which search produced it (reported by ``sbmpc compare``)."""
     WO.checked_cost(world, "energy")       # before the time search: a regenerating vehicle is refused
