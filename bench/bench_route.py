@@ -4,6 +4,7 @@
     taskset -c 0 python bench/bench_route.py --seeds 7 --margins 0.1 --out bench/results/route_margin.json
     taskset -c 0 python bench/bench_route.py --polish every --routes 170 340 --seeds 7 --margins 0 0.1 \
         --costs energy                                  # the polish at every control: route_every.json
+    taskset -c 0 python bench/bench_route.py --ab 3 --routes 170 340   # the time plan's check: route_ab.json
 
 Plans ``sbmpc plan`` would make on fields of random hills at ``hills_field``'s density
 (``bench_horizon.field_scenario``: routes of 70, 170 and 340 m, map seeds 7, 8 and 9),
@@ -17,6 +18,12 @@ compare plans and times against. Per cost and margin: the median planning time o
 seeds at each route length, and the slope of a least-squares line of planning time
 against route length over the found plans (one map per seed and length: a map whose
 goal lies by a steep flank costs its search more than any length does).
+
+``--ab N``: energy plans only, each map N times with the time plan always checked at 1 kHz
+(``plan.TIME_CHECK_SLACK`` 2, as before 2026-12-03) and N times as shipped (the time plan
+checked only where it could be the energy plan), interleaved A B, B A, ...; per map the
+median ratio of the two planning times (shipped / always checked), the plans' energies
+and whether the time plan was checked; writes ``bench/results/route_ab.json``.
 """
 from __future__ import annotations
 
@@ -56,6 +63,8 @@ def main() -> int:
     ap.add_argument("--costs", nargs="*", default=["time", "energy"])
     ap.add_argument("--polish", choices=["auto", "every"], default="auto")
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--ab", type=int, default=0, metavar="N",
+                    help="energy plans with and without the time plan's check, N pairs per map (module doc)")
     args = ap.parse_args()
     from bench_horizon import field_scenario
     from sbmpc.planning import polish as PO, world as WO
@@ -67,6 +76,8 @@ def main() -> int:
     flat = SC.load(ROOT / "scenarios" / "flat.yaml")
     for cost in ("time", "energy"):                  # compile / load the cache
         PL.plan(WO.resolve(replace(flat, planner=replace(flat.planner, threads=1))), cost)
+    if args.ab:
+        return ab(args, out if args.out else OUT.with_name("route_ab.json"))
     rows = []
     for route in args.routes:
         for seed in args.seeds:
@@ -95,6 +106,44 @@ def main() -> int:
            "rows": rows, "slopes": slopes}
     out.write_text(json.dumps(res, indent=1))
     print(json.dumps(slopes, indent=1))
+    print("wrote", out.relative_to(ROOT))
+    return 0
+
+
+def ab(args, out: Path) -> int:
+    """``--ab N`` (module doc): the time plan's 1 kHz check, always against as shipped."""
+    from bench_horizon import field_scenario
+    from sbmpc.planning import plan as PL, world as WO
+    shipped = PL.TIME_CHECK_SLACK
+    rows, summary = [], {}
+    for route in args.routes:
+        for seed in args.seeds:
+            scn = field_scenario(route, seed)
+            for margin in args.margins:
+                w = WO.resolve(replace(scn, planner=replace(scn.planner, threads=1, margin=margin)))
+                ratios = []
+                for k in range(args.ab):
+                    got = {}
+                    for label in (("checked", "shipped") if k % 2 == 0 else ("shipped", "checked")):
+                        PL.TIME_CHECK_SLACK = 2.0 if label == "checked" else shipped
+                        t0 = time.perf_counter()
+                        p = PL.plan(w, "energy")
+                        got[label] = {"s": round(time.perf_counter() - t0, 3), "energy_J": p.energy_J,
+                                      "time_plan_checked": (p.rival or {}).get("checked")}
+                    PL.TIME_CHECK_SLACK = shipped
+                    ratios.append(got["shipped"]["s"] / got["checked"]["s"])
+                    rows.append({"route_m": route, "seed": seed, "margin": margin, "pair": k, **got})
+                    print(json.dumps(rows[-1]), flush=True)
+                summary[f"{route} m, map {seed}, margin {margin:g}"] = {
+                    "ratio_median": round(float(np.median(ratios)), 3),
+                    "ratio_range": [round(min(ratios), 3), round(max(ratios), 3)],
+                    "checked_s_median": float(np.median([r["checked"]["s"] for r in rows[-args.ab:]])),
+                    "shipped_s_median": float(np.median([r["shipped"]["s"] for r in rows[-args.ab:]])),
+                    "same_energy": all(r["checked"]["energy_J"] == r["shipped"]["energy_J"] for r in rows[-args.ab:])}
+    out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+                               "pairs": args.ab, "time_check_slack": shipped, "summary": summary, "rows": rows},
+                              indent=1))
+    print(json.dumps(summary, indent=1))
     print("wrote", out.relative_to(ROOT))
     return 0
 

@@ -296,3 +296,30 @@ def test_an_energy_plan_searches_again_without_the_margin_only_where_the_time_pl
     q = PL.plan(w, "energy")
     assert calls[:2] == [("time", 0.1), ("time", 0.0)] and ("energy", 0.0) in calls
     assert q.found and q.margin["kept"] is False
+
+
+def test_where_the_time_plan_does_not_hold_at_1_khz_the_energy_search_searches_again_without_the_margin(monkeypatch):
+    """The time plan kept the margin at its search's step, so the energy search (which
+    found no plan that keeps it) did not search again without it; checked at 1 kHz after
+    the energy search, the time plan does not hold: the energy plan without the margin is
+    the one left, and it is made then (rather than no plan at all)."""
+    real, real_check = PL._search_plan, PL._checked_plan
+    calls = []
+
+    def fake(world, cost=None, *a, **k):
+        calls.append((cost, world.scenario.planner.margin))
+        if cost == "energy" and world.scenario.planner.margin > 0:
+            return PL.Plan(world.scenario.name, cost, "no_path", "node budget of 10 expansions used up (the test's)",
+                           failure="node_budget", invalid_edges={SS.CODES[SS.MARGIN - 1]: 5})
+        return real(world, cost, *a, **k)
+
+    def time_fails(w, cost, *a, **k):
+        q = real_check(w, cost, *a, **k)
+        return replace(q, status="no_path", reason="does not hold at 1 kHz (the test's)",
+                       failure="controller_rate") if cost == "time" else q
+    monkeypatch.setattr(PL, "_search_plan", fake)
+    monkeypatch.setattr(PL, "_checked_plan", time_fails)
+    p = PL.plan(_plane(0.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0), "energy")
+    assert calls == [("time", 0.1), ("energy", 0.1), ("energy", 0.0)]
+    assert p.found and p.cost == "energy" and p.found_by == "" and p.margin["kept"] is False
+    assert "the test's" in p.margin["note"] and p.rival["status"] == "no_path"

@@ -267,6 +267,13 @@ def _rival_line(plan) -> str:
         return f"  this is the {plan.found_by}\n"
     if r["status"] != "found":
         return "  checked against the time plan: the time search found no path\n"
+    if r.get("checked") is False:
+        less = 100.0 * (1.0 - plan.energy_J / r["energy_J"])
+        why = (f"this plan uses {less:.0f} % less" if less > 0.0 else
+               "this plan keeps the planner's margin and the time search's does not")
+        return (f"  checked against the time plan: {r['energy_J']:.1f} J in {r['travel_time_s']:.2f} s at the "
+                f"search's step, not driven at 1 kHz: {why} (planned in {r['planning_time_s']:.2f} s, counted "
+                f"in the planning time)\n")
     return (f"  checked against the time plan: {r['energy_J']:.1f} J in {r['travel_time_s']:.2f} s "
             f"(planned in {r['planning_time_s']:.2f} s, counted in the planning time)\n")
 

@@ -69,6 +69,10 @@ class Plan:
     failure: str | None = None    # for no_path, the kind of failure: one of FAILURES
     coarse: Coarse | None = None  # the coarse search whose corridor the search looked in (sbmpc.planning.corridor)
     margin: dict | None = None    # how close the plan runs to the limits (sbmpc.planning.margin.report), "kept", "note"
+    # status "searched" (search_plan(lazy=True), inside plan() only): the searched controls' travel
+    # time and energy at the planner's step, and the call that checks them at the controller rate
+    searched: dict | None = None
+    pending: object = field(default=None, repr=False, compare=False)
 
     @property
     def found(self) -> bool:
@@ -223,13 +227,18 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     search runs first (``time_progress`` reports it), and where its plan, driven at the
     controller rate, uses less energy than the energy search's own, or the energy search
     finds nothing, or only it keeps the planner's margin (:func:`cross_checked`), the time
-    plan is the energy plan (``found_by`` says so). The search
+    plan is the energy plan (``found_by`` says so). The time plan is checked at the
+    controller rate only where it could be the energy plan (:func:`_stands`: not where the
+    energy plan uses TIME_CHECK_SLACK less than its search predicts; ``rival.checked``). The search
     for the cheapest energy merges states on its grid and samples its own wheel speeds,
     so it can lose a way the time search kept; a user who asks for the least energy
-    never gets a plan dearer than the fastest one, unless only the dearer one keeps the
-    planner's margin. The two share the time budget (the
-    energy search gets what the time search left); ``planning_time_s`` counts both;
-    ``rival`` holds the time plan's figures."""
+    never gets a plan dearer than the fastest one (unless only the dearer one keeps the
+    planner's margin; where the time plan stands unchecked, as far as its search's
+    prediction tells, which lay within 4 % of its 1 kHz drive on nine route maps). The
+    searches share the time budget (the energy search gets what the time search left; a
+    time plan checked after the energy search gets the budget its check would have had
+    at once, so the whole may run past the budget by that check); ``planning_time_s``
+    counts both; ``rival`` holds the time plan's figures."""
     cost = WO.checked_cost(world, cost)
     start, incumbent = _checked_inputs(world, start, incumbent)
     time_budget_s = WO.checked_budget(time_budget_s)
@@ -237,18 +246,46 @@ def plan(world: World, cost: str | None = None, progress=None, start: np.ndarray
     if cost != "energy" or incumbent is not None or not ps.energy_vs_time:
         return search_plan(world, cost, progress, start, incumbent, time_budget_s)
     budget = ps.time_budget_s if time_budget_s is None else time_budget_s
-    fast = search_plan(world, "time", time_progress, start, None, budget)
-    left = max(budget - fast.planning_time_s, 0.0)
+    fast = search_plan(world, "time", time_progress, start, None, budget, lazy=True)
+    searched_s = fast.planning_time_s           # the time search's share of the budget (its check may come later)
+    left = max(budget - searched_s, 0.0)
+    found = fast.found or fast.status == "searched"
     # where the time plan keeps the margin, an energy plan without it would not be taken
     # (cross_checked): the energy search does not search again without it
-    own = search_plan(world, "energy", progress, start, None, left,
-                      without_margin=not (fast.found and keeps_margin(fast)))
+    margin_free = not (found and keeps_margin(fast))
+    own = search_plan(world, "energy", progress, start, None, left, without_margin=margin_free)
+    if fast.status == "searched":
+        if _stands(own, fast):
+            return replace(counting(own, fast), rival=_rival(fast))
+        fast = fast.pending()
+    if not own.found and not margin_free and not fast.found:
+        # the time plan kept the margin at the search's step but not at the controller
+        # rate: the energy search's plan without it is the one left (search_plan's retry)
+        own = margined(world, "energy", own, progress, start, None, left)
     if not own.found and fast.found and keeps_margin(fast) and own.invalid_edges.get(SS.CODES[SS.MARGIN - 1], 0):
         head = (own.reason or "").split(";")[0]
         own = replace(own, reason=f"no plan it found keeps the planner's margin ({head}); the time plan keeps it")
     elif not own.found:
-        own = _shared_budget(own, fast, budget, left)
+        own = _shared_budget(own, fast, budget, left, searched_s)
     return checked_against_time(own, fast)
+
+
+TIME_CHECK_SLACK = 0.1   # an energy plan this share below the time search's prediction stands unchecked against it
+
+
+def _stands(own: Plan, fast: Plan) -> bool:
+    """Whether the energy plan ``own`` (checked at the controller rate) is the plan whatever
+    the time plan ``fast`` (searched, not yet checked: status "searched") does at 1 kHz: it
+    keeps the margin where the time plan does not, or, both keeping it or neither, it uses
+    TIME_CHECK_SLACK less energy than the time search predicts for its plan. The time
+    plan's 1 kHz drive, its repairs included, used 0.96-1.04x its search's prediction on
+    nine route maps of 70-340 m (docs/performance.md#route-length); its check and repairs
+    took most of its planning time there (about 4 s of 4.5 s on map 8's 340 m route)."""
+    if not own.found:
+        return False
+    if keeps_margin(own) != keeps_margin(fast):
+        return keeps_margin(own)
+    return own.energy_J <= (1.0 - TIME_CHECK_SLACK) * fast.searched["energy_J"]
 
 
 def checked_against_time(own: Plan, fast: Plan) -> Plan:
@@ -267,21 +304,23 @@ def counting(p: Plan, other: Plan) -> Plan:
                    edges_simulated=p.edges_simulated + other.edges_simulated)
 
 
-def _shared_budget(own: Plan, fast: Plan, budget: float, left: float) -> Plan:
+def _shared_budget(own: Plan, fast: Plan, budget: float, left: float, fast_s: float) -> Plan:
     """The energy search's failed plan ``own`` where the time search it is checked against
     ran first: a time budget used up is the whole one, shared (:func:`plan`), and where
     the time search found nothing either, say so, and how to give the energy search all
-    of the budget. Any other failure (a node budget, no path at all) stands as it is."""
+    of the budget. Any other failure (a node budget, no path at all) stands as it is.
+    ``fast_s``: the time search's share of the budget (its 1 kHz check may come after the
+    energy search, :func:`_stands`)."""
     if own.failure != "time_budget":
         return own
     head = f"time budget of {budget_text(left)} s used up"
     rest = own.reason[len(head):] if (own.reason or "").startswith(head) else "; " + (own.reason or "")
-    if fast.planning_time_s < budget:
-        used = (f"{fast.planning_time_s:.2f} s of it by the time search the energy plan is checked against, "
+    if fast_s < budget:
+        used = (f"{fast_s:.2f} s of it by the time search the energy plan is checked against, "
                 f"planner.energy_vs_time; {left:.2f} s left to the energy search")
     else:       # the budget cuts a search, not its fixed costs (the cost-to-go grid, the 1 kHz check)
         used = (f"all of it by the time search the energy plan is checked against, planner.energy_vs_time, which "
-                f"took {fast.planning_time_s:.2f} s: a search's grid and its 1 kHz check are not cut by the budget; "
+                f"took {fast_s:.2f} s: a search's grid and its 1 kHz check are not cut by the budget; "
                 "nothing was left to the energy search")
     reason = f"time budget of {budget_text(budget)} s used up ({used})" + rest
     if not fast.found:
@@ -291,9 +330,15 @@ def _shared_budget(own: Plan, fast: Plan, budget: float, left: float) -> Plan:
 
 
 def _rival(p: Plan) -> dict:
-    """The figures of the plan an energy plan was checked against (plan JSON ``rival``)."""
+    """The figures of the plan an energy plan was checked against (plan JSON ``rival``): as
+    driven at the controller rate (``checked``), or, a time plan that could not be the
+    energy plan (:func:`_stands`), its search's at the planner's step."""
+    if p.status == "searched":
+        return {"cost": p.cost, "status": "found", "travel_time_s": p.searched["travel_time_s"],
+                "energy_J": p.searched["energy_J"], "planning_time_s": p.planning_time_s, "checked": False,
+                "kept_margin": keeps_margin(p)}
     return {"cost": p.cost, "status": p.status, "travel_time_s": p.travel_time_s, "energy_J": p.energy_J,
-            "planning_time_s": p.planning_time_s}
+            "planning_time_s": p.planning_time_s, "checked": True}
 
 
 def keeps_margin(p: Plan) -> bool:
@@ -326,7 +371,7 @@ def cross_checked(own: Plan, other: Plan) -> Plan:
 
 def search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
                 incumbent: list | None = None, time_budget_s: float | None = None,
-                without_margin: bool = True) -> Plan:
+                without_margin: bool = True, lazy: bool = False) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
     search (:func:`_search_plan`), keeping the planner's margin (``planner.margin``,
     :mod:`sbmpc.planning.margin`). Where no plan keeps it (the search found nothing and edges
@@ -334,31 +379,62 @@ def search_plan(world: World, cost: str | None = None, progress=None, start: np.
     budget (unless ``without_margin`` is False): a plan at the nominal vehicle's limit,
     which says so (``margin.kept`` false, ``margin.note``); a vehicle stalled on a slope
     needs every bit of its drive to get away. The plan's ``margin`` reports how close it
-    runs to each limit."""
+    runs to each limit.
+
+    ``lazy``: a found plan comes back searched but not yet checked at the controller rate
+    (status "searched", its figures at the planner's step in ``searched``, ``margin.kept``
+    set); ``pending()`` then makes the plan (:func:`plan` checks the time plan only where it
+    could be the energy plan)."""
     cost = WO.checked_cost(world, cost)
     time_budget_s = WO.checked_budget(time_budget_s)
+    p = _search_plan(world, cost, progress, start, incumbent, time_budget_s, lazy)
+    return margined(world, cost, p, progress, start, incumbent, time_budget_s, lazy, retry=without_margin)
+
+
+def margined(world: World, cost: str, p: Plan, progress=None, start: np.ndarray | None = None,
+             incumbent: list | None = None, time_budget_s: float | None = None, lazy: bool = False,
+             retry: bool = True) -> Plan:
+    """:func:`search_plan`'s plan from its search's result ``p`` (:func:`_search_plan`'s, with
+    the planner's margin): where no plan kept the margin (the search found nothing and
+    edges failed on it), and ``retry``, the search again without it in what is left of the
+    time budget, its plan saying so (``margin.kept`` false, ``margin.note``, the edges that
+    failed on the margin); the plan reported (:func:`_reported`). ``lazy``: search_plan's."""
     ps = world.scenario.planner
-    p = _search_plan(world, cost, progress, start, incumbent, time_budget_s)
     kept = True
     note = None
     failed = None
-    if (without_margin and not p.found and margin_on(ps) and p.failure in ("exhausted", "node_budget")
+    if (retry and not p.found and margin_on(ps) and p.failure in ("exhausted", "node_budget")
             and p.invalid_edges.get(SS.CODES[SS.MARGIN - 1], 0) > 0):
         budget = ps.time_budget_s if time_budget_s is None else time_budget_s
         left = budget - p.planning_time_s
         if left > 0.0:
             bare = WO.without_margin(world)
-            q = _search_plan(bare, cost, progress, start, incumbent, left)
-            if q.found:
+            q = _search_plan(bare, cost, progress, start, incumbent, left, lazy)
+            if q.found or q.status == "searched":
                 note = (f"no plan keeps the margin ({p.reason.split(';')[0]}); this plan rides the nominal "
                         f"vehicle's limits (planner.margin 0)")
                 failed = p.invalid_edges
+                if q.status == "searched":
+                    # checked at 1 kHz, the plan without the margin counts the failed search's work
+                    # too; where it does not hold there, the failed search's reason stands
+                    q = replace(q, pending=lambda miss=p, bare_check=q.pending:
+                                (lambda r: counting(r, miss) if r.found else miss)(bare_check()))
                 p, kept = counting(q, p), False
-    if p.found:
-        rep = report(world, p.trajectory) or {}
-        p = replace(p, margin=dict(rep, kept=kept and margin_on(ps), note=note,
-                                   **({"invalid_edges_with_margin": failed} if failed else {})))
-    return p
+    kept = kept and margin_on(ps)
+    if p.status == "searched":
+        return replace(p, margin={"kept": kept},
+                       pending=lambda check=p.pending: _reported(world, check(), kept, note, failed))
+    return _reported(world, p, kept, note, failed)
+
+
+def _reported(world: World, p: Plan, kept: bool, note: str | None, failed: dict | None) -> Plan:
+    """A found plan with its ``margin`` (:func:`sbmpc.planning.margin.report`, ``kept``, ``note``,
+    the edges that failed on the margin where none kept it); any other plan as it is."""
+    if not p.found:
+        return p
+    rep = report(world, p.trajectory) or {}
+    return replace(p, margin=dict(rep, kept=kept, note=note,
+                                  **({"invalid_edges_with_margin": failed} if failed else {})))
 
 
 def margin_on(ps) -> bool:
@@ -367,7 +443,7 @@ def margin_on(ps) -> bool:
 
 
 def _search_plan(world: World, cost: str | None = None, progress=None, start: np.ndarray | None = None,
-                 incumbent: list | None = None, time_budget_s: float | None = None) -> Plan:
+                 incumbent: list | None = None, time_budget_s: float | None = None, lazy: bool = False) -> Plan:
     """Plan the scenario of ``world`` for ``cost`` (default: the scenario's) by its own
     search: search, polish, check at the controller rate and repair (a plan of more than
     polish.EXACT_UP_TO controls: search, check and repair, then polish what the repairs
@@ -380,7 +456,8 @@ def _search_plan(world: World, cost: str | None = None, progress=None, start: np
     that cannot beat it by the search's weight w is opened: :meth:`Search.bound`) and
     it is the plan when the search finds nothing cheaper within its budgets
     (``found_by`` says so). ``time_budget_s`` overrides the
-    scenario's."""
+    scenario's. ``lazy``: :func:`search_plan`'s (the check, the polish and the repairs made by
+    ``pending()``, with the budget they would have had at once)."""
     cost = WO.checked_cost(world, cost)
     start, incumbent = _checked_inputs(world, start, incumbent)
     time_budget_s = WO.checked_budget(time_budget_s)
@@ -428,6 +505,23 @@ def _search_plan(world: World, cost: str | None = None, progress=None, start: np
     traj, end, S, _ = replay(world, cost, controls, every=1 << 30, start=X0)
     if end < 0 or (res.status == "found" and not np.allclose(S[:K.NS], res.states[-1, :K.NS], rtol=0, atol=1e-9)):
         raise RuntimeError("internal error: the replayed plan does not reproduce the searched path")
+    if lazy:
+        searched = time.perf_counter() - t0
+        return Plan(world.scenario.name, cost, "searched", None, controls, {}, planning_time_s=searched,
+                    found_by=found_by, searched={"travel_time_s": float(S[K.S_T] - X0[K.S_T]),
+                                                 "energy_J": float(S[K.S_E] - X0[K.S_E])},
+                    pending=lambda: _checked_plan(world, cost, prob, res, X0, controls, inc, found_by, common,
+                                                  time.perf_counter() - searched, budget), **common)
+    return _checked_plan(world, cost, prob, res, X0, controls, inc, found_by, common, t0, budget)
+
+
+def _checked_plan(world: World, cost: str, prob, res: SearchResult, X0: np.ndarray, controls: list, inc,
+                  found_by: str, common: dict, t0: float, budget: float) -> Plan:
+    """The rest of :func:`_search_plan` after its search: the polish, the check at the
+    controller rate and its repairs, the incumbent judged at the controller rate, and the
+    Plan (its planning time counted from ``t0``, its deadlines ``t0 + budget``)."""
+    ps = world.scenario.planner
+    common = dict(common)
     pred = res.states[:, [K.S_X, K.S_Y, K.S_YAW]] if res.status == "found" else predicted(world, cost, controls, X0)
     pol, drive, missed = None, None, None
     threads = 1 if res.threads_chosen == "serial" else None
