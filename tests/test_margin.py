@@ -269,11 +269,10 @@ def test_a_plan_that_keeps_the_margin_ranks_before_a_cheaper_one_that_does_not()
     assert PL.cross_checked(made("energy", 3500.0, 99.0, False), made("time", 3400.0, 97.0, False)).energy_J == 3400.0
 
 
-def test_an_energy_plan_searches_again_without_the_margin_only_where_the_time_plan_does_not_keep_it(monkeypatch):
-    """The energy search finds no plan that keeps the margin (its edges failed on it): where
-    the time plan keeps it, that is the plan (cross_checked would not take one without the
-    margin), so the energy search does not run a second time without it; where the time
-    plan does not keep it either, it does, and the cheaper plan without it is the plan."""
+def _energy_fails_on_the_margin(monkeypatch) -> list:
+    """Every energy search with the margin finds nothing, its edges having failed on the
+    margin (as hills_field's does in its budget); other searches run as they are. Returns
+    the (cost, planner.margin) of every search made, in order."""
     real = PL._search_plan
     calls = []
 
@@ -284,6 +283,15 @@ def test_an_energy_plan_searches_again_without_the_margin_only_where_the_time_pl
                            failure="node_budget", invalid_edges={SS.CODES[SS.MARGIN - 1]: 5})
         return real(world, cost, *a, **k)
     monkeypatch.setattr(PL, "_search_plan", fake)
+    return calls
+
+
+def test_an_energy_plan_searches_again_without_the_margin_only_where_the_time_plan_does_not_keep_it(monkeypatch):
+    """The energy search finds no plan that keeps the margin (its edges failed on it): where
+    the time plan keeps it, that is the plan (cross_checked would not take one without the
+    margin), so the energy search does not run a second time without it; where the time
+    plan does not keep it either, it does, and the cheaper plan without it is the plan."""
+    calls = _energy_fails_on_the_margin(monkeypatch)
     flat = _plane(0.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0)
     p = PL.plan(flat, "energy")
     assert calls == [("time", 0.1), ("energy", 0.1)]
@@ -303,21 +311,13 @@ def test_where_the_time_plan_does_not_hold_at_1_khz_the_energy_search_searches_a
     found no plan that keeps it) did not search again without it; checked at 1 kHz after
     the energy search, the time plan does not hold: the energy plan without the margin is
     the one left, and it is made then (rather than no plan at all)."""
-    real, real_check = PL._search_plan, PL._checked_plan
-    calls = []
-
-    def fake(world, cost=None, *a, **k):
-        calls.append((cost, world.scenario.planner.margin))
-        if cost == "energy" and world.scenario.planner.margin > 0:
-            return PL.Plan(world.scenario.name, cost, "no_path", "node budget of 10 expansions used up (the test's)",
-                           failure="node_budget", invalid_edges={SS.CODES[SS.MARGIN - 1]: 5})
-        return real(world, cost, *a, **k)
+    real_check = PL._checked_plan
+    calls = _energy_fails_on_the_margin(monkeypatch)
 
     def time_fails(w, cost, *a, **k):
         q = real_check(w, cost, *a, **k)
         return replace(q, status="no_path", reason="does not hold at 1 kHz (the test's)",
                        failure="controller_rate") if cost == "time" else q
-    monkeypatch.setattr(PL, "_search_plan", fake)
     monkeypatch.setattr(PL, "_checked_plan", time_fails)
     p = PL.plan(_plane(0.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0), "energy")
     assert calls == [("time", 0.1), ("energy", 0.1), ("energy", 0.0)]

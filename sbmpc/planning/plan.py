@@ -415,10 +415,12 @@ def margined(world: World, cost: str, p: Plan, progress=None, start: np.ndarray 
                         f"vehicle's limits (planner.margin 0)")
                 failed = p.invalid_edges
                 if q.status == "searched":
-                    # checked at 1 kHz, the plan without the margin counts the failed search's work
-                    # too; where it does not hold there, the failed search's reason stands
-                    q = replace(q, pending=lambda miss=p, bare_check=q.pending:
-                                (lambda r: counting(r, miss) if r.found else miss)(bare_check()))
+                    def bare_checked(miss=p, check=q.pending):
+                        # checked at 1 kHz, the plan without the margin counts the failed search's
+                        # work too; where it does not hold there, the failed search's reason stands
+                        r = check()
+                        return counting(r, miss) if r.found else miss
+                    q = replace(q, pending=bare_checked)
                 p, kept = counting(q, p), False
     kept = kept and margin_on(ps)
     if p.status == "searched":
