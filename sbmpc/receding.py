@@ -77,7 +77,8 @@ class Replan:
 class HorizonStats:
     """The horizon plans of a receding-horizon run (``planner.horizon_s``): how long each
     took [s], how many the search made and how many kept the previous plan, why the run
-    re-planned from the measured state instead of the predicted one."""
+    re-planned from the measured state instead of the predicted one, how often the wheels
+    were held at rest for a period before a plan was made again (``settled``)."""
 
     horizon_s: float
     seconds: list = field(default_factory=list)
@@ -86,6 +87,7 @@ class HorizonStats:
     from_measured: int = 0
     fallbacks: int = 0
     fallback_s: list = field(default_factory=list)
+    settled: int = 0
 
     def to_json(self) -> dict:
         s = np.array(self.seconds) if self.seconds else np.zeros(1)
@@ -95,7 +97,8 @@ class HorizonStats:
                 "replan_p95_s": float(np.percentile(later, 95)), "replan_max_s": float(later.max()),
                 "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
                 "kept_previous": self.kept_previous, "from_measured": self.from_measured,
-                "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s]}
+                "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s],
+                "settled": self.settled}
 
 
 @dataclass
@@ -256,6 +259,7 @@ class _Executor:
 
 STUCK_HORIZONS = 2   # a horizon run falls back to whole-route plans where its terminal cost did not fall for this many horizons
 HELD = "the next period would come within half the tip-over margin"   # a re-plan's why after the guard
+SETTLED = "after the wheels were held at rest for a period (the horizon plan found no way on from a saturated drive)"   # a plan's why
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
 
@@ -407,6 +411,19 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
     X[K.S_REFR] = X[K.S_WR]
     real.pipe = None
     return None
+
+
+def _settles(X: np.ndarray) -> bool:
+    """Whether a vehicle from whose state X a horizon plan found no way on is first to be
+    held at rest for a period (:func:`_run_horizon`): its drive saturated, its commanded
+    motion not achieved (the stall timer runs), not yet a stall. The wheel-speed
+    references, rate-limited, then keep the drive saturated whatever the next plan
+    commands, and every edge from there stalls: on ``hills_field`` (energy, seed 4) a
+    vehicle braking into a pivot on a 5 deg slope stopped at t = 50 s with 0.12 s on its
+    stall timer, every edge of the horizon and of the whole-route search stalled, and the
+    run failed; after one period with the wheels held at rest the horizon plan found a way
+    on in 19 ms."""
+    return X[K.S_STALLT] > 0.0 and X[K.S_STALLED] == 0.0
 
 
 def _weaker(stalls: list, name: str) -> str:
@@ -667,7 +684,13 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     plans from the measured state (:func:`sbmpc.planning.plan.search_plan` in the planner's
     budget) and follows them, re-planning the whole route where the vehicle leaves one's
     tolerance, as :func:`run` does (``horizon.fallbacks``, their times in
-    ``horizon.fallback_s``)."""
+    ``horizon.fallback_s``).
+
+    A horizon plan that finds no way on from a vehicle whose drive is saturated short of
+    its goal (its stall timer running: the commanded motion not achieved, not yet a stall)
+    is first given a settled vehicle (:func:`_settles`): the wheels are held at rest for
+    one period, the next plan made meanwhile from the predicted state (``horizon.settled``);
+    only where that plan finds nothing too does the run fall back."""
     rs = out.settings
     ps = world.scenario.planner
     out.horizon = stats = HorizonStats(ps.horizon_s)
@@ -691,6 +714,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     window = max(2, int(round(STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
     togo = []                           # the terminal cost at the measured state, period by period
     guide = None                        # [(wl, wr, d)]: the whole-route plan followed after a fallback
+    settle = settled = False            # this period holds the wheels at rest; the last one did
 
     def finish(status, reason):
         return _finish(out, pieces, every, status, reason)
@@ -721,7 +745,10 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     h = hp.plan(X, budget_s=max(ps.horizon_first_budget_s - setup, 1e-3))
     h = made(replace(h, seconds=h.seconds + setup), "start", X)
     while True:
-        if guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
+        settle = guide is None and not h.found and not settled and _settles(X)
+        if settle:
+            stats.settled += 1
+        elif guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
             why = ("the horizon plan found no way on" if not h.found else
                    f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
             p = whole_route(f"{why}: whole-route plan")
@@ -731,7 +758,9 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
                                         f"({why}): {p.reason}{weaker}")
             guide = periods(p.controls, ps.period_s)
             kept = _keeps_margin(p)
-        if guide is not None:
+        if settle:
+            control = (0.0, 0.0, ps.period_s)
+        elif guide is not None:
             control = guide[0]
             if len(guide) == 1:
                 control = (control[0], control[1], max(control[2], ps.period_s))
@@ -759,6 +788,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             held = True
             continue
         held = False
+        settled = settle
         if guide is not None:
             guide.pop(0)
         _, _, P = model.step(X, control, record=False)
@@ -796,7 +826,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             h = made(hp.plan(X, previous=h), "stalled" if end == -SS.STALL else
                      f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s", X)
         else:
-            h = made(nxt, "next period", P)
+            h = made(nxt, SETTLED if settle else "next period", P)
 
 
 def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:

@@ -107,7 +107,7 @@ def run() -> dict:
                                      "replan_median_s": NUM, "replan_p95_s": NUM, "replan_max_s": NUM,
                                      "expansions_median": NUM, "kept_previous": {"type": "integer"},
                                      "from_measured": {"type": "integer"}, "fallbacks": {"type": "integer"},
-                                     "fallback_s": {"type": "array", "items": NUM}},
+                                     "fallback_s": {"type": "array", "items": NUM}, "settled": {"type": "integer"}},
                                     ("horizon_s", "plans", "first_s", "replan_p95_s", "fallbacks")),
                     "plans": {"type": "array", "items": row},
                     "trajectory": {"oneOf": [_trajectory(), {"type": "object", "maxProperties": 0}]}},

@@ -245,3 +245,71 @@ def test_a_horizon_run_never_drives_a_period_the_guard_holds_back(flat, monkeypa
     monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(0)])
     free = R.run(flat, "time")
     assert free.status == "reached" and free.guarded == 0 and free.horizon.fallbacks == 0
+
+
+# A pivot braked on a slope of hills_field: the vehicle at 0.25 m/s, full speed for a
+# second, then the left wheel stopped and the right one reversed. It stops on a 5 deg
+# slope with its right drive saturated and its stall timer running, short of a stall
+# (found by a horizon run, energy, seed 4, that then failed at t = 50 s).
+TRAP_START = {"x": 33.0, "y": 24.0, "yaw_deg": -16.0, "v": 0.25}
+TRAP = [(8.68, 7.4, 1.0), (0.1, -2.5, 1.0)]
+
+
+def _trap_world():
+    scn = SC.load(SCN / "hills_field.yaml")
+    return WO.resolve(replace(scn, start=dict(scn.start, **TRAP_START),
+                              planner=replace(scn.planner, horizon_s=10.0)))
+
+
+@pytest.fixture(scope="module")
+def trap():
+    return _trap_world()
+
+
+@pytest.mark.parametrize("cost", ["time", "energy"])
+def test_a_saturated_drive_has_no_way_on_until_its_wheels_are_held_at_rest(trap, cost):
+    """At the controller rate, the braked pivot stops the vehicle (wheels below 0.05 rad/s)
+    with the stall timer running and no stall; from there every edge of the horizon
+    search stalls (the rate-limited references keep the drive saturated whatever is
+    commanded), within any budget; one period with the wheels commanded to rest clears
+    the timer, and the same search then finds a way on."""
+    ps = trap.scenario.planner
+    X = WO.start_state(trap)
+    for c in TRAP:
+        _, end, X = R._Executor(trap, cost).step(X, c)
+        assert end == 0
+    assert X[K.S_STALLT] > 0.05 and X[K.S_STALLED] == 0.0 and R._settles(X)
+    assert abs(X[K.S_WL]) < 0.05 and abs(X[K.S_WR]) < 0.05
+    hp = HZ.HorizonPlanner(trap, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+    stuck = hp.plan(X, budget_s=5.0)
+    assert not stuck.found and stuck.expansions <= 2 and "stalled" in stuck.reason
+    _, end, rested = R._Executor(trap, cost).step(X, (0.0, 0.0, ps.period_s))
+    assert end == 0 and rested[K.S_STALLT] == 0.0 and not R._settles(rested)
+    assert hp.plan(rested, budget_s=5.0).found
+
+
+def test_a_horizon_run_holds_a_saturated_drive_at_rest_before_it_falls_back(trap, monkeypatch):
+    """A horizon run whose plans drive the braked pivot (scripted here for the first two
+    periods) finds no way on from where the vehicle stops: it holds the wheels at rest for
+    one period, the next plan made meanwhile, and drives on to the goal (horizon JSON
+    ``settled``). Without that (``_settles`` never true) its whole-route fallback found no
+    way on either and the run failed there."""
+    real = HZ.HorizonPlanner.plan
+    calls = []
+
+    def scripted(self, start, previous=None, budget_s=None):
+        calls.append(1)
+        if len(calls) <= 2:
+            return HZ.HorizonPlan(start, list(TRAP[len(calls) - 1:]), 0.0, 0.0, False, "search", 0, 0.0)
+        return real(self, start, previous, budget_s)
+
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", scripted)
+    res = R.run(trap, "time")
+    assert res.status == "reached", res.reason
+    assert res.horizon.settled == 1 and res.to_json()["horizon"]["settled"] == 1
+    assert res.driven[:3] == [TRAP[0], TRAP[1], (0.0, 0.0, trap.scenario.planner.period_s)]
+    assert [r.why for r in res.plans].count(R.SETTLED) == 1
+    calls.clear()
+    monkeypatch.setattr(R, "_settles", lambda X: False)
+    res = R.run(trap, "time")
+    assert res.status == "failed" and "no way on from" in res.reason and "stalled" in res.reason

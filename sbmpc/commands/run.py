@@ -58,7 +58,9 @@ def summary(res) -> str:
                      f"{hz['replan_p95_s'] * 1e3:.0f} ms, max {hz['replan_max_s'] * 1e3:.0f} ms; "
                      f"{hz['kept_previous']} kept the previous plan, {hz['from_measured']} from the measured state"
                      + (f"; {hz['fallbacks']} whole-route plans where the horizon saw no way on "
-                        f"({sum(hz['fallback_s']):.2f} s)" if hz["fallbacks"] else ""))
+                        f"({sum(hz['fallback_s']):.2f} s)" if hz["fallbacks"] else "")
+                     + (f"; wheels held at rest {hz['settled']} period{'s' if hz['settled'] > 1 else ''} to "
+                        f"unload a saturated drive" if hz.get("settled") else ""))
         lines.append(f"  executed: {ex['travel_time_s']:.2f} s, {ex['energy_J']:.1f} J, {d['periods']} periods, "
                      f"{d['stalls']} stalls" if ex["travel_time_s"] is not None else "")
         return "\n".join(x for x in lines if x)
