@@ -309,6 +309,9 @@ def test_a_horizon_run_holds_a_saturated_drive_at_rest_before_it_falls_back(trap
     assert res.horizon.settled == 1 and res.to_json()["horizon"]["settled"] == 1
     assert res.driven[:3] == [TRAP[0], TRAP[1], (0.0, 0.0, trap.scenario.planner.period_s)]
     assert [r.why for r in res.plans].count(R.SETTLED) == 1
+    from sbmpc.commands.run import summary
+    assert "wheels held at rest 1 period to unload a saturated drive" in summary(res)
+    jsonschema.validate(res.to_json(), schemas.run())
     calls.clear()
     monkeypatch.setattr(R, "_settles", lambda X: False)
     res = R.run(trap, "time")
