@@ -415,15 +415,16 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
 
 def _settles(X: np.ndarray) -> bool:
     """Whether a vehicle from whose state X a horizon plan found no way on is first to be
-    held at rest for a period (:func:`_run_horizon`): its drive saturated, its commanded
-    motion not achieved (the stall timer runs), not yet a stall. The wheel-speed
+    held at rest for a period (:func:`_run_horizon`): its stall timer runs (the drive
+    saturated short of its command within the last moments: the timer leaks at the rate
+    it fills), not yet a stall. A moving vehicle is braked to rest. The wheel-speed
     references, rate-limited, then keep the drive saturated whatever the next plan
     commands, and every edge from there stalls: on ``hills_field`` (energy, seed 4) a
     vehicle braking into a pivot on a 5 deg slope stopped at t = 50 s with 0.12 s on its
     stall timer, every edge of the horizon and of the whole-route search stalled, and the
     run failed; after one period with the wheels held at rest the horizon plan found a way
     on in 19 ms."""
-    return X[K.S_STALLT] > 0.0 and X[K.S_STALLED] == 0.0
+    return bool(X[K.S_STALLT] > 0.0 and X[K.S_STALLED] == 0.0)
 
 
 def _weaker(stalls: list, name: str) -> str:
@@ -687,8 +688,8 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     ``horizon.fallback_s``).
 
     A horizon plan that finds no way on from a vehicle whose drive is saturated short of
-    its goal (its stall timer running: the commanded motion not achieved, not yet a stall)
-    is first given a settled vehicle (:func:`_settles`): the wheels are held at rest for
+    its command (its stall timer running: the commanded motion not achieved, not yet a
+    stall) is first given a settled vehicle (:func:`_settles`): the wheels are held at rest for
     one period, the next plan made meanwhile from the predicted state (``horizon.settled``);
     only where that plan finds nothing too does the run fall back."""
     rs = out.settings
@@ -746,9 +747,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     h = made(replace(h, seconds=h.seconds + setup), "start", X)
     while True:
         settle = guide is None and not h.found and not settled and _settles(X)
-        if settle:
-            stats.settled += 1
-        elif guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
+        if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
             why = ("the horizon plan found no way on" if not h.found else
                    f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
             p = whole_route(f"{why}: whole-route plan")
@@ -789,6 +788,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             continue
         held = False
         settled = settle
+        stats.settled += int(settle)      # counted where driven (the guard may hold the rest back)
         if guide is not None:
             guide.pop(0)
         _, _, P = model.step(X, control, record=False)

@@ -256,9 +256,11 @@ TRAP = [(8.68, 7.4, 1.0), (0.1, -2.5, 1.0)]
 
 
 def _trap_world():
+    # budgets of 0.5 s (0.09 s by default): the run's path does not hang on a slow machine's
     scn = SC.load(SCN / "hills_field.yaml")
     return WO.resolve(replace(scn, start=dict(scn.start, **TRAP_START),
-                              planner=replace(scn.planner, horizon_s=10.0)))
+                              planner=replace(scn.planner, horizon_s=10.0, horizon_budget_s=0.5,
+                                              horizon_first_budget_s=1.0)))
 
 
 @pytest.fixture(scope="module")
