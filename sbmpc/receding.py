@@ -715,7 +715,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     window = max(2, int(round(STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
     togo = []                           # the terminal cost at the measured state, period by period
     guide = None                        # [(wl, wr, d)]: the whole-route plan followed after a fallback
-    settle = settled = False            # this period holds the wheels at rest; the last one did
+    settled = False                     # the last period driven held the wheels at rest
 
     def finish(status, reason):
         return _finish(out, pieces, every, status, reason)

@@ -255,17 +255,13 @@ TRAP_START = {"x": 33.0, "y": 24.0, "yaw_deg": -16.0, "v": 0.25}
 TRAP = [(8.68, 7.4, 1.0), (0.1, -2.5, 1.0)]
 
 
-def _trap_world():
+@pytest.fixture(scope="module")
+def trap():
     # budgets of 0.5 s (0.09 s by default): the run's path does not hang on a slow machine's
     scn = SC.load(SCN / "hills_field.yaml")
     return WO.resolve(replace(scn, start=dict(scn.start, **TRAP_START),
                               planner=replace(scn.planner, horizon_s=10.0, horizon_budget_s=0.5,
                                               horizon_first_budget_s=1.0)))
-
-
-@pytest.fixture(scope="module")
-def trap():
-    return _trap_world()
 
 
 @pytest.mark.parametrize("cost", ["time", "energy"])

@@ -60,7 +60,7 @@ def summary(res) -> str:
                      + (f"; {hz['fallbacks']} whole-route plans where the horizon saw no way on "
                         f"({sum(hz['fallback_s']):.2f} s)" if hz["fallbacks"] else "")
                      + (f"; wheels held at rest {hz['settled']} period{'s' if hz['settled'] > 1 else ''} to "
-                        f"unload a saturated drive" if hz.get("settled") else ""))
+                        f"unload a saturated drive" if hz["settled"] else ""))
         lines.append(f"  executed: {ex['travel_time_s']:.2f} s, {ex['energy_J']:.1f} J, {d['periods']} periods, "
                      f"{d['stalls']} stalls" if ex["travel_time_s"] is not None else "")
         return "\n".join(x for x in lines if x)
