@@ -100,7 +100,13 @@ class PlannerSettings:
     worth against the cost so far (the grid is a lower bound: 1.3 values the way made
     near what it costs for time; 2 drove energy plans too fast, 13-55 % dearer than
     whole-route runs, 1.3 still 3-23 % on six of nine energy runs, 1.15 within 5 % on five
-    of nine, and 1 ran out of the budget before the horizon; bench/bench_horizon.py).
+    of nine, and 1 ran out of the budget before the horizon; bench/bench_horizon.py);
+    value: guide the searches with the value over position and heading
+    (:mod:`sbmpc.planning.value`: one backward Dijkstra over the vehicle's own steady
+    motions, with the margin): the horizon's terminal cost, and in whole-route searches
+    the heuristic raised towards it, at most to value_w2 times the admissible grid (a
+    plan then costs at most w value_w2 times the grid's optimum); value_cell: the
+    value's lattice spacing [m].
     """
 
     branching: int = 16
@@ -139,6 +145,9 @@ class PlannerSettings:
     horizon_expansions: int = 2000
     horizon_weight: float = 1.3
     horizon_energy_weight: float = 1.15
+    value: bool = True
+    value_cell: float = 0.5
+    value_w2: float = 2.0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -223,6 +232,8 @@ _SETTING_RANGES = {
     "margin_turn": (float, 0.0, 0.5),
     "margin_tip_deg": (float, 0.0, 30.0),
     "margin_heading_deg": (float, 0.0, 45.0),
+    "value_cell": (float, 0.05, 10.0),
+    "value_w2": (float, 1.0, 100.0),
 }
 # the settings that take one of a few words
 _SETTING_CHOICES = {"samples": ("fixed", "rotating"), "device": ("cpu", "cuda"),
@@ -439,7 +450,7 @@ def _planner(spec, probs: _Problems) -> PlannerSettings:
                 probs.add(f"planner.{key}", " or ".join(f"'{c}'" for c in choices), spec[key])
             else:
                 kw[key] = spec[key]
-    for key in ("hold", "polish_time", "polish_energy", "energy_vs_time"):
+    for key in ("hold", "polish_time", "polish_energy", "energy_vs_time", "value"):
         if key in spec:
             if not isinstance(spec[key], bool):
                 probs.add(f"planner.{key}", "true or false", spec[key])

@@ -11,6 +11,7 @@ from dynamics import kernels as K
 from dynamics.resistance import friction_table
 
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
+from .value import value
 from ..problems import skidsteer as SS
 from ..search.astar import Problem
 from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode, pessimistic
@@ -24,7 +25,8 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     the edges integrated at ``dt`` [s] (default the planner's step). ``margin``: edges
     must also keep the planner's margin (``planner.margin``, ``margin_tip_deg``: the
     search's and the polish's edges); without it an edge fails only where the vehicle
-    does (the checks, the runs' drives). ``grid`` False: no cost-to-go grid (a drive
+    does (the checks, the runs' drives); with it and ``planner.value`` the value over
+    position and heading (:mod:`sbmpc.planning.value`) is packed too. ``grid`` False: no cost-to-go grid (a drive
     that only replays controls, ``skidsteer.replay``, never reads it; its slot holds
     one infinite value and the heuristic's constants 0)."""
     scn, e, v = world.scenario, world.emap, world.vehicle
@@ -46,7 +48,10 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
         twins = [np.concatenate([K.pack(tw.vehicle, tt), friction_table(tw.vehicle, tt)]) for tt in tw.terrains]
     offw = offt + sum(b.size for b in blocks)
     offd = offw + sum(b.size for b in twins)
-    data = np.ascontiguousarray(np.concatenate(parts + blocks + twins + [ctg.ravel()]))
+    val = value(world, cost) if grid and margin and ps.value else None
+    offv = offd + ctg.size
+    data = np.ascontiguousarray(np.concatenate(parts + blocks + twins + [ctg.ravel()]
+                                               + ([val.V.ravel()] if val is not None else [])))
     Q = np.zeros(SS.NQ)
     Q[SS.Q_DT] = dt
     Q[SS.Q_NSTEP] = max(1, round(ps.period_s / dt))
@@ -74,6 +79,11 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     Q[SS.Q_KEGRID] = kegrid        # the step bounds' largest slope dE/dW (heuristics.ke_factor)
     Q[SS.Q_COPPER] = copper_coefficient(world)
     Q[SS.Q_GOALGAP] = gap          # the grid's reach past a path's end in the disc (heuristics._goal_gap)
+    Q[SS.Q_OFFV] = offv if val is not None else -1    # the value over position and heading (planning.value)
+    if val is not None:
+        Q[SS.Q_VNY], Q[SS.Q_VNX] = val.V.shape[:2]
+        Q[SS.Q_VCELL], Q[SS.Q_VOX], Q[SS.Q_VOY] = val.cell, val.ox, val.oy
+        Q[SS.Q_VW2] = ps.value_w2
     return Q, data
 
 

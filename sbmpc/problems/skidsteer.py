@@ -68,6 +68,7 @@ from dynamics.drive import window_share
 from maps.grid import cell_value, height_at, pitch_roll_at, slope_grades_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
+from . import lattice as LA
 
 # ---- extra state entries after the model's ------------------------------------------
 X_YAWW = K.NS          # heading wrapped to (-pi, pi] [rad]
@@ -87,8 +88,8 @@ IN_GOAL = 1
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
  Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG,
- Q_HORIZON, Q_TURNCOST) = range(35)
-NQ = 35
+ Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2) = range(42)
+NQ = 42
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
@@ -405,7 +406,23 @@ def heuristic(params, data, state):
         hd = c - params[Q_KEGRID] * ke
         if hd > h:
             h = hd
-    if params[Q_HORIZON] > 0.0 and params[Q_TURNCOST] > 0.0 and d > 0.0:
+    offv = int(params[Q_OFFV])
+    if offv >= 0:
+        # the value over position and heading (sbmpc.planning.value): the horizon's
+        # terminal cost; in a whole-route search raised towards it, at most to w2 times
+        # the admissible value (the answer stays within w w2 of the grid's optimum)
+        nxv = int(params[Q_VNX])
+        nyv = int(params[Q_VNY])
+        vv = LA.read(data[offv:offv + nxv * nyv * LA.NH], nxv, nyv, params[Q_VCELL], params[Q_VOX], params[Q_VOY],
+                     x, y, state[K.S_YAW])
+        if not math.isinf(vv):
+            vv -= ke
+            if params[Q_HORIZON] > 0.0:
+                if vv > h:
+                    h = vv
+            elif vv > h:
+                h = min(vv, params[Q_VW2] * h) if h > 0.0 else h
+    elif params[Q_HORIZON] > 0.0 and params[Q_TURNCOST] > 0.0 and d > 0.0:
         h += params[Q_TURNCOST] * _heading_error(params, data, state, dx, dy)
     # less the goal's gap, after the clamp: every value moves by the same constant (may
     # go below 0 near the goal), so the weighted search's order stays as without it
