@@ -32,7 +32,8 @@ from pathlib import Path
 ROOT = Path(os.path.abspath(__file__)).parents[1]     # the source tree (abspath, not resolve: numba's own paths)
 # the files the compiled code is built from (the compiled functions and the constants
 # and helpers they read), relative to ROOT
-SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/planning/heuristics.py")
+SOURCES = ("dynamics", "maps", "sbmpc/search", "sbmpc/problems", "sbmpc/planning/heuristics.py",
+           "sbmpc/planning/motions.py", "sbmpc/planning/value.py")
 STAMP = "sbmpc-numba-sources.sha1"
 
 _done = False

@@ -100,7 +100,10 @@ class PlannerSettings:
     worth against the cost so far (the grid is a lower bound: 1.3 values the way made
     near what it costs for time; 2 drove energy plans too fast, 13-55 % dearer than
     whole-route runs, 1.3 still 3-23 % on six of nine energy runs, 1.15 within 5 % on five
-    of nine, and 1 ran out of the budget before the horizon; bench/bench_horizon.py);
+    of nine, and 1 ran out of the budget before the horizon; bench/bench_horizon.py;
+    with the value as the terminal cost, not a lower bound, 1: at 1.3 / 1.15 its
+    horizon runs cost 1.07-1.57x the whole-route runs on hill_tradeoff, mixed_terrain,
+    narrow_pass and hills_field, at 1 0.98-1.24x; with value off, set 1.3 and 1.15);
     value: guide the searches with the value over position and heading
     (:mod:`sbmpc.planning.value`: one backward Dijkstra over the vehicle's own steady
     motions, with the margin): the horizon's terminal cost, and in whole-route searches
@@ -143,8 +146,8 @@ class PlannerSettings:
     horizon_budget_s: float = 0.09
     horizon_first_budget_s: float = 0.5
     horizon_expansions: int = 2000
-    horizon_weight: float = 1.3
-    horizon_energy_weight: float = 1.15
+    horizon_weight: float = 1.0
+    horizon_energy_weight: float = 1.0
     value: bool = True
     value_cell: float = 0.5
     value_w2: float = 2.0
@@ -705,7 +708,8 @@ def json_schema() -> dict:
     planner = _ranges(_SETTING_RANGES)
     planner.update({"wheel_speeds": {"type": "array", "items": NUM, "minItems": 2, "maxItems": 2},
                     "hold": {"type": "boolean"},
-                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"}})
+                    "polish_time": {"type": "boolean"}, "polish_energy": {"type": "boolean"}, "energy_vs_time": {"type": "boolean"},
+                    "value": {"type": "boolean"}})
     planner.update({key: {"enum": list(choices)} for key, choices in _SETTING_CHOICES.items()})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}

@@ -149,7 +149,8 @@ def test_the_heuristic_never_exceeds_what_the_found_path_still_costs(name, cost,
     for margin in (scn.planner.margin, 0.0):
         # admissible with the default margin too; informative (``seen``) as measured, without
         # it (the twin's longer run-ups and detours are what no position bound sees)
-        world = WO.resolve(replace(scn, planner=replace(scn.planner, margin=margin)))
+        # the admissible grid alone (the anchor): the value is no bound (tests/test_value.py)
+        world = WO.resolve(replace(scn, planner=replace(scn.planner, margin=margin, value=False)))
         prob = PB.problem(world, cost)
         res = Search(prob).run(world.scenario.planner.max_expansions)
         assert res.status == "found"
@@ -316,13 +317,15 @@ def test_a_search_that_fails_says_where_it_came_closest_and_whether_a_run_up_is_
     """runup_ramp's ramp (20.6 deg) is steeper than the P3-AT holds on packed dirt
     (13.9 deg): every way climbs 14.9 deg or more somewhere (the grid's 8-neighbour
     steps), so a search cut short is told that only a run-up crosses it, and where it
-    came closest to the goal."""
+    came closest to the goal (guided by the grid alone: with the value over position and
+    heading the same 30 expansions find the run-up)."""
     from sbmpc.planning import plan as PL
     scn = SC.load(SCEN / "runup_ramp.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, max_expansions=30)))
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, max_expansions=30, value=False)))
     need = HE.steepest_climb_needed(world)
     assert math.degrees(need) == pytest.approx(14.9, abs=0.1)
     assert need > steepest_grade(world.vehicle, world.terrains[0])
+    assert PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, max_expansions=30))), "time").found
     p = PL.plan(world, "time")
     assert p.status == "no_path"
     assert "closest approach" in p.reason and "run-up" in p.reason and "14.9 deg or more" in p.reason

@@ -52,12 +52,13 @@ def test_a_horizon_plan_reaches_its_horizon_and_replays_to_its_cost(flat, cost):
     assert hp.to_go(X0) - h.to_go > 0.5 * h.cost
 
 
-def test_the_terminal_cost_charges_the_heading_error_at_the_measured_turn_cost(flat):
-    """The grid knows no heading: the horizon's terminal cost adds the turn cost per
-    radian between the heading and the way on. Facing away from the goal costs pi
-    radians more than facing it; a turn on the spot cannot be faster than both wheels
-    at the top sampled speed in opposite senses allow (yaw rate 2 r w / B, the
-    kinematics' bound without slip)."""
+def test_the_terminal_cost_charges_the_heading_error_at_the_measured_turn_cost():
+    """Without the value (``planner.value`` false) the grid knows no heading: the
+    horizon's terminal cost adds the turn cost per radian between the heading and the
+    way on. Facing away from the goal costs pi radians more than facing it; a turn on
+    the spot cannot be faster than both wheels at the top sampled speed in opposite
+    senses allow (yaw rate 2 r w / B, the kinematics' bound without slip)."""
+    flat = _world(horizon_s=10.0, value=False)
     hp = HZ.HorizonPlanner(flat, "time", 10.0, 1.0, 2000)
     k = hp.prob.params[SS.Q_TURNCOST]
     lo, hi = WO.wheel_speed_range(flat)
@@ -77,6 +78,31 @@ def test_the_terminal_cost_charges_the_heading_error_at_the_measured_turn_cost(f
     assert p[SS.Q_HORIZON] == 0.0
     assert SS.heuristic(p, hp.prob.data, X) == pytest.approx(
         SS.heuristic(p, hp.prob.data, np.r_[X[:K.S_YAW], toward, X[K.S_YAW + 1:]]))
+
+
+def test_with_the_value_the_terminal_cost_knows_the_heading(flat):
+    """With the value over position and heading (the default) the terminal cost is the
+    value where it exceeds the grid, no turn term: facing away from the goal it costs
+    more than facing it by at least what a half turn takes at the tables' best steady
+    turn rate on the level, and the whole-route heuristic reads the same value (clamped
+    by the grid)."""
+    from sbmpc.planning import motions as MO, value as VA
+    hp = HZ.HorizonPlanner(flat, "time", 10.0, 1.0, 2000)
+    assert hp.prob.params[SS.Q_TURNCOST] == 0.0 and hp.prob.params[SS.Q_OFFV] >= 0
+    X = WO.start_state(flat)
+    g = flat.scenario.goal
+    toward = math.atan2(g["y"] - X[K.S_Y], g["x"] - X[K.S_X])
+    X[K.S_YAW] = toward
+    facing = hp.to_go(X)
+    X[K.S_YAW] = toward + math.pi
+    away = hp.to_go(X)
+    tb = MO.tables(flat)
+    lvl = int(np.argmin(np.abs(tb["grades"])))
+    turning = (tb["kinds"] == MO.ARC) | (tb["kinds"] == MO.PIVOT)
+    best_rate = np.abs(tb["w"][0, lvl, turning & tb["ok"][0, lvl]]).max()
+    assert away - facing >= 0.9 * math.pi / best_rate
+    val = VA.value(flat, "time")
+    assert away + hp.prob.params[SS.Q_GOALGAP] == pytest.approx(val.at(X[K.S_X], X[K.S_Y], X[K.S_YAW]), rel=1e-9)
 
 
 def test_a_previous_plan_that_makes_way_bounds_the_search_and_one_that_parks_does_not(flat):

@@ -80,7 +80,9 @@ def test_a_path_that_parts_at_the_controller_rate_is_repaired_or_refused():
     from dataclasses import replace
     import sbmpc.planning.repair as mod
     scn = SC.load(SCEN / "hills_field.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0, margin=0.0, margin_tip_deg=0.0)))
+    # (guided by the grid alone, value off: the search whose path parts from its replay)
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, energy_weight=3.0, margin=0.0, margin_tip_deg=0.0,
+                                                    value=False)))
     p = PL.search_plan(world, "energy")     # the energy search's own (plan() would take the time plan)
     assert p.found and p.repairs >= 1 and p.check.reached
     saved = mod.MAX_REPAIRS
@@ -106,7 +108,8 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     from dataclasses import replace
     from sbmpc.search.astar import Search
     scn = SC.load(SCEN / "hills_field.yaml")
-    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=5, margin=0.0, margin_tip_deg=0.0)))
+    # (guided by the grid alone, value off: the search whose plan parts near the goal)
+    world = WO.resolve(replace(scn, planner=replace(scn.planner, seed=5, margin=0.0, margin_tip_deg=0.0, value=False)))
     starts, run = [], Search.run
 
     def spy(self, *a, **k):
@@ -344,11 +347,14 @@ def test_parallel_edges_and_batches_give_the_serial_plan():
     of their expansion. Either way the search expands the serial search's nodes (on
     this hill, open nodes simulated ahead are often replaced by cheaper arrivals before
     they are expanded: their cached edges must not be used) and the plan is the serial
-    one, control for control; the batch pays in edges simulated and never used."""
+    one, control for control; the batch pays in edges simulated and never used. (Guided
+    by the grid alone, value off: with the value the time search goes nearly straight
+    to the goal and no node simulated ahead goes unused.)"""
     from dataclasses import replace
     scn = SC.load(SCEN / "hill_tradeoff.yaml")
     def plan(batch, threads):
-        return PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, batch=batch, threads=threads))), "time")
+        return PL.plan(WO.resolve(replace(scn, planner=replace(scn.planner, batch=batch, threads=threads, value=False))),
+                       "time")
     serial, parallel, batched = plan(1, 1), plan(1, 2), plan(4, 2)
     assert serial.found and parallel.found and batched.found
     assert parallel.controls == serial.controls == batched.controls

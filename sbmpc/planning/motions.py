@@ -9,7 +9,7 @@ radii and pivots at two speeds, all within the planner's sampled wheel-speed ran
 is driven on a constant grade from the model's steady state at its commands
 (``Model.state``) for SETTLE_S, then measured over MEASURE_S: its speed [m/s], its yaw
 rate [rad/s], its battery power [W] (no regeneration where the vehicle has none), and
-whether the drive holds it (no stall, eq. 27's window kept within ``planner.margin_turn``
+whether the drive holds it (no stall, its wheel speeds no longer drifting, eq. 27's window kept within ``planner.margin_turn``
 of its reach on turns, as the search's edges judge it) for the planning vehicle and for
 the margin's pessimistic twin (:func:`sbmpc.planning.world.pessimistic`). The model
 takes the grade along the heading only (cross-slope enters its tip-over check, which the
@@ -40,6 +40,7 @@ GRADE_MAX = 30.0     # deg: the tables' grades, either way (beyond the tip-over 
 GRADE_STEP = 1.25    # deg
 SETTLE_S = 1.5       # s: driven before measuring (from the steady state the command would have on level ground)
 MEASURE_S = 1.0      # s: measured
+STEADY = 0.03        # of the larger command: the most a held manoeuvre's wheel speeds drift while measured
 RUNUP_DEG = 3.0      # deg: straight climbs this much steeper than the steepest one held cost what that one does
                      # (momentum carries a short ramp: heuristics.RUNUP_DEG, the grid's rule)
 
@@ -91,7 +92,8 @@ def _steady(P, T, S0, which, cmd, pitch, dt, n_settle, n_meas, reserve, out):
     """Every row r: model block which[r] (rows of P, T), start state S0[r], commands
     cmd[r] held on pitch[r] [rad] for n_settle then n_meas steps of dt [s]; out[r]: speed
     [m/s], yaw rate [rad/s], battery power [W] over the measured steps, 1 where the drive
-    held it (no stall; with ``reserve`` > 0 and a turning command, eq. 27's window used
+    held it (no stall, the wheel speeds steady within STEADY of the larger command over
+    the measured steps; with ``reserve`` > 0 and a turning command, eq. 27's window used
     beyond 1 - reserve of its reach at most 0.5 s at a time, skidsteer.MARGIN_TIME)."""
     for r in prange(S0.shape[0]):
         S = S0[r].copy()
@@ -107,12 +109,16 @@ def _steady(P, T, S0, which, cmd, pitch, dt, n_settle, n_meas, reserve, out):
         y0 = 0.0
         yaw0 = 0.0
         e0 = 0.0
+        wl0 = 0.0
+        wr0 = 0.0
         for i in range(n_settle + n_meas):
             if i == n_settle:
                 x0 = S[K.S_X]
                 y0 = S[K.S_Y]
                 yaw0 = S[K.S_YAW]
                 e0 = S[K.S_E]
+                wl0 = S[K.S_WL]
+                wr0 = S[K.S_WR]
             K.step_slope(Pk, Tk, S, cmd[r, 0], cmd[r, 1], sp, cp, dt, False, O)
             if S[K.S_STALLED] > 0.0:
                 ok = 0.0
@@ -129,6 +135,11 @@ def _steady(P, T, S0, which, cmd, pitch, dt, n_settle, n_meas, reserve, out):
                 else:
                     timer = max(0.0, timer - dt)
         tm = n_meas * dt
+        # steady: the wheels' speeds no longer drifting (a drive losing speed on a grade
+        # it cannot hold stalls later)
+        top = max(abs(cmd[r, 0]), abs(cmd[r, 1]))
+        if ok > 0.0 and (abs(S[K.S_WL] - wl0) > STEADY * top or abs(S[K.S_WR] - wr0) > STEADY * top):
+            ok = 0.0
         if ok > 0.0:
             dx = S[K.S_X] - x0
             dy = S[K.S_Y] - y0

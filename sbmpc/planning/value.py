@@ -167,10 +167,13 @@ def _lookup(table, t, g, g0, gstep, ng):
 
 @njit(cache=True, error_model="numpy")
 def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy, chord_kind, turn_kind, dpsi,
-              cell, g0, gstep):
+              cell, g0, gstep, start, reach):
     """Backward Dijkstra from the ``goal`` states (flat indices) over the reversed
     motions (module doc); G, Z, Tr from :func:`_states`, the motions' costs from
-    :func:`sbmpc.planning.motions.motion_costs`. Returns V (nyv, nxv, 16)."""
+    :func:`sbmpc.planning.motions.motion_costs`. Returns V (nyv, nxv, 16). Focused: once
+    every ``start`` state (flat indices) is settled, the search goes on only to ``reach``
+    times the largest of their values, and states not settled by then are left at inf
+    (the search reads the grid there)."""
     nyv, nxv, nh = G.shape
     N = nyv * nxv * nh
     V = np.full(N, np.inf)
@@ -180,6 +183,9 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
     hv = np.empty(cap, np.int64)
     n = 0
     ng = straight.shape[1]
+    left = start.shape[0]
+    top = 0.0
+    stop = np.inf
     for s in goal:
         V[s] = 0.0
         # push
@@ -214,7 +220,16 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
             c = m
         if done[s] or key > V[s]:
             continue
+        if key > stop:
+            break
         done[s] = 1
+        if left > 0:
+            for q in range(start.shape[0]):
+                if start[q] == s:
+                    left -= 1
+                    top = max(top, key)
+            if left == 0:
+                stop = reach * top
         k2 = s % nh
         ij = s // nh
         i2 = ij % nxv
@@ -333,12 +348,28 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
                     hk[q], hk[c] = hk[c], hk[q]
                     hv[q], hv[c] = hv[c], hv[q]
                     c = q
+    for s in range(N):
+        if not done[s]:
+            V[s] = np.inf
     return V.reshape((nyv, nxv, nh))
 
 
 
 
 CELL = 0.5     # m: the lattice's default spacing (planner.value_cell)
+MAX_STATES = 1_200_000   # a larger lattice is made coarser (lattice_cell): the build stays near a second
+REACH = 1.5    # the Dijkstra settles states up to this many times the start's largest value (_dijkstra)
+
+
+def lattice_cell(world: World) -> float:
+    """The lattice's spacing [m]: ``planner.value_cell``, or coarser where the window
+    (the cost-to-go grid's) would hold more than MAX_STATES states at it (a 250 m
+    square: 0.96 m; the build grows with the states, about 1 us each on one core)."""
+    cell = float(world.scenario.planner.value_cell)
+    e = world.emap
+    j0, j1, i0, i1 = ctg_window(world)
+    area = (i1 - 1 - i0) * (j1 - 1 - j0) * e.resolution ** 2
+    return max(cell, math.sqrt(area * NH / MAX_STATES))
 
 
 def _window(world: World, cell: float) -> tuple:
@@ -366,11 +397,21 @@ def _goal_states(world: World, ox, oy, nxv, nyv, cell, G) -> np.ndarray:
     return np.ascontiguousarray(idx[ok] if ok.any() else idx)
 
 
+def _start_states(world: World, ox, oy, nxv, nyv, cell, G) -> np.ndarray:
+    """Flat indices of the open lattice states at the four lattice points around the
+    scenario's start (every heading): the Dijkstra's focus (:func:`_dijkstra`)."""
+    s = world.scenario.start
+    i = min(max(int(math.floor((s["x"] - ox) / cell)), 0), nxv - 2)
+    j = min(max(int(math.floor((s["y"] - oy) / cell)), 0), nyv - 2)
+    idx = np.array([((j + dj) * nxv + i + di) * NH + k for dj in (0, 1) for di in (0, 1) for k in range(NH)])
+    return np.ascontiguousarray(idx[~np.isnan(G.reshape(-1)[idx])], dtype=np.int64)
+
+
 @functools.lru_cache(maxsize=1)
 def _code_hash() -> str:
     """The source the value is made from: a change makes new cache files."""
     src = inspect.getsource(MO) + "".join(inspect.getsource(f) for f in (_dijkstra.py_func, _states.py_func, build,
-                                                                          _goal_states, _window))
+                                                                          _goal_states, _start_states, _window))
     return hashlib.sha256(src.encode()).hexdigest()[:16]
 
 
@@ -382,7 +423,8 @@ def _content_key(world: World, cost: str, cell: float) -> str:
         h.update(np.ascontiguousarray(e.terrain_layer).tobytes())
     h.update(repr((e.resolution, tuple(e.origin), world.vehicle, world.terrains, ps.margin, ps.margin_turn,
                    ps.margin_tip_deg, ps.tip_over_deg, ps.dt, wheel_speed_range(world), cost, cell,
-                   (scn.goal["x"], scn.goal["y"], scn.goal["radius"]), ctg_window(world),
+                   (scn.goal["x"], scn.goal["y"], scn.goal["radius"]), (scn.start["x"], scn.start["y"]),
+                   ctg_window(world), REACH,
                    _code_hash())).encode())
     return h.hexdigest()[:24]
 
@@ -393,11 +435,11 @@ def _cache_path(key: str):
 
 def build(world: World, cost: str, cell: float | None = None) -> Value:
     """V of ``world`` for ``cost`` ('time' or 'energy') over a lattice every ``cell``
-    metres (default ``planner.value_cell``), computed (module doc)."""
+    metres (default :func:`lattice_cell`), computed (module doc)."""
     import time
     t0 = time.perf_counter()
     ps = world.scenario.planner
-    cell = float(cell or getattr(ps, "value_cell", CELL))
+    cell = float(cell or lattice_cell(world))
     e = world.emap
     ox, oy, nxv, nyv = _window(world, cell)
     tan_tip = math.tan(math.radians(ps.tip_over_deg - ps.margin_tip_deg))
@@ -408,8 +450,10 @@ def build(world: World, cost: str, cell: float | None = None) -> Value:
     mc = MO.motion_costs(world, cost, arc_chords(cell), TURNS)
     g = MO.grades()
     goal = _goal_states(world, ox, oy, nxv, nyv, cell, G)
+    start = _start_states(world, ox, oy, nxv, nyv, cell, G)
     V = _dijkstra(G, Z, Tr, goal, mc["straight"], mc["reverse"], mc["pivot"], mc["arc_ok"], mc["arc_turn"],
-                  cost == "energy", CHORD_KIND, TURN_KIND, DPSI, cell, float(g[0]), float(g[1] - g[0]))
+                  cost == "energy", CHORD_KIND, TURN_KIND, DPSI, cell, float(g[0]), float(g[1] - g[0]),
+                  start, REACH)
     return Value(V, cell, ox, oy, cost, time.perf_counter() - t0)
 
 
@@ -418,7 +462,7 @@ def value(world: World, cost: str) -> Value:
     """V of ``world`` for ``cost`` (:func:`build`), kept per (world, cost) in memory and
     on disk by content (:func:`_cache_path`; best effort: a cache that cannot be
     written is skipped)."""
-    cell = float(getattr(world.scenario.planner, "value_cell", CELL))
+    cell = lattice_cell(world)
     ox, oy, nxv, nyv = _window(world, cell)
     key = _content_key(world, cost, cell)
     path = _cache_path(key)

@@ -1,0 +1,118 @@
+"""The value over position and heading (``planner.value``, :mod:`sbmpc.planning.value`):
+what it costs to build, and what it buys the searches.
+
+    taskset -c 0 python bench/bench_value.py                 # build times and plans A/B, one core
+    taskset -c 0 python bench/bench_value.py --builds-only   # the build times alone
+
+Build: per shipped scenario and per generated hills field (routes of 70, 170, 340 and
+500 m: squares of 60, 130, 250 and 360 m, ``bench_horizon``'s fields), the lattice's
+states, the build's wall time on one core (the Dijkstra and the lattice states; the
+motion tables are made once per vehicle and terrains and timed apart), twice, the
+second reported (the first may load compiled code), and the value at the start
+against the admissible grid's.
+
+Plans: every shipped scenario, both costs, ``sbmpc plan``'s defaults on one thread,
+with the value (the default) and without it (``value: false``), interleaved: the
+planning time (the energy plan's includes its time plan and the polish), the cost
+driven at 1 kHz, the expansions, whether the plan keeps the margin.
+
+Writes bench/results/value.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+OUT = ROOT / "bench" / "results" / "value.json"
+SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
+FIELDS = {70: 60, 170: 130, 340: 250, 500: 360}
+
+
+def field(route: int):
+    """A hills field for a route of about ``route`` m (bench_horizon's, with a 500 m one)."""
+    import bench_horizon as BH
+    BH.SIDES.setdefault(500, FIELDS[500])
+    return BH.field_scenario(route)
+
+
+def builds(names, routes) -> list:
+    from sbmpc import scenario as SC
+    from sbmpc.planning import motions as MO, problem as PB, value as VA, world as WO
+    from sbmpc.problems import skidsteer as SS
+    rows = []
+    cases = [(n, SC.load(ROOT / "scenarios" / f"{n}.yaml")) for n in names] + \
+            [(f"field_{r}m", field(r)) for r in routes]
+    for name, scn in cases:
+        world = WO.resolve(scn)
+        t = time.perf_counter()
+        MO.tables(world)
+        tables_s = time.perf_counter() - t
+        for cost in ("time", "energy"):
+            VA.build(world, cost)
+            v = VA.build(world, cost)
+            X = WO.start_state(world)
+            Q, data = PB.pack_world(world, cost, margin=True, grid=True)
+            Q[SS.Q_OFFV] = -1
+            anchor = float(SS.heuristic(Q, data, X) + Q[SS.Q_GOALGAP])
+            at = v.at(scn.start["x"], scn.start["y"], math.radians(scn.start["yaw_deg"]))
+            row = {"scenario": name, "cost": cost, "states": int(v.V.size), "shape": list(v.V.shape),
+                   "cell_m": v.cell, "build_s": round(v.seconds, 4), "tables_s": round(tables_s, 4),
+                   "us_per_state": round(1e6 * v.seconds / v.V.size, 3),
+                   "value_at_start": round(at, 2), "grid_at_start": round(anchor, 2)}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
+def plans(names, costs) -> list:
+    import sbmpc
+    rows = []
+    for name in names:
+        for cost in costs:
+            for value in (True, False):
+                t = time.perf_counter()
+                p = sbmpc.plan_scenario(ROOT / "scenarios" / f"{name}.yaml", cost, threads=1, value=value)
+                wall = time.perf_counter() - t
+                row = {"scenario": name, "cost": cost, "value": value, "found": p.found,
+                       "planning_s": round(p.planning_time_s, 3), "wall_s": round(wall, 3),
+                       "travel_time_s": round(p.travel_time_s, 3) if p.found else None,
+                       "energy_J": round(p.energy_J, 2) if p.found else None,
+                       "expansions": p.nodes_expanded,
+                       "keeps_margin": (p.margin or {}).get("kept") if p.found else None,
+                       "found_by": (p.found_by or "")[:120]}
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    return rows
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
+    ap.add_argument("--routes", nargs="*", type=int, default=sorted(FIELDS), choices=sorted(FIELDS))
+    ap.add_argument("--costs", nargs="+", default=["time", "energy"])
+    ap.add_argument("--builds-only", action="store_true")
+    ap.add_argument("--out", type=Path, default=OUT)
+    a = ap.parse_args()
+    doc = {"date": time.strftime("%Y-%m-%d"), "machine": platform.processor() or platform.machine(),
+           "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                    cwd=ROOT).stdout.strip(),
+           "command": "taskset -c 0 python bench/bench_value.py " + " ".join(sys.argv[1:]),
+           "builds": builds(a.scenarios, a.routes)}
+    if not a.builds_only:
+        doc["plans"] = plans(a.scenarios, a.costs)
+    a.out.write_text(json.dumps(doc, indent=1) + "\n")
+    print(f"wrote {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

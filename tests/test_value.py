@@ -1,0 +1,192 @@
+"""The value over position and heading (sbmpc.planning.value): what the vehicle's own
+steady motions cost, its symmetries and limits, its cache, and what the searches make of it."""
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import sbmpc
+from dynamics import kernels as K
+from dynamics.limits import steepest_grade
+from sbmpc.planning import motions as MO, problem as PB, value as VA, world as WO
+from sbmpc.planning.heuristics import climb_limit
+from sbmpc.problems import skidsteer as SS
+
+
+def _world(heights, res=0.25, start=(2.0, 5.0, 0.0), goal=(18.0, 5.0), terrain="asphalt", **planner):
+    ny, nx = heights.shape
+    scn = {"name": "value", "terrain": terrain,
+           "start": {"x": start[0], "y": start[1], "yaw_deg": start[2]},
+           "goal": {"x": goal[0], "y": goal[1], "radius": 0.5}}
+    return sbmpc.load_world(scn, heights, res, **planner)
+
+
+@pytest.fixture(scope="module")
+def flat():
+    return _world(np.zeros((41, 81)))
+
+
+def test_tables_physics_on_the_level(flat):
+    """Steady straight driving: the speed is the commanded wheel speed times the radius
+    (the PID holds it on the level), the power grows with the speed, and climbing costs
+    more per metre than the level, which costs more than a descent."""
+    tb = MO.tables(flat)
+    g = tb["grades"]
+    lvl = int(np.argmin(np.abs(g)))
+    r = flat.vehicle.wheel_radius
+    for c in np.flatnonzero(tb["kinds"] == MO.STRAIGHT):
+        v = tb["v"][0, lvl, c]
+        assert v == pytest.approx(r * tb["cmds"][c, 0], rel=0.08)
+        assert tb["ok"][0, lvl, c] and tb["ok_twin"][0, lvl, c]
+    mc = MO.motion_costs(flat, "energy", np.array([1.0]), np.array([0.4]))
+    e = mc["straight"][0]
+    up, down = int(np.searchsorted(g, math.radians(8))), int(np.searchsorted(g, math.radians(-8)))
+    assert e[up] > e[lvl] > e[down] >= 0.0
+
+
+def test_tables_close_what_the_drive_cannot_climb(flat):
+    """No straight climb is held beyond the drive's steepest grade (dynamics.limits:
+    eqs. 24-27 at constant speed), and the value's straight motions open at most
+    RUNUP_DEG past it."""
+    tb = MO.tables(flat)
+    g = tb["grades"]
+    steep = steepest_grade(flat.vehicle, flat.terrains[0])
+    held = tb["ok"][0][:, tb["kinds"] == MO.STRAIGHT].any(axis=1)
+    assert not held[g > steep + math.radians(MO.GRADE_STEP)].any()
+    assert held[(g >= 0) & (g < steep - math.radians(2))].all()
+    mc = MO.motion_costs(flat, "time", np.array([1.0]), np.array([0.4]))
+    open_ = np.isfinite(mc["straight"][0])
+    assert not open_[g > steep + math.radians(MO.RUNUP_DEG + MO.GRADE_STEP)].any()
+
+
+def test_value_on_the_level_is_distance_over_the_steady_speed(flat):
+    """Facing the goal on level ground, V for time is the distance to the disc over the
+    best steady speed, within the lattice's step (0.5 m) and no detour (the goal lies on
+    a lattice heading); facing away it costs more by at least the turn, and the start's
+    value reads the same from any nearby heading on both sides (symmetry)."""
+    val = VA.build(flat, "time")
+    mc = MO.motion_costs(flat, "time", np.array([1.0]), np.array([0.4]))
+    lvl = int(np.argmin(np.abs(MO.grades())))
+    per_m = mc["straight"][0, lvl]
+    d = 16.0 - 0.5
+    v0 = val.at(2.0, 5.0, 0.0)
+    assert d * per_m - 0.5 * per_m <= v0 <= (d + 0.5) * per_m
+    assert val.at(2.0, 5.0, math.pi) > v0 + 1.0
+    for a in (0.2, 0.7, 1.5, 2.5):
+        assert val.at(2.0, 5.0, a) == pytest.approx(val.at(2.0, 5.0, -a), rel=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(x=st.floats(3.0, 17.0), dy=st.floats(0.0, 3.5), yaw=st.floats(-math.pi, math.pi))
+def test_value_mirror_symmetry(flat, x, dy, yaw):
+    """The level map and the goal are symmetric about y = 5, and so are the lattice's
+    headings and the vehicle's turns: V(x, 5 + dy, yaw) = V(x, 5 - dy, -yaw)."""
+    val = _cached_value(flat)
+    a = val.at(x, 5.0 + dy, yaw)
+    b = val.at(x, 5.0 - dy, -yaw)
+    assert a == pytest.approx(b, rel=1e-9)
+
+
+_VALS = {}
+
+
+def _cached_value(world):
+    key = id(world)
+    if key not in _VALS:
+        _VALS[key] = VA.build(world, "time")
+    return _VALS[key]
+
+
+def test_a_ramp_too_steep_for_the_drive_is_closed():
+    """A ramp up to a plateau holding the goal, in a lane 2 m wide between cliffs: at
+    10 deg the value climbs it; at a grade past the drive's steepest plus the run-up
+    (short of tipping over) V is infinite at the start, as no motion of the vehicle gets
+    up it. Without the cliffs the value climbs it in switchbacks, across the grade:
+    finite, and dearer than the 10 deg ramp straight up."""
+    res, nx, ny = 0.25, 81, 41
+    x = np.arange(nx) * res
+    y = np.arange(ny) * res
+    w0 = _world(np.zeros((ny, nx)))
+    steep = math.degrees(climb_limit(w0)) + 3.0
+    lane = np.where(np.abs(y - 5.0) > 1.0, 4.0, 0.0)[:, None]
+    got = {}
+    for deg in (10.0, steep):
+        z = np.clip((x - 8.0) * math.tan(math.radians(deg)), 0.0, 2.0)[None, :]
+        for walls in (True, False):
+            H = z + (lane if walls else 0.0) + np.zeros((ny, 1))
+            w = _world(H, margin_tip_deg=0.0, tip_over_deg=45.0)
+            got[deg, walls] = VA.build(w, "time").at(2.0, 5.0, 0.0)
+    assert math.isfinite(got[10.0, True]) and math.isinf(got[steep, True])
+    assert got[10.0, True] == pytest.approx(got[10.0, False], rel=0.02)
+    assert math.isfinite(got[steep, False]) and got[steep, False] > 1.2 * got[10.0, False]
+
+
+def test_energy_value_counts_the_climb():
+    """Energy over a 1 m hill straight between start and goal: at least the potential
+    energy m g h (no regeneration) on top of the level's rolling, and the value from
+    the far side (the descent first) is the smaller by about that climb."""
+    res, nx, ny = 0.25, 81, 41
+    x = np.arange(nx) * res
+    z = 1.0 * np.exp(-((x - 10.0) / 2.5) ** 2)
+    H = np.tile(z, (ny, 1))
+    hill = _world(H)
+    level = _world(np.zeros((ny, nx)))
+    e_hill = VA.build(hill, "energy").at(2.0, 5.0, 0.0)
+    e_level = VA.build(level, "energy").at(2.0, 5.0, 0.0)
+    mgh = hill.vehicle.mass * 9.81 * 1.0
+    assert e_hill >= e_level + 0.9 * mgh
+
+
+def test_disk_cache_reads_the_same(tmp_path, monkeypatch, flat):
+    """A value is written to the disk cache by content and read back the same; another
+    goal is another file."""
+    monkeypatch.setenv("SBMPC_CACHE_DIR", str(tmp_path))
+    VA.value.cache_clear()
+    a = VA.value(flat, "time")
+    assert not a.cached and len(list(tmp_path.glob("value-*.npy"))) == 1
+    VA.value.cache_clear()
+    b = VA.value(flat, "time")
+    assert b.cached and np.array_equal(a.V, b.V, equal_nan=True)
+    other = _world(np.zeros((41, 81)), goal=(18.0, 8.0))
+    VA.value(other, "time")
+    assert len(list(tmp_path.glob("value-*.npy"))) == 2
+    VA.value.cache_clear()
+
+
+def test_the_search_heuristic_is_the_value_clamped_by_the_anchor(flat):
+    """Whole-route searches read max(grid, min(V, w2 grid)); with the value off the grid
+    alone; a horizon search reads max(grid, V) (its terminal cost)."""
+    X = WO.start_state(flat)
+    Q, data = PB.pack_world(flat, "time", margin=True)
+    off = replace(flat, scenario=replace(flat.scenario, planner=replace(flat.scenario.planner, value=False)))
+    Q0, data0 = PB.pack_world(off, "time", margin=True)
+    assert Q0[SS.Q_OFFV] == -1 and Q[SS.Q_OFFV] >= 0
+    gap = Q[SS.Q_GOALGAP]
+    anchor = SS.heuristic(Q0, data0, X) + gap
+    v = VA.value(flat, "time").at(X[K.S_X], X[K.S_Y], X[K.S_YAW])
+    h = SS.heuristic(Q, data, X) + gap
+    assert h == pytest.approx(max(anchor, min(v, Q[SS.Q_VW2] * anchor)), rel=1e-9)
+    Q1 = Q.copy()
+    Q1[SS.Q_VW2] = 1.0
+    assert SS.heuristic(Q1, data, X) + gap == pytest.approx(anchor, rel=1e-9)
+    Qh = Q.copy()
+    Qh[SS.Q_HORIZON] = 10.0
+    assert SS.heuristic(Qh, data, X) + gap == pytest.approx(max(anchor, v), rel=1e-9)
+
+
+def test_value_close_to_the_plan_driven_at_1khz():
+    """The value is an estimate, not a bound: on steep_hill its start reads within 15 %
+    of the time and energy the time and energy plans use when driven at 1 kHz."""
+    from pathlib import Path
+    scn = Path(__file__).resolve().parents[1] / "scenarios" / "steep_hill.yaml"
+    world = sbmpc.load_world(scn)
+    X = WO.start_state(world)
+    for cost in ("time", "energy"):
+        plan = sbmpc.plan_scenario(scn, cost, threads=1)
+        assert plan.found
+        got = plan.travel_time_s if cost == "time" else plan.energy_J
+        v = VA.value(world, cost).at(X[K.S_X], X[K.S_Y], X[K.S_YAW])
+        assert abs(v - got) <= 0.15 * got, (cost, v, got)
