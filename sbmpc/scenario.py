@@ -65,7 +65,10 @@ class PlannerSettings:
     Halton seeds the energy plans of hill_tradeoff, steep_hill and mixed_terrain spread
     by 1.8-3.7 % at 1.1 (2.0-4.8 % before the stall test ran on fixed windows, 2.2-3.1 %
     with one-period controls, 3.1-7.0 % at 1.2 with the older heuristic); 2.0 lost up to
-    24 %, bench/bench_energy_plans.py); refine:
+    24 %, bench/bench_energy_plans.py; with the value over position and heading, which
+    already leads the search greedily, energy_weight 1: on hill_tradeoff, mixed_terrain,
+    steep_hill and narrow_pass its plans used 722-851 J against 756-886 J at 1.1, in
+    about the same time, bench/bench_value.py); refine:
     after the first solution, go on (anytime weighted A*, pruning with the unweighted
     bound) for refine times the expansions it took, keeping the best plan (0: stop at
     the first; on the shipped scenarios refinement changed no time plan by more than
@@ -128,7 +131,7 @@ class PlannerSettings:
     long_controls: str = "held"
     tip_over_deg: float = 30.0
     time_weight: float = 1.1
-    energy_weight: float = 1.1
+    energy_weight: float = 1.0
     refine: float = 0.0
     batch: int = 0
     threads: int = 0
