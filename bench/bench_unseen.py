@@ -2,6 +2,8 @@
 
     python bench/bench_unseen.py             # writes bench/results/unseen.json
     python bench/bench_unseen.py --maps 4    # fewer maps (a quick look)
+    taskset -c 0 python bench/bench_unseen.py --first 100 --maps 20 --threads 1 --out bench/results/unseen_value.json
+                                             # a new family, one core (issue 59)
 
 Each map is 30 x 30 m (0.25 m cells) with 8 random hills (0.4-2.0 m high, 2-5 m in
 radius; ``random_hills`` with the map's number as its seed) on one shipped terrain
@@ -44,6 +46,10 @@ def scenario(k: int) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", type=int, default=16)
+    ap.add_argument("--first", type=int, default=0,
+                    help="the first map's number (its generator seed): --first 100 --maps 20 is a family no "
+                         "setting was tuned for")
+    ap.add_argument("--threads", type=int, default=0, help="planner.threads (1: one core; 0: all)")
     ap.add_argument("--out", type=Path, default=OUT)
     a = ap.parse_args()
     from sbmpc.planning import plan as PL
@@ -54,8 +60,11 @@ def main() -> int:
     for c in ("time", "energy"):                   # compile / load the cache
         PL.plan(WO.resolve(flat), c)
     rows = []
-    for k in range(a.maps):
-        world = WO.resolve(SC.parse(scenario(k), f"unseen_{k}"))
+    for k in range(a.first, a.first + a.maps):
+        d = scenario(k)
+        if a.threads:
+            d["planner"] = {"threads": a.threads}
+        world = WO.resolve(SC.parse(d, f"unseen_{k}"))
         row = {"map": k, "terrain": TERRAINS[k % len(TERRAINS)]}
         own = {c: PL.search_plan(world, c) for c in ("time", "energy")}
         for c, p in own.items():
@@ -95,7 +104,7 @@ def main() -> int:
         "planning_time_s_max": {c: max(r[c]["planning_time_s"] for r in rows) for c in ("time", "energy", "energy_reported")},
     }
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "settings": "defaults (seed 0, both cores)", "summary": summary, "maps": rows,
+           "settings": f"defaults (seed 0, {'one core' if a.threads == 1 else 'every core'}); maps {a.first}-{a.first + a.maps - 1}", "summary": summary, "maps": rows,
            "bench_s": round(time.perf_counter() - t0, 1)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(res, indent=1) + "\n")

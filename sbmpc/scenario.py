@@ -110,9 +110,11 @@ class PlannerSettings:
     value: guide the searches with the value over position and heading
     (:mod:`sbmpc.planning.value`: one backward Dijkstra over the vehicle's own steady
     motions, with the margin): the horizon's terminal cost, and in whole-route searches
-    the heuristic raised towards it, at most to value_w2 times the admissible grid (a
-    plan then costs at most w value_w2 times the grid's optimum); value_cell: the
-    value's lattice spacing [m].
+    the heuristic raised towards it, at most to value_w2 (time) or value_energy_w2
+    (energy) times the admissible grid (a plan then costs at most w w2 times the grid's
+    optimum; time plans at 2 took up to 9.5 % longer than the grid's on narrow_pass,
+    runup_ramp and hills_field, at 1.25 -2.8 to +3.5 %, bench/bench_value.py);
+    value_cell: the value's lattice spacing [m].
     """
 
     branching: int = 16
@@ -153,7 +155,8 @@ class PlannerSettings:
     horizon_energy_weight: float = 1.0
     value: bool = True
     value_cell: float = 0.5
-    value_w2: float = 2.0
+    value_w2: float = 1.25
+    value_energy_w2: float = 2.0
 
     def weight(self, cost: str) -> float:
         return self.time_weight if cost == "time" else self.energy_weight
@@ -240,6 +243,7 @@ _SETTING_RANGES = {
     "margin_heading_deg": (float, 0.0, 45.0),
     "value_cell": (float, 0.05, 10.0),
     "value_w2": (float, 1.0, 100.0),
+    "value_energy_w2": (float, 1.0, 100.0),
 }
 # the settings that take one of a few words
 _SETTING_CHOICES = {"samples": ("fixed", "rotating"), "device": ("cpu", "cuda"),

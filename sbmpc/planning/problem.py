@@ -83,7 +83,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     if val is not None:
         Q[SS.Q_VNY], Q[SS.Q_VNX] = val.V.shape[:2]
         Q[SS.Q_VCELL], Q[SS.Q_VOX], Q[SS.Q_VOY] = val.cell, val.ox, val.oy
-        Q[SS.Q_VW2] = ps.value_w2
+        Q[SS.Q_VW2] = ps.value_w2 if cost == "time" else ps.value_energy_w2
     return Q, data
 
 
