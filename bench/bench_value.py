@@ -120,7 +120,7 @@ def replans(names, costs, draws: int, seed: int = 0) -> list:
     rows = []
     for name in names:
         world = WO.resolve(SC.load(ROOT / "scenarios" / f"{name}.yaml"))
-        for k in range(draws):
+        for _ in range(draws):
             mass, grip = (float(x) for x in 1.0 + 0.1 * rng.standard_normal(2))
             for cost in costs:
                 t = time.perf_counter()

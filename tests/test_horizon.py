@@ -52,6 +52,18 @@ def test_a_horizon_plan_reaches_its_horizon_and_replays_to_its_cost(flat, cost):
     assert hp.to_go(X0) - h.to_go > 0.5 * h.cost
 
 
+def _facing_and_away(hp, world):
+    """The start state (left heading away from the goal), the heading towards the goal
+    [rad], and the terminal cost at the start facing the goal and facing away."""
+    X = WO.start_state(world)
+    g = world.scenario.goal
+    toward = math.atan2(g["y"] - X[K.S_Y], g["x"] - X[K.S_X])
+    X[K.S_YAW] = toward
+    facing = hp.to_go(X)
+    X[K.S_YAW] = toward + math.pi
+    return X, toward, facing, hp.to_go(X)
+
+
 def test_the_terminal_cost_charges_the_heading_error_at_the_measured_turn_cost():
     """Without the value (``planner.value`` false) the grid knows no heading: the
     horizon's terminal cost adds the turn cost per radian between the heading and the
@@ -64,13 +76,7 @@ def test_the_terminal_cost_charges_the_heading_error_at_the_measured_turn_cost()
     lo, hi = WO.wheel_speed_range(flat)
     v = flat.vehicle
     assert k >= v.width / (2.0 * v.wheel_radius * min(abs(lo), abs(hi))) - 1e-9
-    X = WO.start_state(flat)
-    g = flat.scenario.goal
-    toward = math.atan2(g["y"] - X[K.S_Y], g["x"] - X[K.S_X])
-    X[K.S_YAW] = toward
-    facing = hp.to_go(X)
-    X[K.S_YAW] = toward + math.pi
-    away = hp.to_go(X)
+    X, toward, facing, away = _facing_and_away(hp, flat)
     # (the grid's slope at the start may point a few degrees off the straight line)
     assert away - facing == pytest.approx(k * math.pi, rel=0.1)
     # the whole-route search's heuristic is untouched: no horizon, no heading term
@@ -89,13 +95,7 @@ def test_with_the_value_the_terminal_cost_knows_the_heading(flat):
     from sbmpc.planning import motions as MO, value as VA
     hp = HZ.HorizonPlanner(flat, "time", 10.0, 1.0, 2000)
     assert hp.prob.params[SS.Q_TURNCOST] == 0.0 and hp.prob.params[SS.Q_OFFV] >= 0
-    X = WO.start_state(flat)
-    g = flat.scenario.goal
-    toward = math.atan2(g["y"] - X[K.S_Y], g["x"] - X[K.S_X])
-    X[K.S_YAW] = toward
-    facing = hp.to_go(X)
-    X[K.S_YAW] = toward + math.pi
-    away = hp.to_go(X)
+    X, toward, facing, away = _facing_and_away(hp, flat)
     tb = MO.tables(flat)
     lvl = int(np.argmin(np.abs(tb["grades"])))
     turning = (tb["kinds"] == MO.ARC) | (tb["kinds"] == MO.PIVOT)
