@@ -165,6 +165,34 @@ def _lookup(table, t, g, g0, gstep, ng):
     return a + f * (b - a)
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _sift_up(hk, hv, c):
+    """Binary min-heap on keys hk (ids hv): the entry at c moved up to its place."""
+    while c > 0:
+        p = (c - 1) // 2
+        if hk[p] <= hk[c]:
+            break
+        hk[p], hk[c] = hk[c], hk[p]
+        hv[p], hv[c] = hv[c], hv[p]
+        c = p
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _sift_down(hk, hv, c, n):
+    """The same heap of n entries: the entry at c moved down to its place."""
+    while True:
+        l = 2 * c + 1
+        if l >= n:
+            break
+        r = l + 1
+        m = r if r < n and hk[r] < hk[l] else l
+        if hk[c] <= hk[m]:
+            break
+        hk[m], hk[c] = hk[c], hk[m]
+        hv[m], hv[c] = hv[c], hv[m]
+        c = m
+
+
 @njit(cache=True, error_model="numpy")
 def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy, chord_kind, turn_kind, dpsi,
               cell, g0, gstep, start, reach):
@@ -191,33 +219,15 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
         # push
         hk[n] = 0.0
         hv[n] = s
-        c = n
         n += 1
-        while c > 0:
-            p = (c - 1) // 2
-            if hk[p] <= hk[c]:
-                break
-            hk[p], hk[c] = hk[c], hk[p]
-            hv[p], hv[c] = hv[c], hv[p]
-            c = p
+        _sift_up(hk, hv, n - 1)
     while n > 0:
         key = hk[0]
         s = hv[0]
         n -= 1
         hk[0] = hk[n]
         hv[0] = hv[n]
-        c = 0
-        while True:
-            l = 2 * c + 1
-            if l >= n:
-                break
-            r = l + 1
-            m = r if r < n and hk[r] < hk[l] else l
-            if hk[c] <= hk[m]:
-                break
-            hk[m], hk[c] = hk[c], hk[m]
-            hv[m], hv[c] = hv[c], hv[m]
-            c = m
+        _sift_down(hk, hv, 0, n)
         if done[s] or key > V[s]:
             continue
         if key > stop:
@@ -323,31 +333,12 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
                             hv[m2] = hv[e]
                             m2 += 1
                     n = m2
-                    # re-heapify
-                    for c0 in range(n // 2 - 1, -1, -1):
-                        c = c0
-                        while True:
-                            l = 2 * c + 1
-                            if l >= n:
-                                break
-                            r = l + 1
-                            m = r if r < n and hk[r] < hk[l] else l
-                            if hk[c] <= hk[m]:
-                                break
-                            hk[m], hk[c] = hk[c], hk[m]
-                            hv[m], hv[c] = hv[c], hv[m]
-                            c = m
+                    for c0 in range(n // 2 - 1, -1, -1):     # re-heapify
+                        _sift_down(hk, hv, c0, n)
                 hk[n] = v
                 hv[n] = p
-                c = n
                 n += 1
-                while c > 0:
-                    q = (c - 1) // 2
-                    if hk[q] <= hk[c]:
-                        break
-                    hk[q], hk[c] = hk[c], hk[q]
-                    hv[q], hv[c] = hv[c], hv[q]
-                    c = q
+                _sift_up(hk, hv, n - 1)
     for s in range(N):
         if not done[s]:
             V[s] = np.inf
@@ -411,6 +402,7 @@ def _start_states(world: World, ox, oy, nxv, nyv, cell, G) -> np.ndarray:
 def _code_hash() -> str:
     """The source the value is made from: a change makes new cache files."""
     src = inspect.getsource(MO) + "".join(inspect.getsource(f) for f in (_dijkstra.py_func, _states.py_func, build,
+                                                                          _sift_up.py_func, _sift_down.py_func,
                                                                           _goal_states, _start_states, _window))
     return hashlib.sha256(src.encode()).hexdigest()[:16]
 
