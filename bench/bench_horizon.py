@@ -40,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 OUT = ROOT / "bench" / "results" / "horizon.json"
 FIG = ROOT / "docs" / "horizon.png"
 SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
-SIDES = {70: 60, 170: 130, 340: 250}      # route [m] -> square side [m]
+SIDES = {70: 60, 170: 130, 340: 250, 500: 360}      # route [m] -> square side [m]
 TRUTHS = {"nominal": (1.0, 1.0), "heavy": (1.1, 1.0), "slippery": (1.0, 0.9)}
 
 
