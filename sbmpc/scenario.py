@@ -111,8 +111,8 @@ class PlannerSettings:
     (:mod:`sbmpc.planning.value`: one backward Dijkstra over the vehicle's own steady
     motions, with the margin): the horizon's terminal cost, and in whole-route searches
     the heuristic raised towards it, at most to value_w2 (time) or value_energy_w2
-    (energy) times the admissible grid (a plan then costs at most w w2 times the grid's
-    optimum; time plans at 2 took up to 9.5 % longer than the grid's on narrow_pass,
+    (energy) times the admissible grid (a plan then costs about at most w w2 times the
+    optimum over the search's grid, docs/planner.md; time plans at 2 took up to 9.5 % longer than the grid's on narrow_pass,
     runup_ramp and hills_field, at 1.25 -2.8 to +3.5 %, bench/bench_value.py);
     value_cell: the value's lattice spacing [m].
     """

@@ -190,3 +190,20 @@ def test_value_close_to_the_plan_driven_at_1khz():
         got = plan.travel_time_s if cost == "time" else plan.energy_J
         v = VA.value(world, cost).at(X[K.S_X], X[K.S_Y], X[K.S_YAW])
         assert abs(v - got) <= 0.15 * got, (cost, v, got)
+
+
+def test_a_goal_whose_lattice_states_are_all_closed_gives_no_value_and_no_crash():
+    """A plane tilted 27 deg, with the tip-over limit less its margin at 15 deg (45 and 30):
+    at every heading the pitch or the roll is at least 19.8 deg, so every lattice state
+    (the goal's too) is closed. The Dijkstra starts from
+    closed goal states (value 0), reads no motion from them (their grade is nan: before,
+    a pivot read the table at int(nan), far outside it), and V is infinite everywhere
+    else: the search reads the admissible grid alone there."""
+    res, nx, ny = 0.25, 61, 41
+    y = np.arange(ny) * res
+    H = np.tile((math.tan(math.radians(27.0)) * y)[:, None], (1, nx))
+    w = _world(H, start=(2.0, 5.0, 0.0), goal=(12.0, 5.0), tip_over_deg=45.0, margin_tip_deg=30.0)
+    val = VA.build(w, "time")
+    finite = np.isfinite(val.V)
+    assert np.all(val.V[finite] == 0.0) and 0 < finite.sum() <= 9 * 16     # the disc's lattice points
+    assert math.isinf(val.at(2.0, 5.0, 0.0))

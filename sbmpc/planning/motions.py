@@ -23,7 +23,6 @@ cached in memory (the model is the same for every goal and map).
 """
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -159,20 +158,23 @@ def _blocks(world: World):
     return [np.concatenate([K.pack(world.vehicle, t), friction_table(world.vehicle, t)]) for t in world.terrains]
 
 
-@functools.lru_cache(maxsize=16)
-def _tables_cached(key, world: World) -> dict:
-    return _make_tables(world)
+_TABLES: dict = {}     # settings key (tables()) -> tables: a world's map plays no part
 
 
 def tables(world: World) -> dict:
-    """The steady manoeuvres of ``world``'s vehicle on its terrains (module doc), cached
-    per (vehicle, terrains, margin settings, wheel-speed range, dt): a dict of ``grades``
+    """The steady manoeuvres of ``world``'s vehicle on its terrains (module doc), made
+    once per (vehicle, terrains, margin settings, wheel-speed range, dt) and kept (not per
+    world: every world of a run, a sweep or a corridor shares them): a dict of ``grades``
     (G,) [rad], ``cmds`` (C, 2) [rad/s], ``kinds`` (C,), and (n_terrains, G, C) arrays
     ``v`` [m/s], ``w`` [rad/s], ``p`` [W], ``ok`` and ``ok_twin`` (1 where the planning
     vehicle, and the margin's twin, hold the manoeuvre)."""
     ps = world.scenario.planner
     key = (world.vehicle, world.terrains, ps.margin, ps.margin_turn, wheel_speed_range(world), ps.dt)
-    return _tables_cached(key, world)
+    if key not in _TABLES:
+        if len(_TABLES) >= 16:
+            _TABLES.pop(next(iter(_TABLES)))
+        _TABLES[key] = _make_tables(world)
+    return _TABLES[key]
 
 
 def _make_tables(world: World) -> dict:

@@ -150,7 +150,10 @@ VY_T = tuple(int(v) for v in VECTORS[:, 1])
 @njit(cache=True, error_model="numpy", inline="always")
 def _lookup(table, t, g, g0, gstep, ng):
     """table[t, .] at grade g (tan) on the tables' axis (angle g0 + n gstep [rad]):
-    linear between the two nodes, the finite one where only one is, inf where none."""
+    linear between the two nodes, the finite one where only one is, inf where none or
+    where g is not finite (a closed state's grade is nan: a goal state may be closed)."""
+    if not math.isfinite(g):          # a closed state (nan): no motion from or into it
+        return np.inf
     u = (math.atan(g) - g0) / gstep
     if u <= 0.0:
         return table[t, 0]
@@ -400,11 +403,12 @@ def _start_states(world: World, ox, oy, nxv, nyv, cell, G) -> np.ndarray:
 
 @functools.lru_cache(maxsize=1)
 def _code_hash() -> str:
-    """The source the value is made from: a change makes new cache files."""
-    src = inspect.getsource(MO) + "".join(inspect.getsource(f) for f in (_dijkstra.py_func, _states.py_func, build,
-                                                                          _sift_up.py_func, _sift_down.py_func,
-                                                                          _goal_states, _start_states, _window))
-    return hashlib.sha256(src.encode()).hexdigest()[:16]
+    """The source the value is made from: every compiled source (``dynamics``, ``maps``,
+    the search, the problems, the grid, the tables, this module: the numba cache's own
+    list) and the worlds' (the margin's twin): a change makes new cache files."""
+    from dynamics import _jitcache
+    from . import world as WO_mod
+    return hashlib.sha256((_jitcache.digest(_jitcache.sources()) + inspect.getsource(WO_mod)).encode()).hexdigest()[:16]
 
 
 def _content_key(world: World, cost: str, cell: float) -> str:

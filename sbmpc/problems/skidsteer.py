@@ -410,7 +410,8 @@ def heuristic(params, data, state):
     if offv >= 0:
         # the value over position and heading (sbmpc.planning.value): the horizon's
         # terminal cost; in a whole-route search raised towards it, at most to w2 times
-        # the admissible value (the answer stays within w w2 of the grid's optimum)
+        # the admissible value (the answer within about w w2 of the optimum over the search's
+        # grid: docs/planner.md)
         nxv = int(params[Q_VNX])
         nyv = int(params[Q_VNY])
         vv = LA.read(data[offv:offv + nxv * nyv * LA.NH], nxv, nyv, params[Q_VCELL], params[Q_VOX], params[Q_VOY],
