@@ -93,8 +93,9 @@ class HorizonPlanner:
         self.prob = replace(problem(world, cost),
                             weight=ps.horizon_weight if cost == "time" else ps.horizon_energy_weight)
         self.col = K.S_T if cost == "time" else K.S_E
-        # the value over position and heading, where there is one, knows the turns
-        self.prob.params[SS.Q_TURNCOST] = 0.0 if self.prob.params[SS.Q_OFFV] >= 0 else self.turn_cost()
+        # the value over position and heading knows the turns; the turn cost serves where
+        # there is none (planner.value false, or a pose off its lattice)
+        self.prob.params[SS.Q_TURNCOST] = self.turn_cost()
         self.batch = batch_size(ps)
         self.threads = search_threads(ps)
 

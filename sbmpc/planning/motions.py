@@ -242,13 +242,12 @@ def motion_costs(world: World, cost: str, chords: np.ndarray, turns: np.ndarray)
     * ``pivot``: per radian, the best pivot held there and on level ground, at its
       level-ground rate (1 / yaw rate, or power / yaw rate);
     * an arc, a chord of ``chords[a]`` [m] driven while the heading turns by
-      ``turns[b]`` [rad]: ``arc_ok`` (n_terrains, G, len(chords), len(turns)) where an
-      arc command is held at that grade (and on level ground) by the vehicle and its
-      twin; ``arc_turn`` (n_terrains, len(chords), len(turns)): for time the best level
-      arc's max(chord / speed, turn / yaw rate) [s] (the arc takes at least that and at
-      least the chord straight at its grades), for energy what the best level arc costs
-      beyond the chord straight on the level [J] (added to the chord's straight cost at
-      its grades).
+      ``turns[b]`` [rad]: ``arc_turn`` (n_terrains, G, len(chords), len(turns)), among
+      the arc commands held at that grade (and on level ground) by the vehicle and its
+      twin (inf where none is), for time the best one's level max(chord / speed, turn /
+      yaw rate) [s] (the arc takes at least that and at least the chord straight at its
+      grades), for energy what the best one costs on the level beyond the chord straight
+      there [J] (added to the chord's straight cost at its grades).
 
     Turns are costed on level ground because the model takes the grade along the
     heading only: a steady turn on a constant pitch has no counterpart on a real slope
@@ -280,15 +279,13 @@ def motion_costs(world: World, cost: str, chords: np.ndarray, turns: np.ndarray)
         m = kinds == ARC
         va, wa, pa = v[:, lvl, m], w[:, lvl, m], p[:, lvl, m]           # (n_terrains, A) on the level
         ha = held[..., m] & held[:, lvl:lvl + 1, m]                      # (n_terrains, G, A)
-        arc_turn = np.full((v.shape[0], len(chords), len(turns)), np.inf)
-        arc_ok = np.zeros(v.shape[:2] + (len(chords), len(turns)), bool)
+        arc_turn = np.full(v.shape[:2] + (len(chords), len(turns)), np.inf)
         for a, L in enumerate(chords):
             flat = L * straight[:, lvl]
             for b, dpsi in enumerate(turns):
                 t = np.maximum(L / np.where(va > 1e-3, va, np.nan), dpsi / np.where(wa > 1e-3, wa, np.nan))
                 c = pa * t if energy else t                               # (n_terrains, A)
                 good = ha & np.isfinite(c)[:, None, :]                     # (n_terrains, G, A)
-                arc_ok[..., a, b] = good.any(axis=-1)
-                best = np.where(np.isfinite(c) & ha[:, lvl, :], c, np.inf).min(axis=-1)
-                arc_turn[:, a, b] = np.maximum(best - flat, 0.0) if energy else best
-    return dict(straight=straight, reverse=reverse, pivot=pivot, arc_turn=arc_turn, arc_ok=arc_ok)
+                best = np.where(good, c[:, None, :], np.inf).min(axis=-1)  # among the arcs held at each grade
+                arc_turn[..., a, b] = np.maximum(best - flat[:, None], 0.0) if energy else best
+    return dict(straight=straight, reverse=reverse, pivot=pivot, arc_turn=arc_turn)

@@ -197,7 +197,7 @@ def _sift_down(hk, hv, c, n):
 
 
 @njit(cache=True, error_model="numpy")
-def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy, chord_kind, turn_kind, dpsi,
+def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_kind, turn_kind, dpsi,
               cell, g0, gstep, start, reach):
     """Backward Dijkstra from the ``goal`` states (flat indices) over the reversed
     motions (module doc); G, Z, Tr from :func:`_states`, the motions' costs from
@@ -311,7 +311,8 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
                 ak = chord_kind[k] * len(ARC_STEPS_T) + a // 2
                 u = (math.atan(g) - g0) / gstep
                 n0 = min(max(int(math.floor(u + 0.5)), 0), ng - 1)
-                if not arc_ok[t, n0, ak, tk]:
+                turn_c = arc_turn[t, n0, ak, tk]
+                if math.isinf(turn_c):
                     continue
                 L = cell * CHORDS_T[chord_kind[k]]
                 run = 0.0
@@ -320,7 +321,6 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_ok, arc_turn, energy
                     ia = i + q * VX_T[k]
                     ge = (Z[ja + VY_T[k], ia + VX_T[k]] - Z[ja, ia]) / L
                     run += L * _lookup(straight, Tr[ja, ia], ge, g0, gstep, ng)
-                turn_c = arc_turn[t, ak, tk]
                 cst = run + turn_c if energy else max(run, turn_c)
             if math.isinf(cst):
                 continue
@@ -447,7 +447,7 @@ def build(world: World, cost: str, cell: float | None = None) -> Value:
     g = MO.grades()
     goal = _goal_states(world, ox, oy, nxv, nyv, cell, G)
     start = _start_states(world, ox, oy, nxv, nyv, cell, G)
-    V = _dijkstra(G, Z, Tr, goal, mc["straight"], mc["reverse"], mc["pivot"], mc["arc_ok"], mc["arc_turn"],
+    V = _dijkstra(G, Z, Tr, goal, mc["straight"], mc["reverse"], mc["pivot"], mc["arc_turn"],
                   cost == "energy", CHORD_KIND, TURN_KIND, DPSI, cell, float(g[0]), float(g[1] - g[0]),
                   start, REACH)
     return Value(V, cell, ox, oy, cost, time.perf_counter() - t0)

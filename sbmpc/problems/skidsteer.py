@@ -407,6 +407,7 @@ def heuristic(params, data, state):
         if hd > h:
             h = hd
     offv = int(params[Q_OFFV])
+    known = False
     if offv >= 0:
         # the value over position and heading (sbmpc.planning.value): the horizon's
         # terminal cost; in a whole-route search raised towards it, at most to w2 times
@@ -417,13 +418,15 @@ def heuristic(params, data, state):
         vv = LA.read(data[offv:offv + nxv * nyv * LA.NH], nxv, nyv, params[Q_VCELL], params[Q_VOX], params[Q_VOY],
                      x, y, state[K.S_YAW])
         if not math.isinf(vv):
+            known = True
             vv -= ke
             if params[Q_HORIZON] > 0.0:
                 if vv > h:
                     h = vv
             elif vv > h:
                 h = min(vv, params[Q_VW2] * h) if h > 0.0 else h
-    elif params[Q_HORIZON] > 0.0 and params[Q_TURNCOST] > 0.0 and d > 0.0:
+    if not known and params[Q_HORIZON] > 0.0 and params[Q_TURNCOST] > 0.0 and d > 0.0:
+        # the grid alone (no value, or none where the pose is): the turn it knows nothing of
         h += params[Q_TURNCOST] * _heading_error(params, data, state, dx, dy)
     # less the goal's gap, after the clamp: every value moves by the same constant (may
     # go below 0 near the goal), so the weighted search's order stays as without it
