@@ -1,7 +1,8 @@
 """A value that knows the vehicle: V(x, y, heading), the cost [s or J] of the rest of the
 way to the goal disc for this vehicle, with the margin, from every pose of a lattice.
 
-Lattice: the map's ground every ``CELL`` metres (``planner.value_cell``) x 16 headings,
+Lattice: the map's ground every ``planner.value_cell`` metres (0.5; coarser past
+MAX_STATES states, :func:`lattice_cell`) x 16 headings,
 those of the grid vectors (1, 0), (2, 1), (1, 1), (1, 2), ... (Pivtoraiko and Kelly's
 and Smac's choice: a straight step along a heading ends on a lattice point).
 
@@ -22,17 +23,18 @@ tip-over limit less its margin (``planner.margin_tip_deg``, as the search's edge
 lies closer to the map's edge than the footprint's half-diagonal.
 
 One backward Dijkstra from the goal disc's lattice states (value 0) over the reversed
-motions gives V everywhere (compiled, :func:`_dijkstra`). Lattice states farther from
-the start and goal than the cost-to-go grid's window (``heuristics.ctg_window``) are not
-made: V there is infinite and the search falls back to the grid.
+motions (compiled, :func:`_dijkstra`) gives V up to REACH times the start's value;
+beyond that, and outside the cost-to-go grid's window (``heuristics.ctg_window``), V is
+infinite and the search reads the grid.
 
 V is no lower bound: the tables are steady (a transient costs more, a climb's kinetic
 energy less), the 16 headings make the lattice's paths up to 8 % longer than the
 straight line, and a coarse lattice cell may close a pass the vehicle fits through.
 So the search keeps the admissible grid as its anchor (:mod:`sbmpc.problems.skidsteer`'s
-heuristic, ``planner.value_w2``) and the horizon takes V as its terminal cost.
+heuristic, ``planner.value_w2`` and ``value_energy_w2``) and the horizon takes V as its
+terminal cost.
 
-Made once per (map, terrains, vehicle, margin, goal, cost) and kept in memory (every
+Made once per (map, terrains, vehicle, margin, goal, start, cost) and kept in memory (every
 re-plan and horizon plan of a run, every seed of a sweep, reads the same) and on disk by
 content (``$SBMPC_CACHE_DIR``, as the friction tables: :func:`_cache_path`).
 """
@@ -350,7 +352,6 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
 
 
 
-CELL = 0.5     # m: the lattice's default spacing (planner.value_cell)
 MAX_STATES = 1_200_000   # a larger lattice is made coarser (lattice_cell): the build stays near a second
 REACH = 1.5    # the Dijkstra settles states up to this many times the start's largest value (_dijkstra)
 
