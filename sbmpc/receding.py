@@ -258,7 +258,7 @@ class _Executor:
 
 
 STUCK_HORIZONS = 2   # a horizon run falls back to whole-route plans where its terminal cost did not fall for this many horizons
-HELD = "the next period would come within half the tip-over margin"   # a re-plan's why after the guard
+HELD = "the next period would come within half the tip-over margin or leave the map"   # a re-plan's why after the guard
 SETTLED = "after the wheels were held at rest for a period (the horizon plan found no way on from a saturated drive)"   # a plan's why
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
@@ -306,10 +306,12 @@ def _held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
     flank of a pass where the plan has passed it) holds it back where it comes within
     half the margin: the one prediction of a fallback plan's periods on a vehicle the
     plan did not allow for. Once the twin plans (the vehicle proved weaker), the run
-    passes ``kept`` False."""
+    passes ``kept`` False. The world's vehicle's prediction also holds a period back
+    where it leaves the map: a run never drives off its map (a horizon run with 10 %
+    less grip left `hills_field` at (48.4, 59.7), 2026-12-06)."""
     for j, g in enumerate(guards):
         _, end, _ = g.step(X, control, record=False)
-        if end == -SS.TIP or (end == -SS.MARGIN and (kept or j > 0)):
+        if end == -SS.TIP or (end == -SS.OFF_MAP and j == 0) or (end == -SS.MARGIN and (kept or j > 0)):
             return True
     return False
 
@@ -320,11 +322,12 @@ def _stopped(X: np.ndarray, ps, failed: tuple | None = None) -> str:
     ``failed`` (what re-planned, its reason), the period it held back left no plan."""
     at = f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
     if failed is not None:
-        return (f"{at}the next period would come within half the tip-over margin and no {failed[0]} from there "
+        return (f"{at}the next period would come within half the tip-over margin or leave the map and no "
+                f"{failed[0]} from there "
                 f"found a way on ({failed[1]}); the run stops rather than tip over")
     return (f"{at}every way on that the planner found comes within half the tip-over margin "
-            f"({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) from the measured state; the run "
-            f"stops rather than tip over")
+            f"({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) or leaves the map from the measured "
+            f"state; the run stops rather than tip over")
 
 
 RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (_retrace)

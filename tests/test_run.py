@@ -417,6 +417,17 @@ def _searches(monkeypatch, fail_after=None):
     return seen
 
 
+def test_a_period_predicted_to_leave_the_map_is_held_back(flat, monkeypatch):
+    """The planning vehicle's 1 kHz prediction of the third period leaves the map: that
+    period is not driven (a run never drives off its map: a horizon run with 10 % less
+    grip left hills_field, 2026-12-06); the run re-plans from where it stands and reaches
+    the goal."""
+    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, -SS.OFF_MAP, 0), _Predicts(0)])
+    res = R.run(flat, "time")
+    assert res.status == "reached", res.reason
+    assert res.guarded == 1 and any(p.why.startswith(R.HELD) for p in res.plans)
+
+
 def test_where_the_twin_holds_every_period_back_the_run_re_plans_as_the_twin_then_stops(flat, monkeypatch):
     """The guard's twin predicts every period within half the tip-over margin: the first
     period is held back, the fresh plan's too, and the vehicle proves weaker than the
