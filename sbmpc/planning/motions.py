@@ -33,6 +33,7 @@ from dynamics.drive import window_share
 from dynamics.resistance import friction_table
 from dynamics.simulate import Model
 
+from .heuristics import RUNUP_DEG    # straight climbs this much past the steepest held: a run-up (the grid's rule)
 from .world import World, pessimistic, wheel_speed_range
 
 GRADE_MAX = 30.0     # deg: the tables' grades, either way (beyond the tip-over limit of 30 deg no state is open)
@@ -40,8 +41,6 @@ GRADE_STEP = 1.25    # deg
 SETTLE_S = 1.5       # s: driven before measuring (from the steady state the command would have on level ground)
 MEASURE_S = 1.0      # s: measured
 STEADY = 0.03        # of the larger command: the most a held manoeuvre's wheel speeds drift while measured
-RUNUP_DEG = 3.0      # deg: straight climbs this much steeper than the steepest one held cost what that one does
-                     # (momentum carries a short ramp: heuristics.RUNUP_DEG, the grid's rule)
 
 ARC_OUTER = (1.0, 0.7, 0.4)                          # of hi: the outer wheel of an arc
 ARC_INNER = (0.9, 0.8, 0.65, 0.5, 0.3, 0.1, -0.1)    # of the outer: the inner wheel

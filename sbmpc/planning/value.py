@@ -63,7 +63,6 @@ NH = LA.NH
 ANGLES = np.array(LA.ANGLES_T)                                     # ascending from 0
 CHORDS = np.array([1.0, math.sqrt(5.0), math.sqrt(2.0)])            # a vector's length [cells]: its chord kind
 TURNS = np.array([math.atan2(1, 2), math.pi / 4 - math.atan2(1, 2)])  # 26.57 and 18.43 deg: the two turn kinds
-UNREACHED = np.inf
 
 
 def _kinds():
@@ -139,14 +138,13 @@ def _states(H, res, ox, oy, hl, hw, tan_tip, margin, lox, loy, nxv, nyv, cell, t
 ANGLES_T = LA.ANGLES_T
 CHORDS_T = tuple(float(c) for c in CHORDS)
 ARC_STEPS = (1, 2, 4)     # an arc turns by one heading over this many steps of its vector
-ARC_STEPS_T = ARC_STEPS
+VX_T = tuple(int(v) for v in VECTORS[:, 0])
+VY_T = tuple(int(v) for v in VECTORS[:, 1])
 
 
 def arc_chords(cell: float) -> np.ndarray:
     """The arcs' chords [m], indexed chord kind x len(ARC_STEPS) + step index."""
     return np.array([c * m * cell for c in CHORDS for m in ARC_STEPS])
-VX_T = tuple(int(v) for v in VECTORS[:, 0])
-VY_T = tuple(int(v) for v in VECTORS[:, 1])
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -216,6 +214,9 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
     hv = np.empty(cap, np.int64)
     n = 0
     ng = straight.shape[1]
+    is_start = np.zeros(N, np.uint8)
+    for q in range(start.shape[0]):
+        is_start[start[q]] = 1
     left = start.shape[0]
     top = 0.0
     stop = np.inf
@@ -238,11 +239,9 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
         if key > stop:
             break
         done[s] = 1
-        if left > 0:
-            for q in range(start.shape[0]):
-                if start[q] == s:
-                    left -= 1
-                    top = max(top, key)
+        if is_start[s]:
+            left -= 1
+            top = max(top, key)
             if left == 0:
                 stop = reach * top
         k2 = s % nh
@@ -251,7 +250,7 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
         j2 = ij // nxv
         # the predecessors of s: straight, reverse, two pivots, arcs (left and right, each
         # of ARC_STEPS lengths)
-        for mtype in range(4 + 2 * len(ARC_STEPS_T)):
+        for mtype in range(4 + 2 * len(ARC_STEPS)):
             m = 1
             if mtype == 0:        # straight along k2 into s
                 k = k2
@@ -271,7 +270,7 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
                 j = j2
             else:                 # an arc of m steps along k, from k2 -+ 1 (turning left, right)
                 a = mtype - 4
-                m = ARC_STEPS_T[a // 2]
+                m = ARC_STEPS[a // 2]
                 k = (k2 - 1) % nh if a % 2 == 0 else (k2 + 1) % nh
                 i = i2 - m * VX_T[k]
                 j = j2 - m * VY_T[k]
@@ -310,7 +309,7 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
                 # steps straight at their mean grades, plus the turn (motions.motion_costs)
                 a = mtype - 4
                 tk = turn_kind[k] if a % 2 == 0 else turn_kind[k2]
-                ak = chord_kind[k] * len(ARC_STEPS_T) + a // 2
+                ak = chord_kind[k] * len(ARC_STEPS) + a // 2
                 u = (math.atan(g) - g0) / gstep
                 n0 = min(max(int(math.floor(u + 0.5)), 0), ng - 1)
                 turn_c = arc_turn[t, n0, ak, tk]
@@ -348,8 +347,6 @@ def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_
         if not done[s]:
             V[s] = np.inf
     return V.reshape((nyv, nxv, nh))
-
-
 
 
 MAX_STATES = 1_200_000   # a larger lattice is made coarser (lattice_cell): the build stays near a second
