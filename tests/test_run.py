@@ -516,3 +516,23 @@ def test_a_run_whose_plan_ends_short_of_the_goal_re_plans_without_the_margin_whe
     assert res.plans[1].plan.found and res.plans[1].plan.margin["kept"] is False
     assert "keeps the margin (no way (the test's))" in res.plans[1].plan.margin["note"]
     assert seen[:2] == [flat.scenario.planner.margin, 0.0]
+
+
+def test_re_plans_are_not_polished(flat, monkeypatch):
+    """The first plan is sbmpc plan's (an energy plan polished); the re-plans of a run are
+    the search's alone and unpolished: a whole route's polish took most of a re-plan's
+    time (bench/results/value_replans.json)."""
+    seen = []
+    search = PL.search_plan
+
+    def spy(world, *args, **kw):
+        p = search(world, *args, **kw)
+        seen.append((world.scenario.planner.polish_energy, p.polish is not None))
+        return p
+    monkeypatch.setattr(PL, "search_plan", spy)
+    res = R.run(flat, "energy", flat.vehicle.replace(radius_scale_right=0.92))
+    assert res.status == "reached" and res.replans >= 1
+    assert res.plans[0].plan.polish is not None
+    unpolished = [polished for setting, polished in seen if not setting]
+    assert len(unpolished) >= res.replans and not any(unpolished)
+    assert all(r.plan.polish is None for r in res.plans[1:])

@@ -207,3 +207,46 @@ def test_a_goal_whose_lattice_states_are_all_closed_gives_no_value_and_no_crash(
     finite = np.isfinite(val.V)
     assert np.all(val.V[finite] == 0.0) and 0 < finite.sum() <= 9 * 16     # the disc's lattice points
     assert math.isinf(val.at(2.0, 5.0, 0.0))
+
+
+def test_tables_are_shared_by_worlds_of_the_same_vehicle_and_settings(flat):
+    """The motion tables depend on the vehicle, terrains, margin settings, wheel speeds
+    and step, not on the map: another world (another map and goal) with the same ones
+    gets the very same tables; a heavier vehicle gets its own."""
+    other = _world(np.zeros((33, 41)), goal=(8.0, 3.0))
+    assert MO.tables(other) is MO.tables(flat)
+    heavy = replace(flat, vehicle=WO.heavier(flat.vehicle, 1.2))
+    assert MO.tables(heavy) is not MO.tables(flat)
+
+
+def test_each_cost_clamps_the_value_by_its_own_w2(flat):
+    """planner.value_w2 bounds the time searches' heuristic, value_energy_w2 the energy
+    searches'."""
+    Qt, _ = PB.pack_world(flat, "time", margin=True)
+    Qe, _ = PB.pack_world(flat, "energy", margin=True)
+    ps = flat.scenario.planner
+    assert (Qt[SS.Q_VW2], Qe[SS.Q_VW2]) == (ps.value_w2, ps.value_energy_w2) and ps.value_w2 != ps.value_energy_w2
+
+
+def test_where_the_value_is_infinite_the_horizon_adds_the_grids_turn_cost(flat):
+    """Off the value's lattice (V infinite) a horizon's terminal cost is the grid plus the
+    turn cost per radian of heading error, as with the value off."""
+    X = WO.start_state(flat)
+    X[K.S_YAW] = math.pi                      # facing away from the goal
+    Q, data = PB.pack_world(flat, "time", margin=True)
+    off = replace(flat, scenario=replace(flat.scenario, planner=replace(flat.scenario.planner, value=False)))
+    Q0, data0 = PB.pack_world(off, "time", margin=True)
+    blind = data.copy()
+    n = int(Q[SS.Q_VNX] * Q[SS.Q_VNY] * 16)
+    blind[int(Q[SS.Q_OFFV]):int(Q[SS.Q_OFFV]) + n] = np.inf
+    for q in (Q, Q0):
+        q[SS.Q_HORIZON] = 10.0
+        q[SS.Q_TURNCOST] = 2.0
+    assert SS.heuristic(Q, blind, X) == pytest.approx(SS.heuristic(Q0, data0, X), rel=1e-12)
+    assert SS.heuristic(Q, blind, X) > SS.heuristic(_with_turn_cost(Q0, 0.0), data0, X) + 5.0
+
+
+def _with_turn_cost(Q, k):
+    Q = Q.copy()
+    Q[SS.Q_TURNCOST] = k
+    return Q
