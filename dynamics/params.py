@@ -64,10 +64,20 @@ class Vehicle:
     lag: float = 0.0                   # s, first-order lag of delivered current
     sag: float = 0.0                   # V/J, fall of available voltage per energy drawn
     shear_lag: float = 0.0             # s, lag with which turning friction builds up
+    # --- the robot's driver (not the model) ---
+    command_separation: float = 0.0    # m: the track its driver turns cmd_vel into wheel speeds with (0: width)
     description: str = ""
     sources: Mapping[str, str] = field(default_factory=dict, compare=False, hash=False)
 
     # Derived quantities -------------------------------------------------------------
+    @property
+    def command_track(self) -> float:
+        """The track [m] with which the robot's driver turns a ``cmd_vel`` twist into wheel
+        speeds and back (w = (v -+ omega B / 2) / r): ``command_separation`` where set (a
+        ROS diff_drive_controller's ``wheel_separation`` times its
+        ``wheel_separation_multiplier``: 0.555 m x 1.875 on a Husky), else ``width``."""
+        return self.command_separation if self.command_separation > 0.0 else self.width
+
     @property
     def ref_wheel_accel(self) -> float:
         """Rate limit of the wheel-speed reference in rad/s^2 (0 = none)."""
@@ -138,6 +148,7 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
     "radius_scale_left": (0.0, 2.0, False), "radius_scale_right": (0.0, 2.0, False),
     "viscous": (-1e3, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),
     "sag": (0.0, 1e3, True), "shear_lag": (0.0, 10.0, True),
+    "command_separation": (0.0, 100.0, True),
     "alpha": (1.0, 20.0, True), "mu_roll": (0.0, 2.0, True), "mu_sa": (0.0, 5.0, True),
     "mu_op": (0.0, 5.0, True), "shear_modulus": (0.0, 1.0, False),
 }
@@ -181,7 +192,7 @@ def _validated(obj, src: str):
 # keys a parameter file may leave out without naming a ``base``: what the paper's model
 # does without them (no extension, no regeneration, equal wheels) or only labels
 OPTIONAL = {"name", "description", "sources", "regen", "radius_scale_left", "radius_scale_right", "viscous",
-            "delay", "lag", "sag", "shear_lag"}
+            "delay", "lag", "sag", "shear_lag", "command_separation"}
 
 
 def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = "", base_dir: Path | None = None,

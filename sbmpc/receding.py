@@ -43,7 +43,7 @@ from dynamics import kernels as K
 from dynamics.params import Vehicle
 
 from .planning import plan as PL
-from .planning.horizon import HorizonPlanner, periods
+from .planning.horizon import periods
 from .planning import problem as PB
 from . import trajectory as TR
 
@@ -412,11 +412,7 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
     stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
     if out.stalls > out.settings.max_stalls:
         return _weaker(stalls, name)
-    X[K.S_STALLT] = 0.0
-    X[K.S_STALLED] = 0.0
-    X[K.S_REFL] = X[K.S_WL]
-    X[K.S_REFR] = X[K.S_WR]
-    real.pipe = None
+    _protected(X, real)
     return None
 
 
@@ -673,167 +669,74 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 why = ", ".join(off)
 
 
+def measured(X: np.ndarray, vehicle: Vehicle, stalled: bool = False):
+    """What a robot measures of the simulated truth's state X: the pose, wheel speeds,
+    currents and the battery voltage (:class:`sbmpc.robot.Measurement`); ``stalled``: the
+    drive's stall protection tripped."""
+    from .robot.messages import Measurement
+    return Measurement(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]),
+                       v=float(X[SS.X_V]) if len(X) > SS.X_V else None,
+                       wl=float(X[K.S_WL]), wr=float(X[K.S_WR]), il=float(X[K.S_IL]), ir=float(X[K.S_IR]),
+                       voltage=float(vehicle.v_max), stalled=stalled)
+
+
+def _protected(X: np.ndarray, real: "_Executor") -> None:
+    """The drive's stall protection on the simulated truth: its references set to the
+    measured speeds, commands still in the pipe dropped (:func:`_stalled`)."""
+    X[K.S_STALLT] = 0.0
+    X[K.S_STALLED] = 0.0
+    X[K.S_REFL] = X[K.S_WL]
+    X[K.S_REFR] = X[K.S_WR]
+    real.pipe = None
+
+
 def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> RunResult:
-    """:func:`run` with receding-horizon plans (``planner.horizon_s``, :mod:`sbmpc.planning.horizon`).
-
-    The first plan is made from the start state in ``horizon_first_budget_s``. Then, period
-    by period: the vehicle (the truth, at its controller rate) drives the first period of
-    the current plan while the next plan is made from the state the planner's model
-    predicts at that period's end, warm-started from the current plan. Where the measured
-    state then lies outside the run's tolerance of that prediction, or the vehicle
-    stalled, the next plan is made again from the measured state (the vehicle waits for
-    it: counted in ``horizon.from_measured``). Every plan's wall-clock time is kept
-    (``horizon`` in the run JSON): the latency a robot would see.
-
-    What the horizon cannot see (a dead end behind a hill too steep to climb, a pass
-    whose approach lies beyond the horizon) shows as a horizon plan that finds no way on,
-    or as a vehicle that makes no progress: the terminal cost at the measured state has
-    not fallen for ``STUCK_HORIZONS`` horizons. Then the run falls back to whole-route
-    plans from the measured state (:func:`sbmpc.planning.plan.search_plan` in the planner's
-    budget) and follows them, re-planning the whole route where the vehicle leaves one's
-    tolerance, as :func:`run` does (``horizon.fallbacks``, their times in
-    ``horizon.fallback_s``).
-
-    A horizon plan that finds no way on from a vehicle whose drive is saturated short of
-    its command (its stall timer running: the commanded motion not achieved, not yet a
-    stall) is first given a settled vehicle (:func:`_settles`): the wheels are held at rest for
-    one period, the next plan made meanwhile from the predicted state (``horizon.settled``);
-    only where that plan finds nothing too does the run fall back."""
+    """:func:`run` with receding-horizon plans (``planner.horizon_s``): the controller a
+    robot calls (:class:`sbmpc.robot.Controller`, its policy in its module doc) against
+    the simulated truth. Every ``run.control_period_s`` the truth's state is measured
+    (pose, wheel speeds, currents: :func:`measured`), the controller answers with wheel
+    speeds, and the truth drives them for that period at its controller rate. The
+    controller waits for its plans (``lockstep``: the simulated clock stands still while
+    it plans); every plan's wall-clock time is kept (``horizon`` in the run JSON). The
+    truth's stall protection restarts a stalled drive (:func:`_protected`) and tells the
+    controller (``Measurement.stalled``)."""
+    from .robot.controller import Controller
     rs = out.settings
-    ps = world.scenario.planner
-    out.horizon = stats = HorizonStats(ps.horizon_s)
-    t_setup = time.perf_counter()
-    hp = HorizonPlanner(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
-    setup = time.perf_counter() - t_setup   # the cost-to-go grid and the turn cost: part of the first plan's time
-    model = _Executor(world, cost)
-    guards = _guards(world, cost)
-    held = False                        # the last period was held back by the guard, and nothing driven since
-    kept = True                         # the plan followed keeps the margin (a fallback whole-route one may not)
+    ctrl = Controller(world, cost, period_s=rs.control_period_s, lockstep=True, settings=rs)
+    out.horizon = ctrl.horizon
     real = _Executor(twin, cost, twin.vehicle.delay)
     X = WO.start_state(twin)
     pieces = []
     every = max(1, round(TR.RECORD_EVERY / real.dt))
-    tol_yaw = math.radians(rs.tol_yaw_deg)
-    stalls = []
     g = world.scenario.goal
     # no whole-route plan to scale from: the straight line at a third of the top speed
     v_top = world.vehicle.v_max / world.vehicle.torque_constant * world.vehicle.wheel_radius
     t_limit = rs.max_time_factor * 3.0 * math.hypot(g["x"] - X[K.S_X], g["y"] - X[K.S_Y]) / max(v_top, 1e-6) + 30.0
-    window = max(2, int(round(STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
-    togo = []                           # the terminal cost at the measured state, period by period
-    guide = None                        # [(wl, wr, d)]: the whole-route plan followed after a fallback
-    settled = False                     # the last period driven held the wheels at rest
+    stalled = False
 
     def finish(status, reason):
+        ctrl.ended_at(float(X[K.S_T]))
+        ctrl.close()
+        out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
+        out.periods, out.driven = ctrl.periods, ctrl.driven
         return _finish(out, pieces, every, status, reason)
 
-    def made(h, why, X0):
-        stats.seconds.append(h.seconds)
-        stats.expansions.append(h.expansions)
-        stats.kept_previous += h.found_by == "previous"
-        p = PL.Plan(world.scenario.name, cost, "found" if h.found else "no_path", h.reason,
-                    list(h.controls), {}, planning_time_s=h.seconds, nodes_expanded=h.expansions,
-                    found_by=h.found_by)
-        out.plans.append(Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
-                                h.found_by == "previous", g["radius"]))
-        return h
-
-    def whole_route(why):
-        # the whole-route planner's own budget: where the horizon saw no way on, a
-        # re-plan's budget (run.replan_time_budget_s) was too short on narrow_pass; an
-        # energy plan checked against the time plan, as sbmpc plan's (planner.energy_vs_time):
-        # the energy search alone found nothing in 60 s from narrow_pass's start, where
-        # the time search finds a plan in 17 s
-        p = PL.plan(world, cost, start=X)
-        stats.fallbacks += 1
-        stats.fallback_s.append(p.planning_time_s)
-        out.plans.append(Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False, g["radius"]))
-        return p
-
-    h = hp.plan(X, budget_s=max(ps.horizon_first_budget_s - setup, 1e-3))
-    h = made(replace(h, seconds=h.seconds + setup), "start", X)
     while True:
-        settle = guide is None and not h.found and not settled and _settles(X)
-        if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
-            why = ("the horizon plan found no way on" if not h.found else
-                   f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
-            p = whole_route(f"{why}: whole-route plan")
-            if not p.found:
-                weaker = f"; {_weaker(stalls, world.vehicle.name)}" if stalls else ""
-                return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
-                                        f"({why}): {p.reason}{weaker}")
-            guide = periods(p.controls, ps.period_s)
-            kept = _keeps_margin(p)
-        if settle:
-            control = (0.0, 0.0, ps.period_s)
-        elif guide is not None:
-            control = guide[0]
-            if len(guide) == 1:
-                control = (control[0], control[1], max(control[2], ps.period_s))
-        else:
-            step = periods(h.controls, ps.period_s)
-            control = step[0]
-            if h.goal and len(step) == 1:
-                control = (control[0], control[1], max(control[2], ps.period_s))
-        if guards and _held(guards, X, control, kept):
-            # the guard (as in run): the period is not driven; the vehicle waits for a plan
-            # from where it stands: a horizon plan, then a whole-route one, then it stops
-            out.guarded += 1
-            where = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-            if held and guide is not None:
-                return finish("failed", _stopped(X, ps))
-            if held or guide is not None:
-                p = whole_route(f"{where}: whole-route plan")
-                if not p.found:
-                    return finish("failed", _stopped(X, ps, ("whole-route plan", p.reason)))
-                guide = periods(p.controls, ps.period_s)
-                kept = _keeps_margin(p)
-            else:
-                stats.from_measured += 1
-                h = made(hp.plan(X, previous=None), where, X)
-            held = True
-            continue
-        held = False
-        settled = settle
-        stats.settled += int(settle)      # counted where driven (the guard may hold the rest back)
-        if guide is not None:
-            guide.pop(0)
-        _, _, P = model.step(X, control, record=False)
-        nxt = hp.plan(P, previous=h) if guide is None else None     # made while the period is driven
-        rec, end, X = real.step(X, control)
+        cmd = ctrl.step(float(X[K.S_T]), measured(X, twin.vehicle, stalled))
+        if cmd.done:
+            return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
+        rec, end, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s))
         pieces.append(rec if not pieces else rec[1:])
-        out.periods += 1
-        out.driven.append((control[0], control[1], round(float(rec[-1, K.R_T] - rec[0, K.R_T]), 9)))
+        stalled = end == -SS.STALL
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if X[K.S_T] > t_limit:
             return finish("failed", f"took longer than {t_limit:.0f} s without reaching the goal")
-        dxy, dyaw, dv = deviation(X, P)
-        off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
-        if end == -SS.STALL:
-            failed = _stalled(out, stalls, X, real, world.vehicle.name)
-            if failed:
-                return finish("failed", failed)
-            off = True
+        if stalled:
+            _protected(X, real)
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                                     f"t = {X[K.S_T]:.1f} s")
-        if guide is not None:
-            if off or not guide:
-                p = whole_route("off the whole-route plan" if off else "the whole-route plan ended short of the goal")
-                if not p.found:
-                    return finish("failed", f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
-                                            f"t = {X[K.S_T]:.1f} s: {p.reason}")
-                guide = periods(p.controls, ps.period_s)
-                kept = _keeps_margin(p)
-            continue
-        togo.append(hp.to_go(X))
-        if off:
-            stats.from_measured += 1
-            h = made(hp.plan(X, previous=h), "stalled" if end == -SS.STALL else
-                     f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s", X)
-        else:
-            h = made(nxt, SETTLED if settle else "next period", P)
 
 
 def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:

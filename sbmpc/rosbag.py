@@ -4,8 +4,9 @@
   measured run (:class:`dynamics.runs.Run`, the CSV that ``sbmpc diagnose`` reads).
   Defaults that fit common skid-steer drivers (Husky, Jackal, Warthog, Pioneer's
   ``rosaria``/``p2os``): wheel commands from ``geometry_msgs/Twist`` (or ``TwistStamped``)
-  on ``/cmd_vel``, converted to wheel speeds with the vehicle's track and wheel radius
-  (w = (v -+ omega B / 2) / r); measured wheel speeds and efforts from
+  on ``/cmd_vel``, converted to wheel speeds as the robot's driver converts them, with the vehicle's
+  command track and wheel radius (w = (v -+ omega B / 2) / r, B = ``Vehicle.command_track``:
+  a ROS diff_drive_controller's wheel separation times its separation multiplier); measured wheel speeds and efforts from
   ``sensor_msgs/JointState`` on ``/joint_states``, the joints whose names hold ``left``
   and ``right`` averaged per side (efforts summed: a side's torque); pose from
   ``nav_msgs/Odometry`` on ``/odom``; battery voltage from ``sensor_msgs/BatteryState``
@@ -95,20 +96,47 @@ def _side(names, want: list | None, word: str, path, topic) -> list:
     return idx
 
 
+def open_bag(path: Path):
+    """An opened ``rosbags`` AnyReader of the bag at ``path``: a folder is a ROS 2 bag
+    whatever its name, a file a ROS 1 bag. ``ros2 bag record -o drive.bag`` makes a folder
+    named ``drive.bag``, which AnyReader takes for ROS 1 by its suffix and refuses ("Is a
+    directory"): such a folder is read through a link of another name to it (removed
+    with the reader). Messages without embedded definitions decode with ROS 2 Humble's
+    types."""
+    import shutil
+    import tempfile
+    import weakref
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    path = Path(path)
+    link = None
+    if path.is_dir() and path.suffix == ".bag":
+        tmp = Path(tempfile.mkdtemp(prefix="sbmpc-bag-"))
+        link = tmp / "ros2-bag"
+        link.symlink_to(path.resolve(), target_is_directory=True)
+    reader = AnyReader([link or path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    if link is not None:
+        weakref.finalize(reader, shutil.rmtree, str(link.parent), True)
+    reader.open()
+    return reader
+
+
 def read_bag(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: dict) -> Run:
     """A measured run from the bag at ``path`` (module doc); ``vehicle`` gives the track
     and wheel radius that turn ``/cmd_vel`` into wheel speeds. InputError (one line: the
     file, what was expected, what was found) on a bag that cannot be read, a missing
     topic or field, an empty topic, or a clock that jumps back."""
+    return read_bag_timed(path, vehicle, terrain_name, vehicle_name, topics)[0]
+
+
+def read_bag_timed(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: dict) -> tuple:
+    """(:func:`read_bag`'s run, the bag time [s] of its first row: the run's t = 0)."""
     _rosbags()
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: expected a ROS 2 bag folder or a ROS 1 .bag file, found no such file")
     try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        reader.open()
+        reader = open_bag(path)
     except Exception as exc:          # rosbags raises its own errors for every kind of broken bag
         raise InputError(f"{path}: expected a ROS 2 bag folder (sqlite3 or MCAP) or a ROS 1 .bag file, found one "
                          f"that cannot be read ({' '.join(str(exc).split())[:200]})") from None
@@ -184,7 +212,7 @@ def read_bag(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: 
     tw = [m.twist if hasattr(m, "twist") else m for _, m in rows[cmd]]
     v = np.array([x.linear.x for x in tw])
     w = np.array([x.angular.z for x in tw])
-    B, r = vehicle.width, vehicle.wheel_radius
+    B, r = vehicle.command_track, vehicle.wheel_radius       # the driver's own conversion
     k = np.searchsorted(ct, t + 1e-6, side="right") - 1     # (a command stamped within 1 us of a sample: at it)
     before = k < 0
     k = np.clip(k, 0, len(ct) - 1)
@@ -218,10 +246,10 @@ def read_bag(path: Path, vehicle, terrain_name: str, vehicle_name: str, topics: 
     cols["segment"] = seg[good].astype(float)
     cols["t"] = t[good] - t[good][0]
     meta = {"vehicle": vehicle_name, "terrain": terrain_name,
-            "note": f"imported from ROS bag {path.name}: {cmd} -> wl_cmd/wr_cmd (track {B:g} m, wheel radius {r:g} m), "
+            "note": f"imported from ROS bag {path.name}: {cmd} -> wl_cmd/wr_cmd (command track {B:g} m, wheel radius {r:g} m), "
                     f"{js} joints {', '.join(names[i] for i in left)} | {', '.join(names[i] for i in right)}"
                     + (f", pose {odom}" if odom and rows[odom] else "") + (f", voltage {batt}" if batt and rows[batt] else "")}
-    return Run(cols, meta, str(path))
+    return Run(cols, meta, str(path)), float(t[good][0])
 
 
 # ---- out ---------------------------------------------------------------------------
@@ -294,4 +322,4 @@ def write_bag(out: Path, emap, plans: dict, frame: str = "map", run=None, t0: fl
     return counts
 
 
-__all__ = ["TOPICS", "read_bag", "topic_map", "write_bag"]
+__all__ = ["TOPICS", "open_bag", "read_bag", "read_bag_timed", "topic_map", "write_bag"]

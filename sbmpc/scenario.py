@@ -183,7 +183,8 @@ class RunSettings:
     stalled, or the tip-over guard held its next period back); max_replans: the run fails beyond it; max_stalls: stalls of the vehicle
     (each followed by a re-plan from where it stopped) before the run fails;
     max_time_factor: the run fails when it takes longer than this times the first
-    plan's travel time (plus 30 s).
+    plan's travel time (plus 30 s); control_period_s: how often a horizon run's controller
+    is called (:class:`sbmpc.robot.Controller`, the robot's loop: 0.05-1 s).
     """
 
     trigger: str = "tolerance"
@@ -196,6 +197,7 @@ class RunSettings:
     max_replans: int = 50
     max_stalls: int = 3
     max_time_factor: float = 3.0
+    control_period_s: float = 0.1
 
 
 _RUN_RANGES = {
@@ -208,6 +210,7 @@ _RUN_RANGES = {
     "max_replans": (int, 0, 100000),
     "max_stalls": (int, 0, 1000),
     "max_time_factor": (float, 1.0, 1000.0),
+    "control_period_s": (float, 0.05, 1.0),
 }
 TRIGGERS = ("tolerance", "every")
 

@@ -108,6 +108,20 @@ def test_a_bag_of_each_kind_imports_to_the_run_it_was_written_from(short, kind, 
         np.testing.assert_allclose(got[c], short[c], rtol=2e-5, atol=1e-5, err_msg=c)
 
 
+@pytest.mark.parametrize("kind", ["mcap", "sqlite3"])
+def test_a_ros2_bag_folder_named_like_a_ros1_file_is_read_as_ros2(short, kind, tmp_path):
+    """``ros2 bag record -o drive.bag`` makes a folder named drive.bag: rosbags' AnyReader
+    takes it for ROS 1 by the suffix ("Is a directory"); a folder is a ROS 2 bag whatever
+    its name, and the folder is left as it was."""
+    bag = tmp_path / "drive.bag"
+    write_robot_bag(bag, short, kind)
+    before = sorted(p.name for p in bag.iterdir())
+    out = tmp_path / "run.csv"
+    assert main(["import", "rosbag", str(bag), "--out", str(out), "--vehicle", "p3at", "--terrain", "vinyl"]) == 0
+    np.testing.assert_allclose(read_run(out)["wl"], short["wl"], rtol=2e-5, atol=1e-5)
+    assert sorted(p.name for p in bag.iterdir()) == before
+
+
 def test_a_bag_round_trip_finds_the_hidden_effect_as_the_csv_does(tmp_path):
     """A synthetic run with a smaller left wheel, written as a bag, imported and diagnosed:
     the same cause and parameters as the run itself."""

@@ -59,7 +59,7 @@ def copper_coefficient(world: World) -> float:
     return v.armature_resistance * v.wheel_radius * s / (v.torque_constant ** 2 * w_top)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _steps(f_roll, rise, d, c, energy, slope):
     """Over flat arrays: each step's bound (skidsteer.step_energy) into ``energy`` and
     its slope dE/dW = 1 + 2 c W / L at the minimum into ``slope`` (0 where the bound is
@@ -459,7 +459,7 @@ def _max_rise(H, res, dist):
 
 
 # ---- reachability pre-check -----------------------------------------------------------
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _blocked(H, res, ox, oy, hl, hw, tip, nheadings):
     """Cells where the vehicle would exceed the tip-over limit at every heading."""
     ny, nx = H.shape

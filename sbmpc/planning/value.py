@@ -104,7 +104,7 @@ class Value:
                           x, y, yaw))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _states(H, res, ox, oy, hl, hw, tan_tip, margin, lox, loy, nxv, nyv, cell, terrain):
     """Per lattice state (j, i, k), the lattice point (lox + i cell, loy + j cell) on the
     map H (origin (ox, oy), resolution res): the grade along heading k (tan; nan where
@@ -196,7 +196,7 @@ def _sift_down(hk, hv, c, n):
         c = m
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _dijkstra(G, Z, Tr, goal, straight, reverse, pivot, arc_turn, energy, chord_kind, turn_kind, dpsi,
               cell, g0, gstep, start, reach):
     """Backward Dijkstra from the ``goal`` states (flat indices) over the reversed

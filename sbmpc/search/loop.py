@@ -254,7 +254,7 @@ def _full(cnt, table, H, cap, new):
             or 4 * (cnt[C_NODES] + new) > table.shape[0])
 
 
-@njit(_RUN_SIG, cache=True, error_model="numpy")
+@njit(_RUN_SIG, cache=True, error_model="numpy", nogil=True)
 def run_search(fa, weight, params, data, work, start, controls, nbranch, nfixed, rotate, hold, dims, res,
                snap, max_depth, settle, max_iters, refine, chunk, X, G, PAR, CTL, DEP, CLO, KEYS, table, H,
                cnt, best):
@@ -372,7 +372,7 @@ _BATCH_SIG = types.UniTuple(types.int64, 2)(
     _I1, _F2, _I1, _F2, _I1, _F2, _F1, _I1, _F2, _I1, _F2, _F1, _I1, _I1, _I1)
 
 
-@njit(_BATCH_SIG, cache=True, error_model="numpy")
+@njit(_BATCH_SIG, cache=True, error_model="numpy", nogil=True)
 def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate, hold, dims, res, snap,
               max_depth, settle, max_iters, refine, size, pending, chunk,
               X, G, PAR, CTL, DEP, CLO, KEYS, table, H, cnt, best,
@@ -443,7 +443,7 @@ def run_batch(fa, weight, params, data, start, controls, nbranch, nfixed, rotate
     return RUNNING, 0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def expand_nodes(fa, params, data, work, BP, BO, BU, CH, CO):
     """The edges of a batch, one node after another through the problem's serial
     ``expand`` (for a problem with no batch expander of its own): the rows of BO come in

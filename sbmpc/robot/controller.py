@@ -1,0 +1,416 @@
+"""The controller a robot's own loop calls (:class:`Controller`): ``step(t, measurement)
+-> command`` at 10-20 Hz, the planning done beside it.
+
+The policy, period by period (a *period* is the planner's ``period_s``, 1 s by default;
+the robot calls :meth:`Controller.step` every ``period_s`` of the controller, 0.1 s by
+default, and gets the same wheel speeds until the period ends):
+
+1. **drive**: the first period of the current horizon plan
+   (:class:`sbmpc.planning.horizon.HorizonPlanner`), after the **guard** has predicted it
+   from the estimated state (the planning vehicle and the margin's twin at 1 kHz) and let
+   it through: never a period that comes within half the tip-over margin or leaves the
+   map;
+2. meanwhile, in a worker thread, the **next plan** from the state the model predicts at
+   the period's end, warm-started from the current plan;
+3. at the period's end, the **estimate** (:class:`sbmpc.robot.estimator.Estimator`) is
+   compared with that prediction: within the run's tolerance the plan made ahead is
+   taken; off it, or **stalled** (the measurement says so, or the estimator's model
+   infers it), a plan from the estimate is made while the wheels are held at rest;
+4. a horizon plan that finds no way on from a saturated drive is first given a
+   **settled** vehicle (one period at rest); where it still finds none, or the terminal
+   cost has not fallen for ``STUCK_HORIZONS`` horizons, the controller **hands over** to a
+   whole-route plan (:func:`sbmpc.planning.plan.plan`, in a second worker thread) from
+   the vehicle at rest and follows it, re-planning the whole route where the vehicle
+   leaves it;
+5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
+   then whole-route); where that too is held back, the controller stops for good and
+   says why.
+
+:meth:`Controller.step` never waits on a plan (``lockstep=False``, a robot): where the
+plan it needs is not ready, the command holds the wheels at rest (``status``
+'waiting'/'planning') and the next call looks again. ``lockstep=True`` (``sbmpc run``'s
+simulated truth) waits instead: the simulated clock stands still while the planner
+works, and every plan's wall-clock time is kept (``horizon.seconds``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from dynamics import kernels as K
+
+from ..errors import InputError
+from ..planning import plan as PL
+from ..planning import world as WO
+from ..planning.horizon import HorizonPlanner, periods
+from ..problems import skidsteer as SS
+from .. import receding as RC
+from .estimator import Estimator
+from .messages import STATUSES, Command, Measurement, to_twist
+
+PERIOD_RANGE = (0.05, 1.0)     # s: the control periods the controller takes
+
+
+@dataclass
+class _Drive:
+    """Policy request: command ``control`` (wl, wr, duration_s) for a period."""
+    control: tuple
+    status: str
+
+
+@dataclass
+class _Await:
+    """Policy request: the result of ``future`` (a plan)."""
+    future: Future
+    status: str
+
+
+class Controller:
+    """Receding-horizon SBMPC as a robot calls it (module doc).
+
+    ``world``: the planning world (:func:`sbmpc.load_world`); ``cost``: 'time' or
+    'energy' (default the scenario's); ``period_s``: the control period [s] (0.05-1,
+    how often the robot calls :meth:`step`); ``horizon_s``: the look-ahead [s] (default
+    the scenario's ``planner.horizon_s``, else 10); ``lockstep``: wait for plans (a
+    simulated clock) instead of holding at rest; ``settings``: the run's tolerances
+    (:class:`sbmpc.scenario.RunSettings`, default the scenario's ``run``).
+
+    What it did is kept for the record: ``plans`` (:class:`sbmpc.receding.Replan` per
+    plan), ``horizon`` (:class:`sbmpc.receding.HorizonStats`), ``guarded``, ``stalls``,
+    ``periods``, ``driven`` [(wl, wr, duration_s)] and ``latencies`` (wall-clock seconds
+    of every :meth:`step`); with ``keep_paths``, ``paths``: per plan found, (robot time
+    [s], {x, y, z, yaw: arrays}) of the poses its model predicts (what a robot publishes
+    as its plan)."""
+
+    def __init__(self, world: WO.World, cost: str | None = None, period_s: float = 0.1,
+                 horizon_s: float | None = None, lockstep: bool = False, settings=None, keep_paths: bool = False):
+        lo, hi = PERIOD_RANGE
+        if not (isinstance(period_s, (int, float)) and lo <= period_s <= hi):
+            raise InputError(f"period_s: expected a control period in [{lo:g}, {hi:g}] s, found {period_s!r:.30}")
+        self.cost = WO.checked_cost(world, cost)
+        ps = world.scenario.planner
+        if horizon_s is None:
+            horizon_s = ps.horizon_s if ps.horizon_s > 0.0 else 10.0
+        if not (isinstance(horizon_s, (int, float)) and horizon_s > 0.0):
+            raise InputError(f"horizon_s: expected a look-ahead > 0 s, found {horizon_s!r:.30}")
+        if ps.horizon_s != horizon_s:
+            world = replace(world, scenario=replace(world.scenario, planner=replace(ps, horizon_s=float(horizon_s))))
+        self.world = world
+        self.period_s = float(period_s)
+        self.lockstep = bool(lockstep)
+        self.settings = settings or world.scenario.run
+        t0 = time.perf_counter()
+        ps = world.scenario.planner
+        self.planner = HorizonPlanner(world, self.cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+        self.setup_s = time.perf_counter() - t0     # the value and turn cost: the first plan's time
+        self.estimator = Estimator(world, self.cost)
+        self.model = RC._Executor(world, self.cost)
+        self.guards = RC._guards(world, self.cost)
+        self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
+        self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
+        # the record
+        self.plans: list = []
+        self.horizon = RC.HorizonStats(ps.horizon_s)
+        self.guarded = 0
+        self.stalls = 0
+        self.stall_at: list = []
+        self.periods = 0
+        self.driven: list = []
+        self.latencies: list = []
+        self.keep_paths = bool(keep_paths)
+        self.paths: list = []
+        # the loop's state
+        self.status = "planning"
+        self.reason = None
+        self.done = False
+        self._policy = None
+        self._request = None          # the policy's pending _Drive or _Await
+        self._segment_end = -math.inf
+        self._segment_start = None
+        self._command = (0.0, 0.0)    # the wheel speeds commanded now
+        self._last_t = None
+        self._last = None             # the last Command
+        self._plan_t = None           # when the plan driven was made (robot time)
+        self._X = None                # the estimate at the last step
+
+    @classmethod
+    def from_scenario(cls, scenario, cost: str | None = None, period_s: float = 0.1, horizon_s: float | None = None,
+                      lockstep: bool = False, **planner) -> "Controller":
+        """A controller for a scenario (a YAML path, a dict or a Scenario; keyword planner
+        settings override the scenario's, as in :func:`sbmpc.plan_scenario`)."""
+        from ..api import load_world
+        return cls(load_world(scenario, **planner), cost, period_s, horizon_s, lockstep)
+
+    # ---- the robot's call ---------------------------------------------------------
+    def step(self, t: float, measurement: Measurement) -> Command:
+        """The command for the control period from robot time ``t`` [s], given what the
+        robot measures now. A repeated ``t`` gets the last command again; a ``t`` before
+        the last one, a measurement without a pose or with a value that is not a finite
+        number, or a pose off the map, an InputError (the robot keeps its last command
+        or stops: nothing wrong is commanded)."""
+        t0 = time.perf_counter()
+        if not (isinstance(t, (int, float)) and math.isfinite(t)):
+            raise InputError(f"step: t: expected a finite time [s], found {t!r:.30}")
+        m = measurement.checked()
+        if self._last_t is not None:
+            if t < self._last_t:
+                raise InputError(f"step: t: expected times that never go back, found {t:.3f} s after "
+                                 f"{self._last_t:.3f} s; the measurement is ignored")
+            if t == self._last_t:
+                return self._last
+        issued = [] if self._last_t is None else [(*self._command, t - self._last_t)]
+        X = self.estimator.update(t, m, issued)
+        stalled = m.stalled or (bool(X[K.S_STALLED]) and not self.done)
+        if stalled:
+            X = self.estimator.stalled(m)
+        self._X = X
+        self._last_t = float(t)
+        cmd = self._advance(t, X, stalled)
+        self.latencies.append(time.perf_counter() - t0)
+        return cmd
+
+    def ended_at(self, t: float) -> None:
+        """The run ended at robot time ``t`` [s] (the goal reached, or the robot stopped
+        from outside) in the middle of a period: that period is counted and recorded as
+        driven up to ``t``."""
+        if isinstance(self._request, _Drive) and self._segment_start is not None and t > self._segment_start:
+            wl, wr, _ = self._request.control
+            self.periods += 1
+            self.driven.append((wl, wr, round(t - self._segment_start, 9)))
+            self._request = None
+
+    def close(self):
+        """Stop the worker threads (a plan being made is finished first)."""
+        self._horizon_pool.shutdown(wait=True, cancel_futures=True)
+        self._route_pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ---- the loop -----------------------------------------------------------------
+    def _advance(self, t: float, X: np.ndarray, stalled: bool) -> Command:
+        if self.done:
+            return self._issue(0.0, 0.0, self.status)
+        g = self.world.scenario.goal
+        if math.hypot(X[K.S_X] - g["x"], X[K.S_Y] - g["y"]) <= g["radius"]:
+            return self._end("reached", None)
+        if self._policy is None:
+            self._policy = self._run(X)
+            return self._resume(t, None)
+        req = self._request
+        if isinstance(req, _Drive):
+            if t < self._segment_end - 0.5 * self.period_s and not stalled:
+                return self._issue(*self._command, req.status)
+            return self._resume(t, (X, stalled))
+        return self._resume(t, None)         # awaiting a plan
+
+    def _resume(self, t: float, value) -> Command:
+        """Runs the policy from its pending request: sends ``value`` (a period's end) or
+        the awaited plan, until it asks to drive (the command) or awaits a plan that is
+        not ready (the wheels at rest meanwhile)."""
+        send = value
+        while True:
+            req = self._request
+            if isinstance(req, _Await):
+                if not (self.lockstep or req.future.done()):
+                    return self._issue(0.0, 0.0, req.status)
+                send = req.future.result()
+            try:
+                req = self._policy.send(send) if self._request is not None else next(self._policy)
+            except StopIteration as stop:
+                status, reason = stop.value
+                return self._end(status, reason)
+            self._request, send = req, None
+            if isinstance(req, _Drive):
+                wl, wr, d = req.control
+                n = max(1, int(round(d / self.period_s)))
+                self._segment_start, self._segment_end = t, t + n * self.period_s
+                return self._issue(wl, wr, req.status)
+
+    def _issue(self, wl: float, wr: float, status: str) -> Command:
+        self._command = (float(wl), float(wr))
+        self.status = status
+        v, w = to_twist(wl, wr, self.world.vehicle)
+        age = math.inf if self._plan_t is None else self._last_t - self._plan_t
+        self._last = Command(float(wl), float(wr), v, w, status, age, self.done, self.reason)
+        return self._last
+
+    def _end(self, status: str, reason: str | None) -> Command:
+        self.done, self.reason = True, reason
+        self._request = None
+        return self._issue(0.0, 0.0, status)
+
+    # ---- plans, in the workers ---------------------------------------------------
+    def _await_horizon(self, X, previous=None, budget_s=None, status="waiting"):
+        fut = self._horizon_pool.submit(self.planner.plan, X.copy(), previous, budget_s)
+        return (yield _Await(fut, status))
+
+    def _made(self, h, why: str, X0: np.ndarray, extra_s: float = 0.0):
+        """A horizon plan recorded (``extra_s``: set-up time counted in the first)."""
+        st = self.horizon
+        st.seconds.append(h.seconds + extra_s)
+        st.expansions.append(h.expansions)
+        st.kept_previous += h.found_by == "previous"
+        p = PL.Plan(self.world.scenario.name, self.cost, "found" if h.found else "no_path", h.reason,
+                    list(h.controls), {}, planning_time_s=h.seconds + extra_s, nodes_expanded=h.expansions,
+                    found_by=h.found_by)
+        self.plans.append(RC.Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
+                                    h.found_by == "previous", self.world.scenario.goal["radius"]))
+        self._plan_t = self._last_t
+        if self.keep_paths and h.found:
+            self._keep_path(h.start, h.controls)
+        return h
+
+    def _keep_path(self, X0: np.ndarray, controls) -> None:
+        """The poses the planning model predicts along ``controls`` from X0 (``paths``)."""
+        rows, X = [], X0
+        for c in controls:
+            rec, end, X = self.model.step(X, c)
+            rows.append(rec if not rows else rec[1:])
+            if end < 0 or end == SS.IN_GOAL:
+                break
+        rec = np.vstack(rows)[::20]
+        self.paths.append((self._last_t, {"x": rec[:, K.R_X], "y": rec[:, K.R_Y], "z": rec[:, K.R_Z],
+                                          "yaw": rec[:, K.R_YAW]}))
+
+    def _whole_route(self, X: np.ndarray, why: str):
+        """A whole-route plan from X (the vehicle at rest), made in the second worker:
+        the planner's own budget, an energy plan checked against the time plan (as
+        ``sbmpc plan``'s; from narrow_pass's start the energy search alone found nothing
+        in 60 s where the time search found a plan in 17 s)."""
+        fut = self._route_pool.submit(PL.plan, self.world, self.cost, start=X.copy())
+        p = yield _Await(fut, "waiting")
+        self.horizon.fallbacks += 1
+        self.horizon.fallback_s.append(p.planning_time_s)
+        self.plans.append(RC.Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False,
+                                    self.world.scenario.goal["radius"]))
+        self._plan_t = self._last_t
+        if self.keep_paths and p.found:
+            self._keep_path(X, p.controls)
+        return p
+
+    def _drive(self, control, status):
+        """Drives one period; returns (estimate, stalled) at its end, the period counted."""
+        wl, wr, d = control
+        n = max(1, int(round(d / self.period_s)))
+        t_start = self._last_t
+        X, stalled = yield _Drive((wl, wr, n * self.period_s), status)
+        self.periods += 1
+        self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
+        return X, stalled
+
+    def _stalled_here(self, X: np.ndarray):
+        """A stall counted and placed; the reason to stop once there are more than
+        ``run.max_stalls``, else None."""
+        self.stalls += 1
+        self.stall_at.append((float(X[K.S_X]), float(X[K.S_Y])))
+        if self.stalls > self.settings.max_stalls:
+            return RC._weaker(self.stall_at, self.world.vehicle.name)
+        return None
+
+    # ---- the policy ----------------------------------------------------------------
+    def _run(self, X: np.ndarray):
+        """The policy (module doc) as a generator of requests: it yields a period to
+        drive (resumed with the estimate at the period's end and whether the drive
+        stalled) or a plan to wait for (resumed with the plan), and returns (status,
+        reason) where it ends."""
+        world, rs = self.world, self.settings
+        ps = world.scenario.planner
+        st = self.horizon
+        tol_yaw = math.radians(rs.tol_yaw_deg)
+        window = max(2, int(round(RC.STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
+        togo = []                  # the terminal cost at the estimate, period by period
+        guide = None               # [(wl, wr, d)]: the whole-route plan followed after a hand-over
+        kept = True                # the plan followed keeps the margin
+        held = False               # the last period was held back by the guard, nothing driven since
+        settled = False            # the last period driven held the wheels at rest
+        budget = max(ps.horizon_first_budget_s - self.setup_s, 1e-3)
+        h = yield from self._await_horizon(X, None, budget, "planning")
+        h = self._made(h, "start", X, self.setup_s)
+
+        def route(X, why):
+            p = yield from self._whole_route(X, why)
+            return p, (periods(p.controls, ps.period_s) if p.found else None), RC._keeps_margin(p)
+
+        while True:
+            X = self._X
+            settle = guide is None and not h.found and not settled and RC._settles(X)
+            if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
+                why = ("the horizon plan found no way on" if not h.found else
+                       f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
+                p, guide, kept = yield from route(X, f"{why}: whole-route plan")
+                if not p.found:
+                    weaker = f"; {RC._weaker(self.stall_at, world.vehicle.name)}" if self.stall_at else ""
+                    return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
+                                       f"({why}): {p.reason}{weaker}")
+                X = self._X
+            if settle:
+                control, status = (0.0, 0.0, ps.period_s), "settling"
+            elif guide is not None:
+                control, status = guide[0], "whole-route"
+                if len(guide) == 1:
+                    control = (control[0], control[1], max(control[2], ps.period_s))
+            else:
+                step = periods(h.controls, ps.period_s)
+                control, status = step[0], "horizon"
+                if h.goal and len(step) == 1:
+                    control = (control[0], control[1], max(control[2], ps.period_s))
+            if self.guards and RC._held(self.guards, X, control, kept):
+                # the guard: the period is not driven; a plan from where the vehicle
+                # stands: a horizon plan, then a whole-route one, then it stops
+                self.guarded += 1
+                where = f"{RC.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                if held and guide is not None:
+                    return "stopped", RC._stopped(X, ps)
+                if held or guide is not None:
+                    p, guide, kept = yield from route(X, f"{where}: whole-route plan")
+                    if not p.found:
+                        return "stopped", RC._stopped(X, ps, ("whole-route plan", p.reason))
+                else:
+                    st.from_measured += 1
+                    h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
+                held = True
+                continue
+            held = False
+            settled = settle
+            st.settled += int(settle)
+            if guide is not None:
+                guide.pop(0)
+            n = max(1, int(round(control[2] / self.period_s)))
+            _, _, P = self.model.step(X, (control[0], control[1], n * self.period_s), record=False)
+            nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
+                   if guide is None else None)           # made while the period is driven
+            X, stalled = yield from self._drive(control, status)
+            dxy, dyaw, dv = RC.deviation(X, P)
+            off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
+            if stalled:
+                failed = self._stalled_here(X)
+                if failed:
+                    return "stopped", failed
+                off = True
+            if guide is not None:
+                if off or not guide:
+                    p, guide, kept = yield from route(X, "off the whole-route plan" if off else
+                                                      "the whole-route plan ended short of the goal")
+                    if not p.found:
+                        return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
+                                           f"t = {X[K.S_T]:.1f} s: {p.reason}")
+                continue
+            togo.append(self.planner.to_go(X))
+            if off:
+                st.from_measured += 1
+                why = ("stalled" if stalled else
+                       f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s")
+                h = self._made((yield from self._await_horizon(X, h)), why, X)
+            else:
+                h = self._made((yield _Await(nxt, "horizon")), RC.SETTLED if settle else "next period", P)
+
+
+__all__ = ["Controller", "PERIOD_RANGE", "STATUSES"]

@@ -1,0 +1,232 @@
+"""The controller a robot calls (:class:`sbmpc.robot.Controller`): driven against the
+simulated truth at 0.1 s and 1 s periods, fed measurements with missing channels and bad
+timestamps, a slow planner stubbed in; its estimator and its cmd_vel conversion."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from dynamics import kernels as K
+from dynamics.params import load_vehicle
+from sbmpc import receding as R
+from sbmpc import scenario as SC
+from sbmpc.errors import InputError
+from sbmpc.planning import horizon as HZ
+from sbmpc.planning import world as WO
+from sbmpc.problems import skidsteer as SS
+from sbmpc.robot import Command, Controller, Estimator, Measurement, to_twist, to_wheels
+
+SCN = Path(__file__).resolve().parents[1] / "scenarios"
+
+
+def _world(name="flat", **planner):
+    scn = SC.load(SCN / f"{name}.yaml")
+    return WO.resolve(replace(scn, planner=replace(scn.planner, **planner)))
+
+
+@pytest.fixture(scope="module")
+def flat():
+    return _world(horizon_s=10.0)
+
+
+def _drive(world, ctrl, cost="time", truth=None, t_max=120.0):
+    """The controller against the simulated truth (as ``sbmpc run`` does): returns the
+    commands, the end code and the truth's last state."""
+    twin = world if truth is None else replace(world, vehicle=truth)
+    real = R._Executor(twin, cost)
+    X = WO.start_state(twin)
+    cmds, stalled = [], False
+    while X[K.S_T] < t_max:
+        cmd = ctrl.step(float(X[K.S_T]), R.measured(X, twin.vehicle, stalled))
+        cmds.append(cmd)
+        if cmd.done:
+            return cmds, None, X
+        _, end, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s), record=False)
+        stalled = end == -SS.STALL
+        if stalled:
+            R._protected(X, real)
+        elif end != 0:
+            return cmds, end, X
+    return cmds, "timeout", X
+
+
+@pytest.mark.parametrize("period", [0.1, 1.0])
+def test_the_controller_drives_the_truth_into_the_goal_within_the_drives_limits(flat, period):
+    """At a 0.1 s and a 1 s control period, on flat: the truth ends in the goal disc, every
+    command within the sampled wheel-speed range, its twist the wheel speeds' by the
+    vehicle's track, and at 0.1 s the wheel speeds change only at the planner's periods
+    (1 s: a command held for ten steps)."""
+    ctrl = Controller(flat, "time", period_s=period, lockstep=True)
+    cmds, end, X = _drive(flat, ctrl)
+    ctrl.close()
+    assert end == SS.IN_GOAL, (end, ctrl.status, ctrl.reason)
+    lo, hi = WO.wheel_speed_range(flat)
+    w = np.array([(c.wl, c.wr) for c in cmds])
+    assert np.all(w >= lo - 1e-9) and np.all(w <= hi + 1e-9)
+    v = flat.vehicle
+    for c in cmds:
+        assert c.v == pytest.approx(0.5 * v.wheel_radius * (c.wl + c.wr))
+        assert c.omega == pytest.approx(v.wheel_radius * (c.wr - c.wl) / v.width)
+    assert ctrl.plans and ctrl.periods >= 10
+    if period == 0.1:
+        changes = np.flatnonzero(np.any(np.diff(w, axis=0) != 0.0, axis=1)) + 1
+        assert len(changes) <= ctrl.periods + 1 and len(cmds) >= 8 * ctrl.periods
+    # against the horizon run at 1 s: the same drive within 2 % of its time
+    assert X[K.S_T] == pytest.approx(17.7, rel=0.05)
+
+
+def test_sbmpc_runs_horizon_mode_through_the_controller_at_its_period(flat):
+    """``sbmpc run`` with a horizon is the controller against the truth: at 0.1 s and 1 s
+    (run.control_period_s) both reach the goal with the same plans' drive, within 2 %."""
+    runs = {}
+    for p in (0.1, 1.0):
+        w = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, control_period_s=p)))
+        runs[p] = R.run(w, "time")
+        assert runs[p].status == "reached", runs[p].reason
+        assert runs[p].horizon is not None and runs[p].horizon.seconds
+    assert runs[0.1].travel_time_s == pytest.approx(runs[1.0].travel_time_s, rel=0.02)
+    assert runs[0.1].energy_J == pytest.approx(runs[1.0].energy_J, rel=0.02)
+
+
+def test_step_never_waits_on_a_slow_planner_and_holds_the_wheels_at_rest_meanwhile(flat, monkeypatch):
+    """A planner stubbed to take 0.6 s a plan: without lockstep (a robot), every step
+    returns within the 0.1 s period (the planning runs in the worker thread), the wheels
+    held at rest ('planning') until the first plan is ready; then it drives."""
+    real = HZ.HorizonPlanner.plan
+
+    def slow(self, *a, **k):
+        time.sleep(0.6)
+        return real(self, *a, **k)
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", slow)
+    ctrl = Controller(flat, "time", period_s=0.1)
+    X = WO.start_state(flat)
+    real_ex = R._Executor(flat, "time")
+    seen, took = [], []
+    t = 0.0
+    try:
+        for _ in range(30):
+            t0 = time.perf_counter()
+            cmd = ctrl.step(t, R.measured(X, flat.vehicle))
+            took.append(time.perf_counter() - t0)
+            seen.append(cmd)
+            _, _, X = real_ex.step(X, (cmd.wl, cmd.wr, 0.1), record=False)
+            t += 0.1
+            time.sleep(max(0.0, 0.1 - took[-1]))
+    finally:
+        ctrl.close()
+    assert max(took) < 0.1, max(took)
+    assert seen[0].status == "planning" and (seen[0].wl, seen[0].wr) == (0.0, 0.0)
+    first = next(i for i, c in enumerate(seen) if c.status == "horizon")
+    assert 4 <= first <= 12                     # the 0.6 s plan arrived, and it drives
+    assert all((c.wl, c.wr) == (0.0, 0.0) for c in seen[:first])
+    assert any(c.wl != 0.0 or c.wr != 0.0 for c in seen[first:])
+
+
+def test_measurements_with_missing_channels_or_bad_times_get_a_clear_error_or_a_hold(flat):
+    """Pose alone is enough (wheel speeds and currents then come from the model driven by
+    the commands issued); a repeated time gets the last command again; a time that goes
+    back, a missing pose, a NaN, one side of a pair or a pose off the map is an
+    InputError naming it, and the controller goes on at the next good measurement."""
+    s = flat.scenario.start
+    ctrl = Controller(flat, "time", period_s=0.1, lockstep=True)
+    try:
+        m = Measurement(s["x"], s["y"], math.radians(s["yaw_deg"]))
+        a = ctrl.step(0.0, m)
+        assert ctrl.step(0.0, m) is a
+        b = ctrl.step(0.1, m)
+        assert b.status == "horizon" and np.isfinite([b.wl, b.wr, b.v, b.omega]).all()
+        bad = [(0.05, m, "expected times that never go back"),
+               (0.2, Measurement(s["x"], None, 0.0), "field 'y': expected the pose"),
+               (0.2, Measurement(s["x"], s["y"], float("nan")), "field 'yaw': expected a finite number"),
+               (0.2, Measurement(s["x"], s["y"], 0.0, wl=1.0), "expected both sides or neither"),
+               (0.2, Measurement(500.0, s["y"], 0.0), "expected a position on the map"),
+               (float("inf"), m, "t: expected a finite time")]
+        for t, mm, msg in bad:
+            with pytest.raises(InputError, match=msg):
+                ctrl.step(t, mm)
+        c = ctrl.step(0.2, m)
+        assert np.isfinite([c.wl, c.wr]).all() and not c.done
+    finally:
+        ctrl.close()
+    with pytest.raises(InputError, match="period_s: expected a control period in"):
+        Controller(flat, "time", period_s=2.0)
+
+
+def test_the_estimate_of_the_truth_is_the_truth_where_the_model_is_right(flat):
+    """The truth driven by the planning vehicle's own model: from pose, wheel speeds and
+    currents every 0.1 s, the estimate's loop states (references, integrals, currents,
+    speeds) equal the truth's to 1e-9 after 3 s of accelerating and turning; from the
+    pose alone, its wheel speeds follow the commands (the model's, within 1e-9 too)."""
+    est_full, est_pose = Estimator(flat, "time"), Estimator(flat, "time")
+    real = R._Executor(flat, "time")
+    X = WO.start_state(flat)
+    cmds = [(6.0, 8.0)] * 20 + [(8.0, 4.0)] * 10
+    issued = []
+    for k, c in enumerate(cmds):
+        m = R.measured(X, flat.vehicle)
+        est_full.update(X[K.S_T], m, issued)
+        est_pose.update(X[K.S_T], Measurement(m.x, m.y, m.yaw), issued)
+        _, _, X = real.step(X, (*c, 0.1), record=False)
+        issued = [(*c, 0.1)]
+    m = R.measured(X, flat.vehicle)
+    full = est_full.update(X[K.S_T], m, issued)
+    pose = est_pose.update(X[K.S_T], Measurement(m.x, m.y, m.yaw), issued)
+    for i in (K.S_WL, K.S_WR, K.S_REFL, K.S_REFR, K.S_INTL, K.S_INTR, K.S_IL, K.S_IR, K.S_X, K.S_YAW):
+        assert full[i] == pytest.approx(X[i], abs=1e-9), K
+        assert pose[i] == pytest.approx(X[i], abs=1e-6), i
+
+
+def test_a_heavier_truths_currents_correct_the_integrals_the_model_got_wrong(flat):
+    """A truth 30 % heavier, driven up to 4 rad/s and into a turn: from its measured
+    currents and speeds the inner side's PID integral lands on the truth's (within 1 %), where
+    the pose-only estimate keeps the planning model's, 5 % off or more."""
+    heavy = replace(flat, vehicle=WO.heavier(flat.vehicle, 1.3))
+    est_full, est_pose = Estimator(flat, "time"), Estimator(flat, "time")
+    real = R._Executor(heavy, "time")
+    X = WO.start_state(heavy)
+    issued = []
+    for k in range(40):
+        m = R.measured(X, heavy.vehicle)
+        est_full.update(X[K.S_T], m, issued)
+        est_pose.update(X[K.S_T], Measurement(m.x, m.y, m.yaw), issued)
+        c = (4.0, 4.0) if k < 20 else (4.0, 6.0)
+        _, _, X = real.step(X, (*c, 0.1), record=False)
+        issued = [(*c, 0.1)]
+    m = R.measured(X, heavy.vehicle)
+    full = est_full.update(X[K.S_T], m, issued)
+    pose = est_pose.update(X[K.S_T], Measurement(m.x, m.y, m.yaw), issued)
+    assert full[K.S_INTL] == pytest.approx(X[K.S_INTL], rel=0.01)
+    assert abs(pose[K.S_INTL] - X[K.S_INTL]) > 0.05 * abs(X[K.S_INTL])
+    # the outer side is at its current limit: its integral is not observable, and the
+    # estimate keeps the prediction's (the measured current is the limit)
+    assert X[K.S_IR] == pytest.approx(heavy.vehicle.current_limit) and full[K.S_IR] == X[K.S_IR]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-15, 15), st.floats(-15, 15))
+def test_cmd_vel_and_wheel_speeds_convert_both_ways_with_the_drivers_track(wl, wr):
+    """to_twist and to_wheels are each other's inverse, for the P3-AT (track = width) and
+    the Husky (its driver's track, 0.555 m x 1.875)."""
+    for name in ("p3at", "husky"):
+        v = load_vehicle(name)
+        a, b = to_wheels(*to_twist(wl, wr, v), v)
+        assert a == pytest.approx(wl, abs=1e-9) and b == pytest.approx(wr, abs=1e-9)
+
+
+def test_the_husky_is_clearpaths():
+    """The shipped Husky against Clearpath's description (clearpath_common a200
+    control.yaml, husky_description URDF): wheel radius 0.1651 m, wheel separation 0.555 m,
+    and its driver turns cmd_vel into wheel speeds with 0.555 m x 1.875 = 1.04 m: an
+    on-the-spot turn at 1 rad/s is +-3.15 rad/s per side, not the 1.68 of the bare track."""
+    v = load_vehicle("husky")
+    assert v.wheel_radius == pytest.approx(0.1651) and v.width == pytest.approx(0.555)
+    assert v.command_track == pytest.approx(0.555 * 1.875, abs=1e-3)
+    wl, wr = to_wheels(0.0, 1.0, v)
+    assert wr == pytest.approx(-wl) and wr == pytest.approx(0.5 * 1.0406 / 0.1651, rel=1e-4)
+    assert load_vehicle("p3at").command_track == load_vehicle("p3at").width
