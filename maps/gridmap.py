@@ -78,11 +78,32 @@ def is_bag(path: Path) -> bool:
     return (path.is_file() and path.suffix.lower() == ".bag") or (path.is_dir() and (path / "metadata.yaml").is_file())
 
 
+def any_reader(path: Path, default_typestore):
+    """A ``rosbags`` AnyReader (not yet opened) of the bag at ``path``: a folder is a ROS 2
+    bag whatever its name, a file a ROS 1 bag. ``ros2 bag record -o drive.bag`` makes a
+    folder named ``drive.bag``, which AnyReader takes for ROS 1 by its suffix and refuses
+    ("Is a directory"): such a folder is read through a link of another name to it,
+    removed with the reader."""
+    import shutil
+    import tempfile
+    import weakref
+    from rosbags.highlevel import AnyReader
+    path = Path(path)
+    link = None
+    if path.is_dir() and path.suffix == ".bag":
+        link = Path(tempfile.mkdtemp(prefix="sbmpc-bag-")) / "ros2-bag"
+        link.symlink_to(path.resolve(), target_is_directory=True)
+    reader = AnyReader([link or path], default_typestore=default_typestore)
+    if link is not None:
+        weakref.finalize(reader, shutil.rmtree, str(link.parent), True)
+    return reader
+
+
 def read_gridmap(path: Path, spec: dict, where: str, error) -> tuple:
     """(heights H[j, i] [m], resolution [m], origin (x, y) [m]) of the grid map layer the
     map ``spec`` names in the bag at ``path``; ``error(message)`` makes the exception to raise."""
     try:
-        from rosbags.highlevel import AnyReader
+        import rosbags  # noqa: F401
     except ImportError:
         raise error(f"{where}.file: a ROS bag map needs the rosbags package: pip install 'sbmpc[ros]'") from None
     extra = set(spec) - KEYS
@@ -95,7 +116,7 @@ def read_gridmap(path: Path, spec: dict, where: str, error) -> tuple:
         raise error(f"{where}.message: expected an integer (0 the first message, -1 the last), found {index!r:.40}")
     ros1 = path.is_file()
     try:
-        with AnyReader([path], default_typestore=typestore(ros1)) as reader:
+        with any_reader(path, typestore(ros1)) as reader:
             grids = sorted({c.topic for c in reader.connections if c.msgtype == GRID_MAP})
             topic = spec.get("topic")
             if topic is None:
@@ -121,6 +142,16 @@ def read_gridmap(path: Path, spec: dict, where: str, error) -> tuple:
     except Exception as exc:
         raise error(f"{path}: expected a ROS bag with a {GRID_MAP} message, found one that cannot be read "
                     f"({' '.join(str(exc).split())[:200]})") from None
+    return gridmap_heights(msg, layer, spec.get("nodata", "error"), where, str(path), error)
+
+
+def gridmap_heights(msg, layer: str = "elevation", nodata: str = "error", where: str = "map",
+                    source: str = "grid map", error=ValueError) -> tuple:
+    """(heights H[j, i] [m], resolution [m], origin (x, y) [m] of cell [0, 0]) of one layer
+    of a ``grid_map_msgs/GridMap`` message (a deserialized one from a bag, or rclpy's: the
+    fields are the same); ``nodata``: 'error' refuses NaN cells, 'wall' makes them
+    impassable. ``error``: the exception raised, with one line naming ``source``."""
+    path = source
     if layer not in msg.layers:
         raise error(f"{where}.layer: expected one of the grid map's layers {', '.join(msg.layers)}, found {layer!r}")
     arr = msg.data[list(msg.layers).index(layer)]
@@ -142,8 +173,7 @@ def read_gridmap(path: Path, spec: dict, where: str, error) -> tuple:
     H = M[::-1, ::-1].T.copy()                              # H[j, i] up y and up x
     px, py = info.pose.position.x, info.pose.position.y
     own = (px - 0.5 * info.length_x + 0.5 * res, py - 0.5 * info.length_y + 0.5 * res)
-    return wall_nodata(H, spec.get("nodata", "error"), f"{path}: layer {layer}", "NaN: not observed", where,
-                       error), res, own
+    return wall_nodata(H, nodata, f"{path}: layer {layer}", "NaN: not observed", where, error), res, own
 
 
-__all__ = ["GRID_MAP_MSG_ROS1", "GRID_MAP_MSG_ROS2", "is_bag", "read_gridmap", "typestore"]
+__all__ = ["GRID_MAP_MSG_ROS1", "GRID_MAP_MSG_ROS2", "any_reader", "gridmap_heights", "is_bag", "read_gridmap", "typestore"]

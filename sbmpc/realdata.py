@@ -119,7 +119,7 @@ def _chain_windows(win, x, y, yaw):
 
 
 BOREALTC_QUANTUM = 1.0 / 127.0     # m/s: resolution of the logged wheel speeds
-HUSKY_WHEEL_RADIUS = 0.13           # m, BorealTC's code
+HUSKY_WHEEL_RADIUS = 0.13           # m, BorealTC's code: its linear speeds back to angular ones (the tyre: 0.1651 m)
 
 
 def read_borealtc(path: Path | str, wheel_radius: float = HUSKY_WHEEL_RADIUS) -> dict:

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import functools
 import math
-import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -44,61 +43,15 @@ from dynamics.params import Vehicle
 
 from .planning import plan as PL
 from .planning.horizon import periods
-from .planning import problem as PB
 from . import trajectory as TR
 
 from .planning import world as WO
 from .problems import skidsteer as SS
 from .scenario import RunSettings
-
-
-@dataclass
-class Replan:
-    """One plan of a run: when and why it was made, what it predicted."""
-
-    t: float                 # run time at which it was made [s]
-    x: float
-    y: float
-    why: str
-    plan: PL.Plan
-    warm: bool               # an incumbent (the rest of the previous plan) was handed to the search
-    goal_radius: float       # the radius of the goal disc the plan aimed at [m] (re-plans: AIM_MARGIN inside)
-
-    def to_json(self) -> dict:
-        p = self.plan
-        return {"t": self.t, "x": self.x, "y": self.y, "why": self.why, "status": p.status, "reason": p.reason, "failure": p.failure,
-                "planning_time_s": p.planning_time_s, "nodes_expanded": p.nodes_expanded,
-                "predicted_travel_time_s": p.travel_time_s, "predicted_energy_J": p.energy_J,
-                "controls": len(p.controls), "warm_start": self.warm, "goal_radius_m": self.goal_radius,
-                "found_by": p.found_by or ("search" if p.found else None), "rival": p.rival}
-
-
-@dataclass
-class HorizonStats:
-    """The horizon plans of a receding-horizon run (``planner.horizon_s``): how long each
-    took [s], how many the search made and how many kept the previous plan, why the run
-    re-planned from the measured state instead of the predicted one, how often the wheels
-    were held at rest for a period before a plan was made again (``settled``)."""
-
-    horizon_s: float
-    seconds: list = field(default_factory=list)
-    expansions: list = field(default_factory=list)
-    kept_previous: int = 0
-    from_measured: int = 0
-    fallbacks: int = 0
-    fallback_s: list = field(default_factory=list)
-    settled: int = 0
-
-    def to_json(self) -> dict:
-        s = np.array(self.seconds) if self.seconds else np.zeros(1)
-        later = s[1:] if len(s) > 1 else s
-        return {"horizon_s": self.horizon_s, "plans": len(self.seconds),
-                "first_s": float(s[0]), "replan_median_s": float(np.median(later)),
-                "replan_p95_s": float(np.percentile(later, 95)), "replan_max_s": float(later.max()),
-                "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
-                "kept_previous": self.kept_previous, "from_measured": self.from_measured,
-                "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s],
-                "settled": self.settled}
+from .robot.messages import measured  # noqa: F401
+from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
+                        Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
+                        protected as _protected, settles as _settles, stopped as _stopped, weaker as _weaker)
 
 
 @dataclass
@@ -185,81 +138,6 @@ class RunResult:
         }
 
 
-def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
-    """(position [m], heading [rad], speed [m/s]) differences of a measured state X from
-    a predicted state P (planner states, :mod:`sbmpc.problems.skidsteer`)."""
-    dxy = math.hypot(X[K.S_X] - P[K.S_X], X[K.S_Y] - P[K.S_Y])
-    dyaw = abs(math.remainder(X[K.S_YAW] - P[K.S_YAW], 2.0 * math.pi))
-    dv = abs(X[SS.X_V] - P[SS.X_V])
-    return dxy, dyaw, dv
-
-
-class _Executor:
-    """Steps one world's closed-loop model through controls, period by period, at its
-    vehicle's controller period (the paper's 1 kHz digital PID). ``delay_s``: the
-    vehicle's command delay: each command reaches the wheel loops that much later (the
-    commands issued still in the pipe are kept across periods, so a delay longer than a
-    period is executed in full; before the first command arrives the loops hold the
-    start state's wheel-speed references: a vehicle that starts at speed keeps it)."""
-
-    def __init__(self, world: WO.World, cost: str, delay_s: float = 0.0, tip_guard: bool = False):
-        self.dt = 1.0 / world.vehicle.controller_rate
-        self.Q, self.data = PB.pack_world(world, cost, self.dt, grid=False)
-        if tip_guard:
-            # half the tip-over margin alone (planner.margin_tip_deg): the guard of a run's
-            # periods. Half: a plan keeps the whole margin at the planner's step, and its
-            # 1 kHz drive may graze it (with the whole, hills_field's energy run held back
-            # its own fresh plans' periods 50 times)
-            ps = world.scenario.planner
-            self.Q[SS.Q_TIPM] = math.radians(ps.tip_over_deg - 0.5 * ps.margin_tip_deg)
-        self.lag = int(round(delay_s / self.dt))
-        self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
-
-    def _applied(self, X: np.ndarray, wl: float, wr: float, n: int) -> list:
-        """The commands [[wl, wr, steps]] that reach the loops over the next n steps."""
-        if self.pipe is None:
-            self.pipe = [[float(X[K.S_REFL]), float(X[K.S_REFR]), self.lag]]
-        self.pipe.append([wl, wr, n])
-        out, need = [], n
-        while need > 0:
-            seg = self.pipe[0]
-            take = min(seg[2], need)
-            if take > 0:
-                out.append([seg[0], seg[1], take])
-            seg[2] -= take
-            need -= take
-            if seg[2] == 0:
-                self.pipe.pop(0)
-        return out
-
-    def step(self, X: np.ndarray, control, record: bool = True) -> tuple:
-        """Apply (wl, wr, duration_s) from state X. Returns (recorded rows (n, NR) from X
-        on, end code, new state)."""
-        wl, wr, d = control
-        n = max(1, int(round(d / self.dt)))
-        segs = self._applied(X, wl, wr, n) if self.lag > 0 else [[wl, wr, n]]
-        rec = np.zeros((n + 1 if record else 1, K.NR))
-        rows, S, end, _ = SS.replay(self.Q, self.data, np.ascontiguousarray(X), np.array([g[0] for g in segs], float),
-                                    np.array([g[1] for g in segs], float), np.array([g[2] for g in segs], np.int64), rec)
-        if self.lag > 0:
-            # a drive cut short (a stall, the goal) applied fewer steps: what it did not
-            # apply is still in the pipe, in order
-            left = n - int(round((S[K.S_T] - X[K.S_T]) / self.dt))
-            for g in reversed(segs):
-                if left <= 0:
-                    break
-                back = min(left, g[2])
-                if self.pipe and self.pipe[0][:2] == g[:2]:
-                    self.pipe[0][2] += back
-                else:
-                    self.pipe.insert(0, [g[0], g[1], back])
-                left -= back
-        return rec[:rows], int(end), S
-
-
-STUCK_HORIZONS = 2   # a horizon run falls back to whole-route plans where its terminal cost did not fall for this many horizons
-HELD = "the next period would come within half the tip-over margin or leave the map"   # a re-plan's why after the guard
-SETTLED = "after the wheels were held at rest for a period (the horizon plan found no way on from a saturated drive)"   # a plan's why
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 
 
@@ -282,54 +160,6 @@ def _aim(world: WO.World) -> WO.World:
     return replace(world, scenario=replace(world.scenario, goal=dict(g, radius=g["radius"] - m), planner=ps))
 
 
-def _guards(world: WO.World, cost: str) -> list:
-    """The tip-over guard of a run's periods (``planner.margin_tip_deg`` > 0; else none):
-    controller-rate executors of the planning vehicle and, with a margin
-    (``planner.margin``), of its pessimistic twin (:func:`sbmpc.planning.world.pessimistic`),
-    each with half the tip-over margin (:class:`_Executor`)."""
-    ps = world.scenario.planner
-    if ps.margin_tip_deg <= 0.0:
-        return []
-    out = [_Executor(world, cost, tip_guard=True)]
-    if ps.margin > 0.0:
-        out.append(_Executor(WO.pessimistic(world), cost, tip_guard=True))
-    return out
-
-
-def _held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
-    """Whether the guards (:func:`_guards`: the world's vehicle, then its twin) hold back
-    the period ``control`` from the measured state X. The world's vehicle's prediction holds it back where it tips over, or, for a plan
-    that keeps the margin (``kept``), where it comes within half the tip-over margin; a
-    plan made without the margin (none kept it: it says so) rides within the margin by
-    design, and its drive would be held back at every period. The pessimistic twin's
-    prediction (a vehicle weaker than the planning one: it falls behind, and meets the
-    flank of a pass where the plan has passed it) holds it back where it comes within
-    half the margin: the one prediction of a fallback plan's periods on a vehicle the
-    plan did not allow for. Once the twin plans (the vehicle proved weaker), the run
-    passes ``kept`` False. The world's vehicle's prediction also holds a period back
-    where it leaves the map: a run never drives off its map (a horizon run with 10 %
-    less grip left `hills_field` at (48.4, 59.7), 2026-12-06)."""
-    for j, g in enumerate(guards):
-        _, end, _ = g.step(X, control, record=False)
-        if end == -SS.TIP or (end == -SS.OFF_MAP and j == 0) or (end == -SS.MARGIN and (kept or j > 0)):
-            return True
-    return False
-
-
-def _stopped(X: np.ndarray, ps, failed: tuple | None = None) -> str:
-    """Why a run stopped at the measured state X rather than tip over (``ps``: the planner
-    settings): the guard held back the first period of every plan from there, or, with
-    ``failed`` (what re-planned, its reason), the period it held back left no plan."""
-    at = f"stopped at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s: "
-    if failed is not None:
-        return (f"{at}the next period would come within half the tip-over margin or leave the map and no "
-                f"{failed[0]} from there "
-                f"found a way on ({failed[1]}); the run stops rather than tip over")
-    return (f"{at}every way on that the planner found comes within half the tip-over margin "
-            f"({0.5 * ps.margin_tip_deg:g} deg below {ps.tip_over_deg:g} deg) or leaves the map from the measured "
-            f"state; the run stops rather than tip over")
-
-
 RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (_retrace)
 
 
@@ -349,11 +179,6 @@ def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
             return None
         _, _, S = guards[0].step(S, c, record=False)
     return back
-
-
-def _keeps_margin(plan: PL.Plan) -> bool:
-    """Whether a plan keeps the planner's margin (a fallback made without it says so)."""
-    return bool((plan.margin or {}).get("kept", True))
 
 
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray) -> tuple:
@@ -414,29 +239,6 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
         return _weaker(stalls, name)
     _protected(X, real)
     return None
-
-
-def _settles(X: np.ndarray) -> bool:
-    """Whether a vehicle from whose state X a horizon plan found no way on is first to be
-    held at rest for a period (:func:`_run_horizon`): its stall timer runs (the drive
-    saturated short of its command within the last moments: the timer leaks at the rate
-    it fills), not yet a stall. A moving vehicle is braked to rest. The wheel-speed
-    references, rate-limited, then keep the drive saturated whatever the next plan
-    commands, and every edge from there stalls: on ``hills_field`` (energy, seed 4) a
-    vehicle braking into a pivot on a 5 deg slope stopped at t = 50 s with 0.12 s on its
-    stall timer, every edge of the horizon and of the whole-route search stalled, and the
-    run failed; after one period with the wheels held at rest the horizon plan found a way
-    on in 19 ms."""
-    return bool(X[K.S_STALLT] > 0.0 and X[K.S_STALLED] == 0.0)
-
-
-def _weaker(stalls: list, name: str) -> str:
-    """The failure of a run whose vehicle stalled at ``stalls`` [(x, y)] where every plan
-    of the planning model ``name`` predicted it would get through."""
-    where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
-    return (f"the vehicle stalled {len(stalls)} time{'s' if len(stalls) > 1 else ''}, at {where}, where every "
-            f"plan predicted it would get through: it is weaker there than the planning model ({name}); plan "
-            f"with a model of this vehicle (sbmpc diagnose on a run of it writes one)")
 
 
 def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
@@ -667,27 +469,6 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
             off += [f"speed off by {dv:.2f} m/s"] if dv > rs.tol_v else []
             if off:
                 why = ", ".join(off)
-
-
-def measured(X: np.ndarray, vehicle: Vehicle, stalled: bool = False):
-    """What a robot measures of the simulated truth's state X: the pose, wheel speeds,
-    currents and the battery voltage (:class:`sbmpc.robot.Measurement`); ``stalled``: the
-    drive's stall protection tripped."""
-    from .robot.messages import Measurement
-    return Measurement(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]),
-                       v=float(X[SS.X_V]) if len(X) > SS.X_V else None,
-                       wl=float(X[K.S_WL]), wr=float(X[K.S_WR]), il=float(X[K.S_IL]), ir=float(X[K.S_IR]),
-                       voltage=float(vehicle.v_max), stalled=stalled)
-
-
-def _protected(X: np.ndarray, real: "_Executor") -> None:
-    """The drive's stall protection on the simulated truth: its references set to the
-    measured speeds, commands still in the pipe dropped (:func:`_stalled`)."""
-    X[K.S_STALLT] = 0.0
-    X[K.S_STALLED] = 0.0
-    X[K.S_REFL] = X[K.S_WL]
-    X[K.S_REFR] = X[K.S_WR]
-    real.pipe = None
 
 
 def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> RunResult:

@@ -98,25 +98,13 @@ def _side(names, want: list | None, word: str, path, topic) -> list:
 
 def open_bag(path: Path):
     """An opened ``rosbags`` AnyReader of the bag at ``path``: a folder is a ROS 2 bag
-    whatever its name, a file a ROS 1 bag. ``ros2 bag record -o drive.bag`` makes a folder
-    named ``drive.bag``, which AnyReader takes for ROS 1 by its suffix and refuses ("Is a
-    directory"): such a folder is read through a link of another name to it (removed
-    with the reader). Messages without embedded definitions decode with ROS 2 Humble's
-    types."""
-    import shutil
-    import tempfile
-    import weakref
-    from rosbags.highlevel import AnyReader
+    whatever its name (``drive.bag`` too), a file a ROS 1 bag
+    (:func:`maps.gridmap.any_reader`). Messages without embedded definitions decode with
+    ROS 2 Humble's types."""
     from rosbags.typesys import Stores, get_typestore
-    path = Path(path)
-    link = None
-    if path.is_dir() and path.suffix == ".bag":
-        tmp = Path(tempfile.mkdtemp(prefix="sbmpc-bag-"))
-        link = tmp / "ros2-bag"
-        link.symlink_to(path.resolve(), target_is_directory=True)
-    reader = AnyReader([link or path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-    if link is not None:
-        weakref.finalize(reader, shutil.rmtree, str(link.parent), True)
+
+    from maps.gridmap import any_reader
+    reader = any_reader(path, get_typestore(Stores.ROS2_HUMBLE))
     reader.open()
     return reader
 

@@ -85,3 +85,17 @@ def test_an_8bit_png_refused_for_its_size_prints_the_refusal_alone(tmp_path, cap
     s = _scenario(tmp_path, "{file: h.png, resolution: 1.0, height_range: [0, 2]}")
     err = one_line(capsys, main(["plan", str(s)]))
     assert "8-bit" not in err and "at most 25 million cells" in err
+
+
+@pytest.mark.parametrize("command", [["plan"], ["run"], ["compare", "--out", "cmp"]])
+def test_a_scenario_with_a_nul_byte_gets_one_line(tmp_path, capsys, command):
+    """A NUL byte in a scenario: the YAML parser's message has a line break in it (the
+    character, then where); every message is one line (issue 63), and the file is left as
+    it was."""
+    p = _scenario(tmp_path, "{generate: {size: [10, 10]}}")
+    data = p.read_bytes().replace(b"name: s", b"name: s\x00")
+    p.write_bytes(data)
+    args = [command[0], str(p)] + [str(tmp_path / a) if a == "cmp" else a for a in command[1:]]
+    err = one_line(capsys, main(args))
+    assert "malformed YAML" in err and "special characters are not allowed" in err
+    assert p.read_bytes() == data

@@ -20,7 +20,7 @@ from sbmpc.errors import InputError
 from sbmpc.planning import horizon as HZ
 from sbmpc.planning import world as WO
 from sbmpc.problems import skidsteer as SS
-from sbmpc.robot import Command, Controller, Estimator, Measurement, to_twist, to_wheels
+from sbmpc.robot import Controller, Estimator, Measurement, to_twist, to_wheels
 
 SCN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -168,7 +168,7 @@ def test_the_estimate_of_the_truth_is_the_truth_where_the_model_is_right(flat):
     X = WO.start_state(flat)
     cmds = [(6.0, 8.0)] * 20 + [(8.0, 4.0)] * 10
     issued = []
-    for k, c in enumerate(cmds):
+    for c in cmds:
         m = R.measured(X, flat.vehicle)
         est_full.update(X[K.S_T], m, issued)
         est_pose.update(X[K.S_T], Measurement(m.x, m.y, m.yaw), issued)

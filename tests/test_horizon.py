@@ -14,6 +14,7 @@ import pytest
 
 from dynamics import kernels as K
 from sbmpc.planning import horizon as HZ
+from sbmpc import execution as EX
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc import schemas
@@ -263,14 +264,14 @@ def test_a_horizon_run_never_drives_a_period_the_guard_holds_back(flat, monkeypa
     tip-over margin is not driven; the vehicle waits for a horizon plan from where it
     stands, then for a whole-route plan, and where that one's first period is held back
     too, the run stops rather than tip over, without driving a step."""
-    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(-SS.MARGIN)])
+    monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _Predicts(-SS.MARGIN)])
     res = R.run(flat, "time")
     assert res.status == "failed" and "the run stops rather than tip over" in res.reason
     assert res.periods == 0 and res.guarded == 3
     assert res.horizon.fallbacks == 1 and res.horizon.from_measured == 1
     assert [r.why.split(" at (")[0] for r in res.plans[1:]] == [R.HELD, R.HELD]
     # a guard that holds nothing back changes nothing
-    monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0), _Predicts(0)])
+    monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _Predicts(0)])
     free = R.run(flat, "time")
     assert free.status == "reached" and free.guarded == 0 and free.horizon.fallbacks == 0
 
@@ -339,6 +340,6 @@ def test_a_horizon_run_holds_a_saturated_drive_at_rest_before_it_falls_back(trap
     assert "wheels held at rest 1 period to unload a saturated drive" in summary(res)
     jsonschema.validate(res.to_json(), schemas.run())
     calls.clear()
-    monkeypatch.setattr(R, "_settles", lambda X: False)
+    monkeypatch.setattr(EX, "settles", lambda X: False)
     res = R.run(trap, "time")
     assert res.status == "failed" and "no way on from" in res.reason and "stalled" in res.reason

@@ -322,3 +322,38 @@ def test_grid_map_holes_and_bad_keys_are_refused_or_walled(tmp_path, capsys):
     assert main(["plan", str(scn), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "4 cells without data" in err[0]
+
+
+@pytest.mark.parametrize("kind", ["mcap", "ros1"])
+def test_shadow_writes_the_controllers_commands_and_plans_beside_the_recorded_topics(short, kind, tmp_path, capsys):
+    """``sbmpc shadow``: a recorded 8 s drive (rosbags' own writers; ROS 2 MCAP, and ROS 1
+    whose messages are converted) fed to the controller at 0.1 s on flat: the output bag
+    holds every recorded message, one /sbmpc/cmd_vel and /sbmpc/status per step, a
+    /sbmpc/plan per plan (poses on the map, from the aligned start), and the JSON's
+    commands are those Twists; the summary compares them with the driver's."""
+    import json
+    bag = tmp_path / ("drive.bag" if kind == "ros1" else "drive")
+    write_robot_bag(bag, short, kind)
+    out, js = tmp_path / "shadow", tmp_path / "shadow.json"
+    assert main(["shadow", str(bag), "--scenario", str(SCN / "flat.yaml"), "--bag", str(out), "--json", str(js),
+                 "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "against the driver's commands" in text and "step latency" in text
+    d = json.loads(js.read_text())
+    n = len(d["steps"]["t"])
+    assert n == pytest.approx((short.t[-1] - short.t[0]) / 0.1 + 1, abs=1)
+    assert d["summary"]["plans"] >= 1 and 0.0 <= d["summary"]["same_direction"] <= 1.0
+    with AnyReader([out]) as r:
+        counts = {c.topic: c.msgcount for c in r.connections}
+        assert counts["/cmd_vel"] == counts["/joint_states"] == counts["/odom"] == len(short)
+        assert counts["/sbmpc/cmd_vel"] == counts["/sbmpc/status"] == n
+        assert counts["/sbmpc/plan"] >= 1
+        conn = next(c for c in r.connections if c.topic == "/sbmpc/cmd_vel")
+        v = [r.deserialize(raw, conn.msgtype).linear.x for _, _, raw in r.messages(connections=[conn])]
+        np.testing.assert_allclose(v, d["steps"]["v"], atol=1e-9)
+        conn = next(c for c in r.connections if c.topic == "/sbmpc/plan")
+        path = r.deserialize(next(iter(r.messages(connections=[conn])))[2], conn.msgtype)
+        p0 = path.poses[0].pose.position
+        assert (p0.x, p0.y) == pytest.approx((2.0, 2.0), abs=0.05)      # flat's start: the aligned first pose
+    assert main(["shadow", str(bag), "--scenario", str(SCN / "flat.yaml"), "--period", "3"]) == 2
+    assert "--period: expected a control period in [0.05, 1] s, found 3" in capsys.readouterr().err

@@ -104,6 +104,12 @@ def _negative_values(argv: list) -> list:
     return out
 
 
+def _one_line(exc) -> str:
+    """An error's message on one line: a library's own message may carry line breaks (the
+    YAML parser's 'special characters are not allowed' and the place it found one)."""
+    return " ".join(str(exc).split())
+
+
 def main(argv=None) -> int:
     """:func:`_main`, with stderr that may lose its reader too (``2>&1 | true``: the exit
     code of a bad input was 1, Python's for the error line it could not print)."""
@@ -152,10 +158,10 @@ def _main(argv=None) -> int:
                 sys.stdout.flush()
                 sys.stdout = out
     except InputError as exc:
-        print(f"sbmpc {args.command}: error: {exc}", file=sys.stderr)
+        print(f"sbmpc {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except NoResult as exc:
-        print(f"sbmpc {args.command}: {exc}", file=sys.stderr)
+        print(f"sbmpc {args.command}: {_one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"sbmpc {args.command}: interrupted", file=sys.stderr)

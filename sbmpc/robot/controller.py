@@ -48,7 +48,7 @@ from ..planning import plan as PL
 from ..planning import world as WO
 from ..planning.horizon import HorizonPlanner, periods
 from ..problems import skidsteer as SS
-from .. import receding as RC
+from .. import execution as EX
 from .estimator import Estimator
 from .messages import STATUSES, Command, Measurement, to_twist
 
@@ -79,8 +79,8 @@ class Controller:
     simulated clock) instead of holding at rest; ``settings``: the run's tolerances
     (:class:`sbmpc.scenario.RunSettings`, default the scenario's ``run``).
 
-    What it did is kept for the record: ``plans`` (:class:`sbmpc.receding.Replan` per
-    plan), ``horizon`` (:class:`sbmpc.receding.HorizonStats`), ``guarded``, ``stalls``,
+    What it did is kept for the record: ``plans`` (:class:`sbmpc.execution.Replan` per
+    plan), ``horizon`` (:class:`sbmpc.execution.HorizonStats`), ``guarded``, ``stalls``,
     ``periods``, ``driven`` [(wl, wr, duration_s)] and ``latencies`` (wall-clock seconds
     of every :meth:`step`); with ``keep_paths``, ``paths``: per plan found, (robot time
     [s], {x, y, z, yaw: arrays}) of the poses its model predicts (what a robot publishes
@@ -108,13 +108,13 @@ class Controller:
         self.planner = HorizonPlanner(world, self.cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
         self.setup_s = time.perf_counter() - t0     # the value and turn cost: the first plan's time
         self.estimator = Estimator(world, self.cost)
-        self.model = RC._Executor(world, self.cost)
-        self.guards = RC._guards(world, self.cost)
+        self.model = EX.Executor(world, self.cost)
+        self.guards = EX.guards(world, self.cost)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
         # the record
         self.plans: list = []
-        self.horizon = RC.HorizonStats(ps.horizon_s)
+        self.horizon = EX.HorizonStats(ps.horizon_s)
         self.guarded = 0
         self.stalls = 0
         self.stall_at: list = []
@@ -139,11 +139,13 @@ class Controller:
 
     @classmethod
     def from_scenario(cls, scenario, cost: str | None = None, period_s: float = 0.1, horizon_s: float | None = None,
-                      lockstep: bool = False, **planner) -> "Controller":
-        """A controller for a scenario (a YAML path, a dict or a Scenario; keyword planner
-        settings override the scenario's, as in :func:`sbmpc.plan_scenario`)."""
-        from ..api import load_world
-        return cls(load_world(scenario, **planner), cost, period_s, horizon_s, lockstep)
+                      lockstep: bool = False) -> "Controller":
+        """A controller for a scenario: a YAML path or a :class:`sbmpc.scenario.Scenario`
+        (with planner overrides, a dict or a heights array:
+        ``Controller(sbmpc.load_world(..., **planner))``)."""
+        from .. import scenario as SC
+        scn = scenario if isinstance(scenario, SC.Scenario) else SC.load(scenario)
+        return cls(WO.resolve(scn), cost, period_s, horizon_s, lockstep)
 
     # ---- the robot's call ---------------------------------------------------------
     def step(self, t: float, measurement: Measurement) -> Command:
@@ -261,7 +263,7 @@ class Controller:
         p = PL.Plan(self.world.scenario.name, self.cost, "found" if h.found else "no_path", h.reason,
                     list(h.controls), {}, planning_time_s=h.seconds + extra_s, nodes_expanded=h.expansions,
                     found_by=h.found_by)
-        self.plans.append(RC.Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
+        self.plans.append(EX.Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
                                     h.found_by == "previous", self.world.scenario.goal["radius"]))
         self._plan_t = self._last_t
         if self.keep_paths and h.found:
@@ -289,7 +291,7 @@ class Controller:
         p = yield _Await(fut, "waiting")
         self.horizon.fallbacks += 1
         self.horizon.fallback_s.append(p.planning_time_s)
-        self.plans.append(RC.Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False,
+        self.plans.append(EX.Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False,
                                     self.world.scenario.goal["radius"]))
         self._plan_t = self._last_t
         if self.keep_paths and p.found:
@@ -312,7 +314,7 @@ class Controller:
         self.stalls += 1
         self.stall_at.append((float(X[K.S_X]), float(X[K.S_Y])))
         if self.stalls > self.settings.max_stalls:
-            return RC._weaker(self.stall_at, self.world.vehicle.name)
+            return EX.weaker(self.stall_at, self.world.vehicle.name)
         return None
 
     # ---- the policy ----------------------------------------------------------------
@@ -325,29 +327,30 @@ class Controller:
         ps = world.scenario.planner
         st = self.horizon
         tol_yaw = math.radians(rs.tol_yaw_deg)
-        window = max(2, int(round(RC.STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
+        window = max(2, int(round(EX.STUCK_HORIZONS * ps.horizon_s / ps.period_s)))
         togo = []                  # the terminal cost at the estimate, period by period
         guide = None               # [(wl, wr, d)]: the whole-route plan followed after a hand-over
         kept = True                # the plan followed keeps the margin
         held = False               # the last period was held back by the guard, nothing driven since
         settled = False            # the last period driven held the wheels at rest
-        budget = max(ps.horizon_first_budget_s - self.setup_s, 1e-3)
-        h = yield from self._await_horizon(X, None, budget, "planning")
+        # the first plan has its own budget: the set-up (the value, the turn cost) came with
+        # the controller, before the robot's first call (it is recorded with the first plan)
+        h = yield from self._await_horizon(X, None, ps.horizon_first_budget_s, "planning")
         h = self._made(h, "start", X, self.setup_s)
 
         def route(X, why):
             p = yield from self._whole_route(X, why)
-            return p, (periods(p.controls, ps.period_s) if p.found else None), RC._keeps_margin(p)
+            return p, (periods(p.controls, ps.period_s) if p.found else None), EX.keeps_margin(p)
 
         while True:
             X = self._X
-            settle = guide is None and not h.found and not settled and RC._settles(X)
+            settle = guide is None and not h.found and not settled and EX.settles(X)
             if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
                 why = ("the horizon plan found no way on" if not h.found else
                        f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
                 p, guide, kept = yield from route(X, f"{why}: whole-route plan")
                 if not p.found:
-                    weaker = f"; {RC._weaker(self.stall_at, world.vehicle.name)}" if self.stall_at else ""
+                    weaker = f"; {EX.weaker(self.stall_at, world.vehicle.name)}" if self.stall_at else ""
                     return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                        f"({why}): {p.reason}{weaker}")
                 X = self._X
@@ -362,17 +365,17 @@ class Controller:
                 control, status = step[0], "horizon"
                 if h.goal and len(step) == 1:
                     control = (control[0], control[1], max(control[2], ps.period_s))
-            if self.guards and RC._held(self.guards, X, control, kept):
+            if self.guards and EX.held(self.guards, X, control, kept):
                 # the guard: the period is not driven; a plan from where the vehicle
                 # stands: a horizon plan, then a whole-route one, then it stops
                 self.guarded += 1
-                where = f"{RC.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 if held and guide is not None:
-                    return "stopped", RC._stopped(X, ps)
+                    return "stopped", EX.stopped(X, ps)
                 if held or guide is not None:
                     p, guide, kept = yield from route(X, f"{where}: whole-route plan")
                     if not p.found:
-                        return "stopped", RC._stopped(X, ps, ("whole-route plan", p.reason))
+                        return "stopped", EX.stopped(X, ps, ("whole-route plan", p.reason))
                 else:
                     st.from_measured += 1
                     h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
@@ -388,7 +391,7 @@ class Controller:
             nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
                    if guide is None else None)           # made while the period is driven
             X, stalled = yield from self._drive(control, status)
-            dxy, dyaw, dv = RC.deviation(X, P)
+            dxy, dyaw, dv = EX.deviation(X, P)
             off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
             if stalled:
                 failed = self._stalled_here(X)
@@ -410,7 +413,7 @@ class Controller:
                        f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s")
                 h = self._made((yield from self._await_horizon(X, h)), why, X)
             else:
-                h = self._made((yield _Await(nxt, "horizon")), RC.SETTLED if settle else "next period", P)
+                h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
 
 
 __all__ = ["Controller", "PERIOD_RANGE", "STATUSES"]

@@ -35,6 +35,7 @@ import numpy as np
 from dynamics import kernels as K
 
 from ..errors import InputError
+from ..execution import Executor
 from ..planning import world as WO
 from ..problems import skidsteer as SS
 from .messages import Measurement
@@ -49,9 +50,8 @@ class Estimator:
     corrects."""
 
     def __init__(self, world: WO.World, cost: str):
-        from ..receding import _Executor          # the controller-rate model of the run
         self.world = world
-        self.model = _Executor(world, cost)
+        self.model = Executor(world, cost)
         self.X = None              # the estimate (planner state, SS.NX)
         self.t0 = None             # robot time of the first measurement [s]
 

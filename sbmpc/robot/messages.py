@@ -8,7 +8,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+import numpy as np
+
+from dynamics import kernels as K
+
 from ..errors import InputError
+from ..problems import skidsteer as SS
 
 
 @dataclass(frozen=True)
@@ -97,6 +102,16 @@ STATUSES = {
 }
 
 
+def measured(X: np.ndarray, vehicle, stalled: bool = False) -> Measurement:
+    """What a robot measures of the simulated truth's state X: the pose, wheel speeds,
+    currents and the battery voltage (:class:`sbmpc.robot.Measurement`); ``stalled``: the
+    drive's stall protection tripped."""
+    return Measurement(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]),
+                       v=float(X[SS.X_V]) if len(X) > SS.X_V else None,
+                       wl=float(X[K.S_WL]), wr=float(X[K.S_WR]), il=float(X[K.S_IL]), ir=float(X[K.S_IR]),
+                       voltage=float(vehicle.v_max), stalled=stalled)
+
+
 def to_twist(wl: float, wr: float, vehicle) -> tuple:
     """(v [m/s], omega [rad/s]) of per-side wheel speeds, as a differential-drive
     controller computes them: v = r (wl + wr) / 2, omega = r (wr - wl) / B with B the
@@ -112,4 +127,4 @@ def to_wheels(v: float, omega: float, vehicle) -> tuple:
     return (v - 0.5 * B * omega) / r, (v + 0.5 * B * omega) / r
 
 
-__all__ = ["Measurement", "Command", "STATUSES", "to_twist", "to_wheels"]
+__all__ = ["Measurement", "Command", "STATUSES", "measured", "to_twist", "to_wheels"]

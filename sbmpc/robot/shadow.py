@@ -133,8 +133,8 @@ def summary(res: ShadowResult, ctrl: Controller | None = None) -> dict:
 
 
 def write_shadow_bag(out: Path, source: Path, res: ShadowResult, frame: str = "map") -> dict:
-    """The recorded bag's topics (copied as they are; ROS 1 messages converted to ROS 2's
-    encoding) with ``/sbmpc/cmd_vel`` (geometry_msgs/Twist, every controller step),
+    """The recorded bag's topics (copied as they are; a ROS 1 bag's decoded and written
+    with ROS 2 Humble's message definitions, types Humble lacks left out) with ``/sbmpc/cmd_vel`` (geometry_msgs/Twist, every controller step),
     ``/sbmpc/plan`` (nav_msgs/Path, every plan found, in ``frame``) and ``/sbmpc/status``
     (std_msgs/String) beside them, as a ROS 2 bag folder (MCAP) at ``out``. Returns
     {topic: messages}."""
@@ -148,15 +148,19 @@ def write_shadow_bag(out: Path, source: Path, res: ShadowResult, frame: str = "m
     reader = open_bag(source)
     try:
         with Writer(out, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            # a ROS 2 bag's messages are copied as they are; a ROS 1 bag's are decoded and
+            # written with ROS 2 Humble's definitions (a Header loses its seq)
+            ros1 = not reader.is2
             conns = {}
             for c in reader.connections:
                 try:
-                    conns[c.id] = w.add_connection(c.topic, c.msgtype, typestore=reader.typestore)
+                    if ros1 and c.msgtype not in ts.types:
+                        raise KeyError(c.msgtype)
+                    conns[c.id] = w.add_connection(c.topic, c.msgtype, typestore=ts if ros1 else reader.typestore)
                 except Exception:         # a type the writer cannot describe: left out, and said so
                     counts.setdefault("left out", []).append(c.topic)
-            ros1 = not reader.is2
             for c, t_bag, raw in reader.messages(connections=[c for c in reader.connections if c.id in conns]):
-                data = reader.typestore.ros1_to_cdr(raw, c.msgtype) if ros1 else raw
+                data = ts.serialize_cdr(reader.deserialize(raw, c.msgtype), c.msgtype) if ros1 else raw
                 w.write(conns[c.id], t_bag, data)
                 counts[c.topic] = counts.get(c.topic, 0) + 1
 
