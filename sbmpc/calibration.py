@@ -1,0 +1,314 @@
+"""Calibration: the vehicle's and terrain's parameters fitted to measured runs
+(``sbmpc calibrate``).
+
+The paper identifies its model from experiments (Table I: circle tests per terrain for
+the friction coefficients). This does the same from any drive that excites the
+parameters, on the model's own replay at the controller rate
+(:func:`dynamics.discrepancy.replay`, the residuals ``sbmpc diagnose`` uses):
+
+1. **Which parameters** (:func:`excitation`): each one is tried only where the runs
+   excite it. Rolling resistance needs straight driving with a torque (or current)
+   channel. The turning friction (mu_sa, mu_op) needs turns of both directions, and
+   the torque constant efforts or currents. The mass needs accelerations with efforts or
+   currents.
+2. **The fit** (:func:`calibrate`): least squares over the training part of every run
+   (the first 70 % in time), the channels in noise units, all parameters jointly.
+3. **Identifiability**: standard errors and correlations from the Jacobian at the
+   optimum. A parameter whose relative standard error exceeds ``MAX_REL_SE``, or that
+   correlates with another beyond ``MAX_CORR``, cannot be pinned by these runs. The
+   worst of them is put back at its prior, the fit is run again without it, and the
+   report says so.
+4. **The test**: the held-out last 30 % of each run, nominal against calibrated, in
+   noise units per channel.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynamics.discrepancy import (TRAIN_FRACTION, _error, _least_squares, _residuals, channels, noise_scale,
+                                  replay)
+from dynamics.params import Terrain, Vehicle
+
+# name: (vehicle or terrain, bounds as factors of the prior, what excites it)
+PARAMS = {
+    "mass": ("vehicle", (0.5, 2.0), "accelerations and climbs, with efforts or currents logged"),
+    "torque_constant": ("vehicle", (0.5, 2.0), "efforts or currents logged (the torque per amp, the top speed V/k)"),
+    "mu_roll": ("terrain", (0.2, 5.0), "straight driving, with efforts or currents logged"),
+    "mu_sa": ("terrain", (0.3, 3.0), "turns (the paper's circle tests), with efforts or currents logged"),
+    "mu_op": ("terrain", (0.3, 3.0), "turns of both directions, with efforts or currents logged"),
+}
+MAX_REL_SE = 0.25      # a fitted value whose standard error is more than this share of it is not pinned
+MAX_CORR = 0.95        # two parameters correlated beyond this cannot be told apart
+MIN_SECONDS = 3.0      # s of a manoeuvre that excites a parameter before it is fitted
+ACCEL = 1.0            # rad/s^2: a measured wheel-speed rate above this is an acceleration
+
+
+@dataclass
+class Calibration:
+    """The outcome: the calibrated vehicle and terrain, per parameter its prior, value,
+    standard error and whether it was fitted (``fitted``) or kept (``kept``: why), the
+    correlation matrix of the fitted ones, what the runs excited, and the held-out error
+    per run and channel (noise units) of the nominal and the calibrated model."""
+
+    vehicle: Vehicle
+    terrain: Terrain
+    params: dict
+    correlation: dict
+    excitation: dict
+    heldout: dict
+    rounds: int = 1
+    notes: list = field(default_factory=list)
+
+    def to_json(self) -> dict:
+        return {"schema": "sbmpc.calibration/1", "vehicle": self.vehicle.name, "terrain": self.terrain.name,
+                "params": self.params, "correlation": self.correlation, "excitation": self.excitation,
+                "heldout": self.heldout, "rounds": self.rounds, "notes": self.notes}
+
+
+def excitation(runs: list) -> dict:
+    """Seconds of each manoeuvre in the runs' commands and whether efforts or currents
+    are logged: straight driving, left and right turns, accelerations (the command's
+    measured mean wheel speed changing faster than ``ACCEL``), and the channels."""
+    out = {"straight_s": 0.0, "left_turns_s": 0.0, "right_turns_s": 0.0, "accelerations_s": 0.0,
+           "efforts": all(("tau_l" in r and "tau_r" in r) for r in runs),
+           "currents": all(("i_l" in r and "i_r" in r) for r in runs)}
+    for r in runs:
+        t = r.t
+        dt = np.diff(t, append=t[-1])
+        dt = np.where(dt > 0, dt, 0.0)
+        cl, cr = r["wl_cmd"], r["wr_cmd"]
+        ok = np.isfinite(cl) & np.isfinite(cr)
+        mean = 0.5 * (cl + cr)
+        diff = cr - cl
+        moving = ok & (np.abs(mean) > 0.5)
+        out["straight_s"] += float(dt[moving & (np.abs(diff) < 0.1 * np.abs(mean))].sum())
+        out["left_turns_s"] += float(dt[ok & (diff > 0.5)].sum())
+        out["right_turns_s"] += float(dt[ok & (diff < -0.5)].sum())
+        # accelerations from the measured wheel speeds (0.1 s moving mean): the drive's
+        # rate-limited response to a step command lasts as long as the ramp
+        w = 0.5 * (np.nan_to_num(r["wl"]) + np.nan_to_num(r["wr"]))
+        if len(t) > 2:
+            n = max(1, int(round(0.1 / max(float(np.median(np.diff(t))), 1e-6))))
+            ws = np.convolve(w, np.ones(n) / n, mode="same")
+            rate = np.abs(np.gradient(ws, t))
+            out["accelerations_s"] += float(dt[rate > ACCEL].sum())
+    return out
+
+
+def chosen(exc: dict) -> dict:
+    """{parameter: why it is fitted, or None: why not} from :func:`excitation`."""
+    load = exc["efforts"] or exc["currents"]
+    why = {}
+    why["mass"] = (None if not load else "no accelerations" if exc["accelerations_s"] < MIN_SECONDS else "")
+    why["torque_constant"] = "" if load else None
+    why["mu_roll"] = (None if not load else "no straight driving" if exc["straight_s"] < MIN_SECONDS else "")
+    turns = min(exc["left_turns_s"], exc["right_turns_s"])
+    for k in ("mu_sa", "mu_op"):
+        why[k] = (None if not load else "turns of one direction only, or none" if turns < MIN_SECONDS else "")
+    out = {}
+    for k, w in why.items():
+        if w is None:
+            out[k] = "no efforts or currents logged"
+        else:
+            out[k] = w or True
+    return out
+
+
+def _models(names, x, vehicle, terrain):
+    v_kw = {n: float(a) for n, a in zip(names, x) if PARAMS[n][0] == "vehicle"}
+    t_kw = {n: float(a) for n, a in zip(names, x) if PARAMS[n][0] == "terrain"}
+    if "mass" in v_kw:           # a load spread like the body: inertia with the mass
+        v_kw["inertia"] = vehicle.inertia * v_kw["mass"] / vehicle.mass
+    return (vehicle.replace(**v_kw) if v_kw else vehicle), (terrain.replace(**t_kw) if t_kw else terrain)
+
+
+def _parts(runs):
+    """Per run: (channels, noise scales, training mask, held-out mask)."""
+    out = []
+    for r in runs:
+        chans = channels(r)
+        scales = {c: noise_scale(r[c]) for c in chans}
+        t = r.t
+        split = t[0] + TRAIN_FRACTION * (t[-1] - t[0])
+        out.append((chans, scales, t < split, t >= split))
+    return out
+
+
+def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40, only=None) -> Calibration:
+    """Fit the parameters the runs excite (module doc); ``only``: a subset of
+    :data:`PARAMS` to consider."""
+    exc = excitation(runs)
+    pick = chosen(exc)
+    names = [k for k in PARAMS if pick[k] is True and (only is None or k in only)]
+    parts = _parts(runs)
+    kept = {k: pick[k] for k in PARAMS if pick[k] is not True}
+    if only is not None:
+        kept.update({k: "not asked for" for k in PARAMS if k not in only})
+
+    def prior(n):
+        return getattr(vehicle if PARAMS[n][0] == "vehicle" else terrain, n)
+
+    rounds, x, se, corr = 0, np.zeros(0), np.zeros(0), np.zeros((0, 0))
+    while names:
+        rounds += 1
+        x0 = np.array([prior(n) for n in names])
+        lo = np.array([prior(n) * PARAMS[n][1][0] for n in names])
+        hi = np.array([prior(n) * PARAMS[n][1][1] for n in names])
+        # a prior of 0 (no rolling resistance) still gets a range
+        hi = np.where(hi > lo, hi, lo + 0.1)
+
+        def fun(xv, names=names):
+            v, ter = _models(names, xv, vehicle, terrain)
+            return np.concatenate([_residuals(r, replay(r, v, ter), ch, sc, tr)
+                                   for r, (ch, sc, tr, _) in zip(runs, parts)])
+        x, se, J = _fit(fun, x0, lo, hi, max_nfev)
+        corr = _correlation(J)
+        rel = np.where(np.abs(x) > 0, se / np.abs(x), np.inf)
+        worst = None
+        bad = [i for i in range(len(names)) if not (np.isfinite(rel[i]) and rel[i] <= MAX_REL_SE)]
+        if bad:
+            worst = max(bad, key=lambda i: rel[i] if np.isfinite(rel[i]) else np.inf)
+            kept[names[worst]] = (f"not pinned by these runs: standard error {100 * rel[worst]:.0f} % of the value"
+                                  if np.isfinite(rel[worst]) else "not pinned by these runs: singular")
+        else:
+            off = np.abs(corr - np.eye(len(names)))
+            if off.size and off.max() > MAX_CORR:
+                i, j = np.unravel_index(int(np.argmax(off)), off.shape)
+                worst = i if rel[i] >= rel[j] else j
+                other = names[j if worst == i else i]
+                kept[names[worst]] = f"not told apart from {other} by these runs (correlation {corr[i, j]:+.2f})"
+        if worst is None:
+            break
+        names = [n for k, n in enumerate(names) if k != worst]
+    v, ter = _models(names, x, vehicle, terrain) if names else (vehicle, terrain)
+    params = {}
+    for n in PARAMS:
+        if n in names:
+            k = names.index(n)
+            params[n] = {"prior": prior(n), "value": float(x[k]), "se": float(se[k]), "fitted": True,
+                         "excited_by": PARAMS[n][2]}
+        else:
+            params[n] = {"prior": prior(n), "value": prior(n), "se": None, "fitted": False,
+                         "kept": kept.get(n, "not asked for")}
+    correlation = {a: {b: float(corr[i, j]) for j, b in enumerate(names)} for i, a in enumerate(names)}
+    held = {}
+    for r, (ch, sc, _, ho) in zip(runs, parts):
+        nom, cal = replay(r, vehicle, terrain), replay(r, v, ter)
+        held[r.source] = {"channels": list(ch), "nominal": _error(r, nom, ch, sc, ho),
+                          "calibrated": _error(r, cal, ch, sc, ho),
+                          "per_channel": {c: {"nominal": _error(r, nom, (c,), sc, ho),
+                                              "calibrated": _error(r, cal, (c,), sc, ho)} for c in ch}}
+    return Calibration(v, ter, params, correlation, exc, held, rounds)
+
+
+def _fit(fun, x0, lo, hi, max_nfev):
+    """(x, standard errors, Jacobian at the optimum) of a bounded least-squares fit, the
+    parameters scaled by their priors (the fit sees factors near 1; the Jacobian is in
+    those factors, which leaves the correlations as they are)."""
+    scale = np.where(np.abs(x0) > 0, np.abs(x0), 1.0)
+
+    def g(u):
+        return fun(u * scale)
+    u, se = _least_squares(g, x0 / scale, lo / scale, hi / scale, 1e-3, max_nfev)
+    return u * scale, se * scale, _jacobian(g, u)
+
+
+def _jacobian(f, u, h: float = 1e-3):
+    """The Jacobian of the residual vector f at u by central differences (relative step
+    h), for the correlations."""
+    f0 = f(u)
+    J = np.zeros((f0.size, u.size))
+    for i in range(u.size):
+        d = np.zeros_like(u)
+        d[i] = h * max(abs(u[i]), 1e-6)
+        a, b = f(u + d), f(u - d)
+        n = min(a.size, b.size, f0.size)
+        J[:n, i] = (a[:n] - b[:n]) / (2.0 * d[i])
+    return J
+
+
+def _correlation(J: np.ndarray) -> np.ndarray:
+    k = J.shape[1]
+    try:
+        C = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return np.full((k, k), math.nan)
+    d = np.sqrt(np.maximum(np.diag(C), 1e-300))
+    return C / np.outer(d, d)
+
+
+__all__ = ["Calibration", "MAX_CORR", "MAX_REL_SE", "PARAMS", "calibrate", "chosen", "excitation"]
+
+
+def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 30) -> list:
+    """Calibrate, then diagnose (issue 61): per run, each add-on effect of
+    :data:`dynamics.discrepancy.CANDIDATES` fitted *jointly* with the parameters the
+    calibration fitted (an effect fitted on top of a calibration alone is partly absorbed
+    by it: a hidden viscous friction went into a 3x rolling resistance), scored on the
+    held-out part against the calibrated model. The cause is the effect with the largest
+    held-out gain where the evidence for it is decisive (gain at least
+    ``discrepancy.MARGIN`` and a held-out BIC change below ``-discrepancy.EVIDENCE``); the
+    share of the calibrated model's excess over the noise it explains is reported, not a
+    veto. Otherwise ``none`` where the calibrated model is within ``EXCESS_MIN`` noise
+    units, else ``unexplained``. Returns per run {run, cause, base_error, candidates:
+    [{effect, params, se, error, gain, evidence, share}]}."""
+    from dynamics.discrepancy import CANDIDATES, EVIDENCE, EXCESS_MIN, MARGIN, _model_for, _spec, explained_share
+    from dynamics.discrepancy import heldout_evidence
+    base = [n for n, p in cal.params.items() if p["fitted"]]
+    out = []
+    for r, (ch, sc, tr, ho) in zip(runs, _parts(runs)):
+        pred0 = replay(r, cal.vehicle, cal.terrain)
+        e0 = _error(r, pred0, ch, sc, ho)
+        cands = []
+        for eff in (effects or CANDIDATES):
+            names = _spec(eff)[0]
+            x = _joint(eff, r, ch, sc, tr, base, cal, max_nfev)
+            v, ter = _models(base, x[:len(base)], cal.vehicle, cal.terrain)
+            v2, ter2, p = _model_for(eff, x[len(base):], v, ter, names, r)
+            pred = replay(r, v2, ter2, p)
+            e = _error(r, pred, ch, sc, ho)
+            gain = 1.0 - e / e0 if e0 > 0 else 0.0
+            ev = heldout_evidence(r, pred, ch, sc, ho, gain, len(names)) if gain > 0 else math.inf
+            cands.append({"effect": eff, "params": {n: float(a) for n, a in zip(names, x[len(base):])},
+                          "base": {n: float(a) for n, a in zip(base, x[:len(base)])},
+                          "error": e, "gain": gain, "evidence": ev,
+                          "share": explained_share(e0, e) if e0 > 1.0 else 0.0})
+        cands.sort(key=lambda c: -c["gain"])
+        best = cands[0] if cands else None
+        if best is not None and best["gain"] >= MARGIN and best["evidence"] < -EVIDENCE:
+            cause = best["effect"]
+        else:
+            cause = "none" if e0 < EXCESS_MIN else "unexplained"
+        out.append({"run": r.source, "cause": cause, "base_error": e0, "candidates": cands})
+    return out
+
+
+def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):
+    """The parameters (the calibrated base's, then the effect's) of ``eff`` fitted jointly
+    with the base on run ``r``'s training part: the effect first on the calibrated model
+    (:func:`dynamics.discrepancy.fit_candidate`), then both together from there; an effect
+    resolved on a grid (the delay) is held while the base is fitted again."""
+    from dynamics.discrepancy import _model_for, _spec, fit_candidate
+    names, lo, hi, _, step = _spec(eff)
+    xe, _ = fit_candidate(eff, r, cal.vehicle, cal.terrain, ch, sc, tr)
+    xb0 = np.array([cal.params[n]["value"] for n in base])
+    if not base:
+        return np.asarray(xe, float)
+    lob = np.array([cal.params[n]["prior"] * PARAMS[n][1][0] for n in base])
+    hib = np.array([cal.params[n]["prior"] * PARAMS[n][1][1] for n in base])
+    hib = np.where(hib > lob, hib, lob + 0.1)
+    held = step > 0
+
+    def fun(xv):
+        xb, xx = (xv, xe) if held else (xv[:len(base)], xv[len(base):])
+        v, ter = _models(base, xb, cal.vehicle, cal.terrain)
+        v2, ter2, p = _model_for(eff, xx, v, ter, names, r)
+        return _residuals(r, replay(r, v2, ter2, p), ch, sc, tr)
+    if held:
+        return np.r_[_fit(fun, xb0, lob, hib, max_nfev)[0], xe]
+    lo_all, hi_all = np.r_[lob, lo], np.r_[hib, hi]
+    x, _, _ = _fit(fun, np.clip(np.r_[xb0, xe], lo_all, hi_all), lo_all, hi_all, max_nfev)
+    return x
