@@ -8,9 +8,10 @@ parameters, on the model's own replay at the controller rate
 
 1. **Which parameters** (:func:`excitation`): each one is tried only where the runs
    excite it. Rolling resistance needs straight driving with a torque (or current)
-   channel. The turning friction (mu_sa, mu_op) needs turns of both directions, and
-   the torque constant efforts or currents. The mass needs accelerations with efforts or
-   currents.
+   channel. The turning friction (mu_sa, mu_op) needs turns of both directions. The
+   torque constant needs efforts or currents, or the wheels held at their top speed
+   (V_max / k). The mass needs accelerations with efforts or currents. The drive's
+   current limit and reference acceleration need accelerations; wheel speeds suffice.
 2. **The fit** (:func:`calibrate`): least squares over the training part of every run
    (the first 70 % in time), the channels in noise units, all parameters jointly.
 3. **Identifiability**: standard errors and correlations from the Jacobian at the
@@ -35,7 +36,10 @@ from dynamics.params import Terrain, Vehicle
 # name: (vehicle or terrain, bounds as factors of the prior, what excites it)
 PARAMS = {
     "mass": ("vehicle", (0.5, 2.0), "accelerations and climbs, with efforts or currents logged"),
-    "torque_constant": ("vehicle", (0.5, 2.0), "efforts or currents logged (the torque per amp, the top speed V/k)"),
+    "torque_constant": ("vehicle", (0.5, 2.0), "efforts or currents logged (the torque per amp), or the wheels "
+                        "held at their top speed (V_max / k)"),
+    "current_limit": ("vehicle", (0.2, 5.0), "accelerations at the drive's limit (wheel speeds suffice)"),
+    "ref_accel": ("vehicle", (0.2, 5.0), "accelerations after speed steps (wheel speeds suffice)"),
     "mu_roll": ("terrain", (0.2, 5.0), "straight driving, with efforts or currents logged"),
     "mu_sa": ("terrain", (0.3, 3.0), "turns (the paper's circle tests), with efforts or currents logged"),
     "mu_op": ("terrain", (0.3, 3.0), "turns of both directions, with efforts or currents logged"),
@@ -72,7 +76,7 @@ def excitation(runs: list) -> dict:
     """Seconds of each manoeuvre in the runs' commands and whether efforts or currents
     are logged: straight driving, left and right turns, accelerations (the command's
     measured mean wheel speed changing faster than ``ACCEL``), and the channels."""
-    out = {"straight_s": 0.0, "left_turns_s": 0.0, "right_turns_s": 0.0, "accelerations_s": 0.0,
+    out = {"straight_s": 0.0, "left_turns_s": 0.0, "right_turns_s": 0.0, "accelerations_s": 0.0, "top_speed_s": 0.0,
            "efforts": all(("tau_l" in r and "tau_r" in r) for r in runs),
            "currents": all(("i_l" in r and "i_r" in r) for r in runs)}
     for r in runs:
@@ -95,6 +99,13 @@ def excitation(runs: list) -> dict:
             ws = np.convolve(w, np.ones(n) / n, mode="same")
             rate = np.abs(np.gradient(ws, t))
             out["accelerations_s"] += float(dt[rate > ACCEL].sum())
+        # at the top speed: the wheels held well below a command they cannot reach, near
+        # the fastest they turn in the run
+        for side, cmd in (("wl", cl), ("wr", cr)):
+            m = np.abs(np.nan_to_num(r[side]))
+            top = float(np.nanmax(m)) if m.size else 0.0
+            at = ok & (np.abs(cmd) > 1.05 * m) & (m > 0.85 * top) & (top > 0.5)
+            out["top_speed_s"] += 0.5 * float(dt[at].sum())
     return out
 
 
@@ -103,7 +114,10 @@ def chosen(exc: dict) -> dict:
     load = exc["efforts"] or exc["currents"]
     why = {}
     why["mass"] = (None if not load else "no accelerations" if exc["accelerations_s"] < MIN_SECONDS else "")
-    why["torque_constant"] = "" if load else None
+    why["torque_constant"] = "" if load or exc["top_speed_s"] >= MIN_SECONDS else None
+    accel = "" if exc["accelerations_s"] >= MIN_SECONDS else "no accelerations"
+    why["current_limit"] = accel
+    why["ref_accel"] = accel
     why["mu_roll"] = (None if not load else "no straight driving" if exc["straight_s"] < MIN_SECONDS else "")
     turns = min(exc["left_turns_s"], exc["right_turns_s"])
     for k in ("mu_sa", "mu_op"):
@@ -111,7 +125,8 @@ def chosen(exc: dict) -> dict:
     out = {}
     for k, w in why.items():
         if w is None:
-            out[k] = "no efforts or currents logged"
+            out[k] = ("no efforts or currents logged" if k != "torque_constant" else
+                      "no efforts or currents logged, and the wheels never held at their top speed")
         else:
             out[k] = w or True
     return out
@@ -169,10 +184,15 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
         rel = np.where(np.abs(x) > 0, se / np.abs(x), np.inf)
         worst = None
         bad = [i for i in range(len(names)) if not (np.isfinite(rel[i]) and rel[i] <= MAX_REL_SE)]
-        if bad:
-            worst = max(bad, key=lambda i: rel[i] if np.isfinite(rel[i]) else np.inf)
-            kept[names[worst]] = (f"not pinned by these runs: standard error {100 * rel[worst]:.0f} % of the value"
-                                  if np.isfinite(rel[worst]) else "not pinned by these runs: singular")
+        if bad and not np.all(np.isfinite(se)):
+            # singular: the direction the runs cannot see (the Jacobian's smallest singular
+            # vector) names the parameter to keep (one the runs never move: a current limit
+            # never reached)
+            worst = int(np.argmax(np.abs(np.linalg.svd(J, full_matrices=False)[2][-1])))
+            kept[names[worst]] = "not pinned by these runs: they do not move it apart from the others (singular)"
+        elif bad:
+            worst = max(bad, key=lambda i: rel[i])
+            kept[names[worst]] = f"not pinned by these runs: standard error {100 * rel[worst]:.0f} % of the value"
         else:
             off = np.abs(corr - np.eye(len(names)))
             if off.size and off.max() > MAX_CORR:

@@ -49,6 +49,8 @@ def test_a_vehicle_off_in_five_parameters_is_recovered_and_its_files_plan(tmp_pa
         p = doc["params"][name]
         assert p["fitted"], (name, p)
         assert abs(p["value"] - want) <= max(2.0 * p["se"], 0.01 * want), (name, p, want)
+    # the current limit is never reached apart from the torque constant: kept, and said why
+    assert not doc["params"]["current_limit"]["fitted"] and "torque_constant" in doc["params"]["current_limit"]["kept"]
     h = doc["heldout"][str(src)]
     assert h["nominal"] > 5.0 and h["calibrated"] < 1.2
     v2, t2 = load_vehicle(str(out / "p3at_calibrated.yaml")), load_terrain(str(out / "vinyl_calibrated.yaml"))
@@ -86,8 +88,9 @@ def test_a_hidden_effect_is_named_on_top_with_the_base_fitted_jointly(tmp_path, 
 
 
 def test_what_the_runs_do_not_excite_is_kept_at_its_prior_and_said_so(tmp_path, capsys):
-    """Wheel speeds alone (no efforts, no currents): nothing is fitted, every parameter
-    kept with the reason; turns of one direction: the turning friction kept."""
+    """Wheel speeds alone (no efforts, no currents): the mass and the friction kept with
+    the reason, the drive's reference acceleration fitted (it shapes every speed step);
+    turns of one direction: the turning friction kept."""
     run, _ = synth_run("none", 3, duration=60.0)
     cols = {k: a for k, a in run.columns.items() if k not in ("tau_l", "tau_r", "i_l", "i_r")}
     src = tmp_path / "speeds.csv"
@@ -95,13 +98,17 @@ def test_what_the_runs_do_not_excite_is_kept_at_its_prior_and_said_so(tmp_path, 
     out = tmp_path / "cal"
     assert main(["calibrate", str(src), "--out", str(out), "--no-diagnose"]) == 0
     doc = json.loads((out / "calibration.json").read_text())
-    assert all(not p["fitted"] and p["kept"] == "no efforts or currents logged" for p in doc["params"].values())
+    for name in ("mass", "mu_roll", "mu_sa", "mu_op"):
+        assert not doc["params"][name]["fitted"] and doc["params"][name]["kept"] == "no efforts or currents logged"
+    assert doc["params"]["ref_accel"]["fitted"]
     exc = {"straight_s": 30.0, "left_turns_s": 20.0, "right_turns_s": 0.0, "accelerations_s": 10.0,
-           "efforts": True, "currents": False}
+           "top_speed_s": 0.0, "efforts": True, "currents": False}
     why = chosen(exc)
     assert why["mass"] is True and why["mu_roll"] is True and why["torque_constant"] is True
     assert why["mu_sa"] == why["mu_op"] == "turns of one direction only, or none"
     assert chosen(dict(exc, accelerations_s=MIN_SECONDS / 2))["mass"] == "no accelerations"
+    speeds = chosen(dict(exc, efforts=False, top_speed_s=10.0))
+    assert speeds["torque_constant"] is True and speeds["mu_roll"] == "no efforts or currents logged"
 
 
 def test_bad_arguments_get_one_line(tmp_path, capsys):
