@@ -8,9 +8,10 @@ no effect or one hidden (viscous friction, wheel radius, command delay). Per run
 parameter's error in standard errors, the held-out error (noise units) of the shipped
 model, the calibrated one and the calibrated one with the effect named, and the cause.
 
-Real runs (``--real``): the Warthog's DRIVE runs (wheel speeds only) and the Husky's
-BorealTC files (currents, no commands: the measured speeds stand in), imported as
-``sbmpc import`` does, the same numbers.
+Real runs (``--real``): the Warthog's DRIVE runs (wheel speeds only, 600 s each),
+imported as ``sbmpc import drive`` does, the same numbers. (BorealTC's Husky files log
+no commands: the measured speeds stand in for them, which leaves the drive's
+parameters nothing to show; not included.)
 
 Writes bench/results/calibration.json.
 
@@ -86,7 +87,7 @@ def main() -> int:
               f"{ {k: round(100 * x, 1) for k, x in r['relative_error'].items()} } % ({r['seconds']} s)", flush=True)
     real = []
     if args.real:
-        from sbmpc.realdata import read_borealtc_run, read_drive_windows
+        from sbmpc.realdata import read_drive_windows
         for terr, shipped in (("asphalt", "asphalt"), ("gravel", "packed_dirt"), ("sand", "grass")):
             p = REAL / "drive" / f"drive_warthog_{terr}_windows.csv"
             if not p.exists():

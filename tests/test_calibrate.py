@@ -59,6 +59,7 @@ def test_a_vehicle_off_in_five_parameters_is_recovered_and_its_files_plan(tmp_pa
     assert "fitted by sbmpc calibrate on drive.csv" in v2.sources["mass"]
 
 
+@pytest.mark.slow
 def test_a_hidden_effect_is_named_on_top_with_the_base_fitted_jointly(tmp_path, capsys):
     """The same kind of vehicle with a viscous friction hidden: calibrated alone, the base
     absorbs it (rolling resistance three times too large) and leaves 4.5 noise units; each

@@ -34,7 +34,12 @@ def test_largest_acceleration_from_rest_is_current_limited():
     tr = simulate(fast, *straight(fast, 0.8, 0.3))
     acc = np.gradient(tr.v, tr.t)
     assert acc[3:15].max() == pytest.approx(2.57, abs=0.1)
-    assert np.all(np.abs(tr.i_l) <= m.vehicle.current_limit + 1e-9)
+    # eq. 27: within the current limit, unless the back-EMF alone exceeds the supply (a
+    # vehicle braking down a slope faster than its no-load speed: 21 deg at 1 m/s reaches
+    # 10.7 rad/s), where the voltage bound sets the current (drive.current_window)
+    v = m.vehicle
+    over = (v.torque_constant * np.abs(tr.wl) - v.v_max) / v.armature_resistance
+    assert np.all(np.abs(tr.i_l) <= np.maximum(v.current_limit, over) + 1e-9)
 
 
 def _eq22_by_hand(v, ter, pitch, w_side, w_other):
@@ -325,6 +330,7 @@ def test_lemniscate_follows_eqs_29_30():
     assert np.hypot(off.x[-1] - px[-1], off.y[-1] - py[-1]) > 0.5
 
 
+@pytest.mark.slow
 def test_planner_edges_converge_to_the_controller_rate():
     """A small version of bench/bench_edges.py: 40 random planner edges (1 s at the
     planner's 20 ms step) on every shipped terrain, entry at rest, moving or turning,
@@ -450,7 +456,12 @@ def test_no_nan_or_inf_over_random_commands_grades_and_terrains(wl, wr, pitch, t
     tr = simulate(m, hold(wl, 1.0, dt), hold(wr, 1.0, dt), pitch=pitch, state=m.state(w0, w0), dt=dt)
     for name in ("v", "yaw_rate", "wl", "wr", "tau_l", "tau_r", "power_W", "energy_J", "x", "y"):
         assert np.all(np.isfinite(tr.data[name])), name
-    assert np.all(np.abs(tr.i_l) <= m.vehicle.current_limit + 1e-9)
+    # eq. 27: within the current limit, unless the back-EMF alone exceeds the supply (a
+    # vehicle braking down a slope faster than its no-load speed: 21 deg at 1 m/s reaches
+    # 10.7 rad/s), where the voltage bound sets the current (drive.current_window)
+    v = m.vehicle
+    over = (v.torque_constant * np.abs(tr.wl) - v.v_max) / v.armature_resistance
+    assert np.all(np.abs(tr.i_l) <= np.maximum(v.current_limit, over) + 1e-9)
     assert np.all(np.abs(tr.wl) < 1.5 * m.vehicle.no_load_speed + 10 * abs(pitch) + 1)
 
 

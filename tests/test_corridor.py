@@ -56,6 +56,7 @@ def test_the_grid_charges_the_ways_that_stay_in_the_corridor_and_a_penalty_off_i
     assert e.shape == grid.shape
 
 
+@pytest.mark.slow
 def test_a_corridor_plan_takes_far_fewer_expansions_and_costs_about_the_same():
     """hill_tradeoff's energy plan (seed 0): the coarse route round the hill and the
     search along it expand at most half the nodes of the whole map's search (16 311), and

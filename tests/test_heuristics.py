@@ -131,6 +131,7 @@ def test_the_ke_credit_covers_the_steepest_grid_step():
     assert HE.cost_to_go.__wrapped__(world, "time")[2] == 1.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, cost, seen", [("hill_tradeoff", "energy", 0.7), ("runup_ramp", "energy", 0.7),
                                              ("hill_tradeoff", "time", 0.8), ("mixed_terrain", "time", 0.85),
                                              ("steep_hill", "time", 0.7)])

@@ -40,6 +40,7 @@ def test_tasks_are_every_combination_with_stable_ids(spec):
     assert [t["task_id"] for t in SW.tasks(SW.load_spec(spec))] == [t["task_id"] for t in ts]
 
 
+@pytest.mark.slow
 def test_a_sweep_on_ray_gives_the_serial_rows_and_records_a_crash(spec, tmp_path, capsys):
     ray = pytest.importorskip("ray")
     serial = SW.execute(SW.tasks(SW.load_spec(spec)), tmp_path / "serial", use_ray=False)["rows"]
@@ -68,6 +69,7 @@ def test_a_sweep_on_ray_gives_the_serial_rows_and_records_a_crash(spec, tmp_path
     assert "error: " in out.err and "variant 'broken'" in out.err
 
 
+@pytest.mark.slow
 def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path):
     """A sweep on Ray killed (SIGKILL, the driver and its workers' results in flight)
     after a few tasks: --resume runs only the rest."""
