@@ -48,6 +48,7 @@ MAX_REL_SE = 0.25      # a fitted value whose standard error is more than this s
 MAX_CORR = 0.95        # two parameters correlated beyond this cannot be told apart
 MIN_SECONDS = 3.0      # s of a manoeuvre that excites a parameter before it is fitted
 ACCEL = 1.0            # rad/s^2: a measured wheel-speed rate above this is an acceleration
+STARTS = 3             # starting points of the first fit (the prior, then points spread over the bounds)
 
 
 @dataclass
@@ -167,6 +168,7 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
         return getattr(vehicle if PARAMS[n][0] == "vehicle" else terrain, n)
 
     rounds, x, se, corr = 0, np.zeros(0), np.zeros(0), np.zeros((0, 0))
+    x_prev, names_prev = None, []
     while names:
         rounds += 1
         x0 = np.array([prior(n) for n in names])
@@ -179,7 +181,10 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
             v, ter = _models(names, xv, vehicle, terrain)
             return np.concatenate([_residuals(r, replay(r, v, ter), ch, sc, tr)
                                    for r, (ch, sc, tr, _) in zip(runs, parts)])
-        x, se, J = _fit(fun, x0, lo, hi, max_nfev)
+        # the first fit from several starts; after a parameter is put back, from the last optimum
+        x, se, J = _fit(fun, x0 if rounds == 1 else _restart(names, x_prev, names_prev, x0), lo, hi, max_nfev,
+                        STARTS if rounds == 1 else 1)
+        x_prev, names_prev = x, list(names)
         corr = _correlation(J)
         rel = np.where(np.abs(x) > 0, se / np.abs(x), np.inf)
         worst = None
@@ -224,16 +229,31 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
     return Calibration(v, ter, params, correlation, exc, held, rounds)
 
 
-def _fit(fun, x0, lo, hi, max_nfev):
+def _fit(fun, x0, lo, hi, max_nfev, starts: int = 1):
     """(x, standard errors, Jacobian at the optimum) of a bounded least-squares fit, the
     parameters scaled by their priors (the fit sees factors near 1; the Jacobian is in
-    those factors, which leaves the correlations as they are)."""
+    those factors, which leaves the correlations as they are). ``starts`` > 1: also from
+    points spread over the bounds (:func:`dynamics.discrepancy.start_points`), the lowest
+    residual kept: a replay's residual has local minima over the drive's saturation (a
+    P3-AT 15 % heavier with a torque constant 12 % low was fitted 20 % off from its prior
+    alone)."""
+    from dynamics.discrepancy import start_points
     scale = np.where(np.abs(x0) > 0, np.abs(x0), 1.0)
 
     def g(u):
         return fun(u * scale)
-    u, se = _least_squares(g, x0 / scale, lo / scale, hi / scale, 1e-3, max_nfev)
+    best = None
+    for u0 in start_points(x0 / scale, lo / scale, hi / scale, starts):
+        u, se, cost = _least_squares(g, u0, lo / scale, hi / scale, 1e-3, max_nfev, with_cost=True)
+        if best is None or cost < best[2]:
+            best = (u, se, cost)
+    u, se, _ = best
     return u * scale, se * scale, _jacobian(g, u)
+
+
+def _restart(names, x_prev, names_prev, x0):
+    """The start of a fit over ``names`` from the last optimum (over ``names_prev``)."""
+    return np.array([x_prev[names_prev.index(n)] if n in names_prev else a for n, a in zip(names, x0)])
 
 
 def _jacobian(f, u, h: float = 1e-3):
@@ -308,27 +328,40 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
 
 def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):
     """The parameters (the calibrated base's, then the effect's) of ``eff`` fitted jointly
-    with the base on run ``r``'s training part: the effect first on the calibrated model
-    (:func:`dynamics.discrepancy.fit_candidate`), then both together from there; an effect
-    resolved on a grid (the delay) is held while the base is fitted again."""
+    with the base on run ``r``'s training part. Two starts, the lower residual kept: the
+    effect fitted on the calibrated model, and on the model at the priors (a calibration
+    absorbs part of an effect: a hidden 0.23 s command delay went into a reference
+    acceleration of 0.59 and a torque constant 43 % low, and the delay fitted on top of
+    that was 0.07 s). From each, both together (:func:`dynamics.discrepancy.fit_candidate`
+    for the effect first); an effect resolved on a grid (the delay) is held while the base
+    is fitted again."""
     from dynamics.discrepancy import _model_for, _spec, fit_candidate
     names, lo, hi, _, step = _spec(eff)
-    xe, _ = fit_candidate(eff, r, cal.vehicle, cal.terrain, ch, sc, tr)
-    xb0 = np.array([cal.params[n]["value"] for n in base])
-    if not base:
-        return np.asarray(xe, float)
+    held = step > 0
+    xcal = np.array([cal.params[n]["value"] for n in base])
+    xpri = np.array([cal.params[n]["prior"] for n in base])
     lob = np.array([cal.params[n]["prior"] * PARAMS[n][1][0] for n in base])
     hib = np.array([cal.params[n]["prior"] * PARAMS[n][1][1] for n in base])
     hib = np.where(hib > lob, hib, lob + 0.1)
-    held = step > 0
+    best = None
+    for xb0 in ((xcal, xpri) if base else (xcal,)):
+        v0, t0 = _models(base, xb0, cal.vehicle, cal.terrain)
+        xe = np.asarray(fit_candidate(eff, r, v0, t0, ch, sc, tr)[0], float)
 
-    def fun(xv):
-        xb, xx = (xv, xe) if held else (xv[:len(base)], xv[len(base):])
-        v, ter = _models(base, xb, cal.vehicle, cal.terrain)
-        v2, ter2, p = _model_for(eff, xx, v, ter, names, r)
-        return _residuals(r, replay(r, v2, ter2, p), ch, sc, tr)
-    if held:
-        return np.r_[_fit(fun, xb0, lob, hib, max_nfev)[0], xe]
-    lo_all, hi_all = np.r_[lob, lo], np.r_[hib, hi]
-    x, _, _ = _fit(fun, np.clip(np.r_[xb0, xe], lo_all, hi_all), lo_all, hi_all, max_nfev)
-    return x
+        def fun(xv, xe=xe):
+            xb, xx = (xv, xe) if held else (xv[:len(base)], xv[len(base):])
+            v, ter = _models(base, xb, cal.vehicle, cal.terrain)
+            v2, ter2, p = _model_for(eff, xx, v, ter, names, r)
+            return _residuals(r, replay(r, v2, ter2, p), ch, sc, tr)
+        if not base:
+            return xe
+        if held:
+            x = np.r_[_fit(fun, xb0, lob, hib, max_nfev)[0], xe]
+            cost = float(np.sum(fun(x[:len(base)]) ** 2))
+        else:
+            lo_all, hi_all = np.r_[lob, lo], np.r_[hib, hi]
+            x = _fit(fun, np.clip(np.r_[xb0, xe], lo_all, hi_all), lo_all, hi_all, max_nfev)[0]
+            cost = float(np.sum(fun(x) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, x)
+    return best[1]

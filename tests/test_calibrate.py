@@ -27,6 +27,7 @@ def _truth(**scale):
     return v, t
 
 
+@pytest.mark.slow
 def test_a_vehicle_off_in_five_parameters_is_recovered_and_its_files_plan(tmp_path, capsys):
     """A 90 s generated drive (turns both ways, speed steps, torques and currents logged)
     of a P3-AT 8-15 % off in mass, torque constant, mu_roll, mu_sa and mu_op: every one is

@@ -18,13 +18,13 @@ def _cold(functions) -> bool:
 
 def compile_note(quiet: bool = False) -> None:
     """The line for ``plan``, ``compare`` and ``run``: the search and the skid-steer's
-    edges compile for 1-2 minutes on two cores."""
+    edges compile for about 2 minutes (117 s on one core, 2026-12-06)."""
     if quiet:
         return
     from ..problems.skidsteer import expand_batch
     from ..search.loop import run_search
     if _cold((run_search, expand_batch)):
-        print("compiling the planner (first run only, about 1-2 minutes, mostly before the search: the planning "
+        print("compiling the planner (first run only, about 2 minutes, mostly before the search: the planning "
               "time printed shows part of it) ...", file=sys.stderr, flush=True)
 
 
