@@ -16,11 +16,12 @@ Subscribes: ``odom`` (nav_msgs/Odometry: the pose, in the map's frame), ``joint_
 optional: a new map replaces the scenario's and restarts the controller).
 Publishes: ``cmd_vel`` (geometry_msgs/Twist), ``plan`` (nav_msgs/Path, each new plan),
 ``status`` (std_msgs/String). Every topic name is a parameter; ``period`` is the control
-period [s], ``horizon`` the look-ahead [s], ``frame`` the plans' frame id.
+period [s], ``horizon`` the look-ahead [s] (0: the scenario's), ``frame`` the plans' frame id.
 """
 from __future__ import annotations
 
 import math
+import threading
 
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
@@ -41,7 +42,7 @@ class SbmpcNode(Node):
     def __init__(self):
         super().__init__("sbmpc")
         p = {name: self.declare_parameter(name, default).value for name, default in (
-            ("scenario", ""), ("cost", ""), ("period", 0.1), ("horizon", 10.0), ("frame", "map"),
+            ("scenario", ""), ("cost", ""), ("period", 0.1), ("horizon", 0.0), ("frame", "map"),
             ("odom", "/odom"), ("joint_states", "/joint_states"), ("battery", "/battery_state"),
             ("grid_map", ""), ("grid_map_layer", "elevation"), ("cmd_vel", "/cmd_vel"), ("plan", "/sbmpc/plan"),
             ("status", "/sbmpc/status"), ("left_joints", [""]), ("right_joints", [""]))}
@@ -65,8 +66,9 @@ class SbmpcNode(Node):
         self.create_timer(float(p["period"]), self.on_tick)
 
     def _controller(self, world):
+        # horizon 0: the scenario's planner.horizon_s (10 s where it has none)
         return sbmpc.Controller(world, self.p["cost"] or None, period_s=float(self.p["period"]),
-                                horizon_s=float(self.p["horizon"]), keep_paths=True)
+                                horizon_s=float(self.p["horizon"]) or None, keep_paths=True)
 
     # ---- measurements: the latest of each ------------------------------------------
     def on_odom(self, msg: Odometry):
@@ -78,7 +80,12 @@ class SbmpcNode(Node):
             self.names = list(msg.name)
             left = [n for n in self.p["left_joints"] if n] or [n for n in self.names if "left" in n]
             right = [n for n in self.p["right_joints"] if n] or [n for n in self.names if "right" in n]
-            self.sides = ([self.names.index(n) for n in left], [self.names.index(n) for n in right])
+            missing = [n for n in left + right if n not in self.names]
+            if missing:
+                self.get_logger().error(f"joint_states: expected the joints {', '.join(missing)}, found "
+                                        f"{', '.join(self.names)}; wheel speeds left out")
+            self.sides = ([self.names.index(n) for n in left if n in self.names],
+                          [self.names.index(n) for n in right if n in self.names])
         L, R = self.sides
         if len(msg.velocity) == len(self.names) and L and R:
             self.wheels = (sum(msg.velocity[i] for i in L) / len(L), sum(msg.velocity[i] for i in R) / len(R))
@@ -97,14 +104,16 @@ class SbmpcNode(Node):
         except InputError as exc:
             self.get_logger().error(f"grid map refused: {exc}")
             return
-        self.ctrl.close()
+        self.cmd_pub.publish(Twist())             # at rest while the controller starts again on the new map
+        old, self.ctrl = self.ctrl, None
+        threading.Thread(target=old.close, daemon=True).start()   # never wait here on a plan being made
         self.world, self.ctrl, self.paths_sent = world, self._controller(world), 0
         self.get_logger().info("new grid map: the controller starts again on it")
 
     # ---- the loop -----------------------------------------------------------------------
     def on_tick(self):
-        if self.pose is None:
-            return                                # no pose yet: nothing to command
+        if self.pose is None or self.ctrl is None:
+            return                                # no pose yet, or a controller starting: nothing new to command
         t = self.get_clock().now().nanoseconds * 1e-9
         kw = {}
         if self.wheels is not None:

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dynamics.discrepancy import (TRAIN_FRACTION, _error, _least_squares, _residuals, channels, noise_scale,
-                                  replay)
+from dynamics.discrepancy import (TRAIN_FRACTION, _error, _least_squares, _residuals, channels,
+                                  effective_samples, noise_scale, replay)
 from dynamics.params import Terrain, Vehicle
 
 # name: (vehicle or terrain, bounds as factors of the prior, what excites it)
@@ -185,8 +185,14 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
         x, se, J = _fit(fun, x0 if rounds == 1 else _restart(names, x_prev, names_prev, x0), lo, hi, max_nfev,
                         STARTS if rounds == 1 else 1)
         x_prev, names_prev = x, list(names)
+        # the residuals of a replay are autocorrelated: the standard errors count the
+        # samples as independent only as far as they are (dynamics.discrepancy.effective_samples)
+        r = fun(x)
+        se = se * math.sqrt(r.size / max(effective_samples(r), 1.0))
         corr = _correlation(J)
-        rel = np.where(np.abs(x) > 0, se / np.abs(x), np.inf)
+        # relative to the value, or to the prior where the value is near zero
+        ref = np.maximum(np.abs(x), np.abs(x0))
+        rel = np.where(ref > 0, se / np.where(ref > 0, ref, 1.0), np.inf)
         worst = None
         bad = [i for i in range(len(names)) if not (np.isfinite(rel[i]) and rel[i] <= MAX_REL_SE)]
         if bad and not np.all(np.isfinite(se)):
@@ -263,7 +269,7 @@ def _jacobian(f, u, h: float = 1e-3):
     J = np.zeros((f0.size, u.size))
     for i in range(u.size):
         d = np.zeros_like(u)
-        d[i] = h * max(abs(u[i]), 1e-6)
+        d[i] = h * max(abs(u[i]), 1.0)     # (the parameters are factors of their priors)
         a, b = f(u + d), f(u - d)
         n = min(a.size, b.size, f0.size)
         J[:n, i] = (a[:n] - b[:n]) / (2.0 * d[i])
@@ -300,10 +306,16 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
     base = [n for n, p in cal.params.items() if p["fitted"]]
     out = []
     for r, (ch, sc, tr, ho) in zip(runs, _parts(runs)):
-        pred0 = replay(r, cal.vehicle, cal.terrain)
-        e0 = _error(r, pred0, ch, sc, ho)
+        # the baseline: the base alone fitted again on this run, from the same two starts
+        # as each effect's joint fit (else the gain of fitting the base to one run, or of a
+        # better optimum, would count as the effect's)
+        xb = _base_refit(r, ch, sc, tr, base, cal, max_nfev)
+        vb, tb = _models(base, xb, cal.vehicle, cal.terrain)
+        e0 = _error(r, replay(r, vb, tb), ch, sc, ho)
         cands = []
         for eff in (effects or CANDIDATES):
+            if eff == "turning_friction" and {"mu_sa", "mu_op"} <= set(base):
+                continue         # one scale on both: the same model as the fitted pair
             names = _spec(eff)[0]
             x = _joint(eff, r, ch, sc, tr, base, cal, max_nfev)
             v, ter = _models(base, x[:len(base)], cal.vehicle, cal.terrain)
@@ -322,7 +334,8 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
             cause = best["effect"]
         else:
             cause = "none" if e0 < EXCESS_MIN else "unexplained"
-        out.append({"run": r.source, "cause": cause, "base_error": e0, "candidates": cands})
+        out.append({"run": r.source, "cause": cause, "base_error": e0, "calibrated_error": cal.heldout[r.source]["calibrated"],
+                    "base": {n: float(a) for n, a in zip(base, xb)}, "candidates": cands})
     return out
 
 
@@ -362,6 +375,27 @@ def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):
             lo_all, hi_all = np.r_[lob, lo], np.r_[hib, hi]
             x = _fit(fun, np.clip(np.r_[xb0, xe], lo_all, hi_all), lo_all, hi_all, max_nfev)[0]
             cost = float(np.sum(fun(x) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, x)
+    return best[1]
+
+
+def _base_refit(r, ch, sc, tr, base, cal, max_nfev):
+    """The base parameters fitted again on run ``r``'s training part alone, from the
+    calibration and from the priors, the lower residual kept."""
+    if not base:
+        return np.zeros(0)
+    lob = np.array([cal.params[n]["prior"] * PARAMS[n][1][0] for n in base])
+    hib = np.array([cal.params[n]["prior"] * PARAMS[n][1][1] for n in base])
+    hib = np.where(hib > lob, hib, lob + 0.1)
+
+    def fun(xb):
+        v, ter = _models(base, xb, cal.vehicle, cal.terrain)
+        return _residuals(r, replay(r, v, ter), ch, sc, tr)
+    best = None
+    for x0 in (np.array([cal.params[n]["value"] for n in base]), np.array([cal.params[n]["prior"] for n in base])):
+        x = _fit(fun, x0, lob, hib, max_nfev)[0]
+        cost = float(np.sum(fun(x) ** 2))
         if best is None or cost < best[0]:
             best = (cost, x)
     return best[1]

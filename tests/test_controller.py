@@ -230,3 +230,25 @@ def test_the_husky_is_clearpaths():
     wl, wr = to_wheels(0.0, 1.0, v)
     assert wr == pytest.approx(-wl) and wr == pytest.approx(0.5 * 1.0406 / 0.1651, rel=1e-4)
     assert load_vehicle("p3at").command_track == load_vehicle("p3at").width
+
+
+def test_a_planner_that_fails_stops_the_controller_with_the_reason_and_never_a_wrong_command(flat, monkeypatch):
+    """A plan that raises in the worker (a bug, a corrupt map): the controller stops for
+    good, says why, and every later step holds the wheels at rest; after close(), a step
+    holds them at rest too. Numbers of NumPy's types are measurements like any other."""
+    def broken(self, *a, **k):
+        raise RuntimeError("the planner broke (test)")
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", broken)
+    s = flat.scenario.start
+    ctrl = Controller(flat, "time", period_s=0.1, lockstep=True)
+    m = Measurement(np.float64(s["x"]), np.float32(s["y"]), np.float64(0.0), wl=np.float32(0.0), wr=0)
+    a = ctrl.step(0.0, m)
+    assert a.done and a.status == "stopped" and "the planner broke (test)" in a.reason
+    b = ctrl.step(0.1, m)
+    assert b.done and (b.wl, b.wr) == (0.0, 0.0)
+    ctrl.close()
+    monkeypatch.undo()
+    fresh = Controller(flat, "time", period_s=0.1, lockstep=True)
+    fresh.close()
+    c = fresh.step(0.0, m)
+    assert c.done and c.status == "stopped" and (c.wl, c.wr) == (0.0, 0.0) and "closed" in c.reason

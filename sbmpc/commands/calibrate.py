@@ -11,7 +11,7 @@ def add_parsers(sub):
     c = sub.add_parser("calibrate", help="fit the vehicle's and terrain's parameters to measured runs, write the "
                        "files to plan with, then diagnose on top",
                        description="Calibrate: fit every parameter the runs excite (mass, torque constant, "
-                       "rolling resistance, the turning friction mu_sa and mu_op) jointly on the model's replay "
+                       "current limit, reference acceleration, rolling resistance, the turning friction mu_sa and mu_op) jointly on the model's replay "
                        "of the training part of each run (the first 70 %), keep at its prior every parameter the "
                        "runs cannot pin (standard error over 25 % of the value, or correlated beyond 0.95 with "
                        "another) and say so, score nominal against calibrated on the held-out 30 %, write a "
@@ -27,11 +27,22 @@ def add_parsers(sub):
     c.add_argument("--out", type=path_arg, required=True, help="folder for the calibrated vehicle and terrain "
                    "YAML and calibration.json")
     c.add_argument("--only", help="comma-separated parameters to consider (default: all the runs excite: mass, "
-                   "torque_constant, mu_roll, mu_sa, mu_op)")
+                   "torque_constant, current_limit, ref_accel, mu_roll, mu_sa, mu_op)")
     c.add_argument("--effects", help="comma-separated add-on effects the diagnosis tries (default: every one of "
                    "sbmpc diagnose's)")
     c.add_argument("--no-diagnose", action="store_true", help="skip the diagnosis on the calibrated model")
     c.set_defaults(func=run_calibrate)
+
+
+def _names(text, allowed, flag: str, what: str):
+    """A comma-separated list of names among ``allowed`` (None where not given)."""
+    if not text:
+        return None
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    bad = [s for s in names if s not in allowed]
+    if bad:
+        raise InputError(f"{flag}: expected {what} among {', '.join(allowed)}, found {bad[0]!r}")
+    return names
 
 
 def _base(kind: str, given, runs):
@@ -58,19 +69,9 @@ def run_calibrate(args) -> int:
         except RunError as exc:
             raise InputError(str(exc)) from None
     vehicle, terrain = _base("vehicle", args.vehicle, runs), _base("terrain", args.terrain, runs)
-    only = None
-    if args.only:
-        only = [s.strip() for s in args.only.split(",") if s.strip()]
-        bad = [s for s in only if s not in PARAMS]
-        if bad:
-            raise InputError(f"--only: expected parameters among {', '.join(PARAMS)}, found {bad[0]!r}")
-    effects = None
-    if args.effects:
-        from dynamics.discrepancy import CANDIDATES
-        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        bad = [e for e in effects if e not in CANDIDATES]
-        if bad:
-            raise InputError(f"--effects: expected effects among {', '.join(CANDIDATES)}, found {bad[0]!r}")
+    from dynamics.discrepancy import CANDIDATES
+    only = _names(args.only, PARAMS, "--only", "parameters")
+    effects = _names(args.effects, CANDIDATES, "--effects", "effects")
     from dynamics.discrepancy import check_run_length
     for r in runs:
         try:
@@ -88,6 +89,9 @@ def run_calibrate(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     from dynamics.params import vehicle_to_yaml
     vpath, tpath = out / f"{v.name}.yaml", out / f"{t.name}.yaml"
+    if vpath == tpath:                      # a vehicle and a terrain of the same name
+        vpath, tpath = out / f"{v.name}_vehicle.yaml", out / f"{t.name}_terrain.yaml"
+    outs.folder(out, "--out", (vpath.name, tpath.name, "calibration.json"))
     write_text(vpath, vehicle_to_yaml(v, f"calibrated by sbmpc calibrate on {names}"))
     write_text(tpath, vehicle_to_yaml(t, f"calibrated by sbmpc calibrate on {names}"))
     doc["files"] = {"vehicle": str(vpath), "terrain": str(tpath)}
@@ -143,7 +147,8 @@ def _with_effect(v, t, diagnosis: list, names: str) -> tuple:
                                   "shear_lag") if getattr(v2, f) != getattr(v, f)}
     changed_t = {f: src for f in ("mu_sa", "mu_op") if getattr(t2, f) != getattr(t, f)}
     return (v2.replace(sources=dict(v.sources, **changed_v)), t2.replace(sources=dict(t.sources, **changed_t)),
-            {"effect": c["effect"], "params": c["params"]})
+            {"effect": c["effect"], "params": c["params"], "base": c["base"],
+             "note": "the files hold these base values, fitted jointly with the effect, not params' values"})
 
 
 def _diagnoses(cal, runs, effects) -> list:

@@ -32,6 +32,11 @@ def run_sweep(args) -> int:
         raise InputError(f"--workers: expected an integer in [0, 4096], found {args.workers}")
     if not 0 <= args.batch_size <= 100000:
         raise InputError(f"--batch-size: expected an integer in [0, 100000], found {args.batch_size}")
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        raise InputError("sweep writes its results as Parquet tables, which need pyarrow: "
+                         "pip install 'sbmpc[sweep]'") from None
     spec = SW.load_spec(args.spec)
     Outputs([args.spec] + list(spec["scenarios"]) + [p for p, _ in spec["families"]]).folder(
         args.out, "--out", ("results.parquet", "summary.png"))

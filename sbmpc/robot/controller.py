@@ -127,6 +127,7 @@ class Controller:
         self.status = "planning"
         self.reason = None
         self.done = False
+        self.closed = False
         self._policy = None
         self._request = None          # the policy's pending _Drive or _Await
         self._segment_end = -math.inf
@@ -148,9 +149,11 @@ class Controller:
         return cls(WO.resolve(scn), cost, period_s, horizon_s, lockstep)
 
     # ---- the robot's call ---------------------------------------------------------
-    def step(self, t: float, measurement: Measurement) -> Command:
+    def step(self, t: float, measurement: Measurement, applied: tuple | None = None) -> Command:
         """The command for the control period from robot time ``t`` [s], given what the
-        robot measures now. A repeated ``t`` gets the last command again; a ``t`` before
+        robot measures now. ``applied``: the wheel speeds (wl, wr) [rad/s] the drive was
+        given since the last call, where not this controller's own (a shadow run: the
+        driver's). A repeated ``t`` gets the last command again; a ``t`` before
         the last one, a measurement without a pose or with a value that is not a finite
         number, or a pose off the map, an InputError (the robot keeps its last command
         or stops: nothing wrong is commanded)."""
@@ -164,7 +167,8 @@ class Controller:
                                  f"{self._last_t:.3f} s; the measurement is ignored")
             if t == self._last_t:
                 return self._last
-        issued = [] if self._last_t is None else [(*self._command, t - self._last_t)]
+        done = applied if applied is not None else self._command
+        issued = [] if self._last_t is None else [(float(done[0]), float(done[1]), t - self._last_t)]
         X = self.estimator.update(t, m, issued)
         stalled = m.stalled or (bool(X[K.S_STALLED]) and not self.done)
         if stalled:
@@ -183,10 +187,13 @@ class Controller:
             wl, wr, _ = self._request.control
             self.periods += 1
             self.driven.append((wl, wr, round(t - self._segment_start, 9)))
-            self._request = None
+        self._request = None
+        self.done = True
 
     def close(self):
-        """Stop the worker threads (a plan being made is finished first)."""
+        """Stop the worker threads (a plan being made is finished first). A later
+        :meth:`step` holds the wheels at rest ('stopped')."""
+        self.closed = True
         self._horizon_pool.shutdown(wait=True, cancel_futures=True)
         self._route_pool.shutdown(wait=True, cancel_futures=True)
 
@@ -198,6 +205,8 @@ class Controller:
 
     # ---- the loop -----------------------------------------------------------------
     def _advance(self, t: float, X: np.ndarray, stalled: bool) -> Command:
+        if self.closed and not self.done:
+            return self._end("stopped", "the controller was closed")
         if self.done:
             return self._issue(0.0, 0.0, self.status)
         g = self.world.scenario.goal
@@ -220,15 +229,18 @@ class Controller:
         send = value
         while True:
             req = self._request
-            if isinstance(req, _Await):
-                if not (self.lockstep or req.future.done()):
-                    return self._issue(0.0, 0.0, req.status)
-                send = req.future.result()
             try:
+                if isinstance(req, _Await):
+                    if not (self.lockstep or req.future.done()):
+                        return self._issue(0.0, 0.0, req.status)
+                    send = req.future.result()
                 req = self._policy.send(send) if self._request is not None else next(self._policy)
             except StopIteration as stop:
                 status, reason = stop.value
                 return self._end(status, reason)
+            except Exception as exc:      # a plan or a prediction that failed: stop, say why, never a wrong command
+                return self._end("stopped", f"the controller stopped: {type(exc).__name__}: "
+                                            f"{' '.join(str(exc).split())[:200]}")
             self._request, send = req, None
             if isinstance(req, _Drive):
                 wl, wr, d = req.control

@@ -16,8 +16,9 @@ estimator is a predictor corrected by measurement:
    give them; each side's current (or effort / torque constant) where logged, which
    pins the PID integral (current = kp (ref - w) + ki integral + kd d(ref)/dt: a measured
    current off the predicted one moves the integral by the difference over ki) unless the
-   drive is at its current limit, where the integral is not observable and the
-   prediction's is kept.
+   drive is at a bound of its window (eq. 27: the current limit, and at speed the voltage
+   limit), or its current lags (``Vehicle.lag``), where the integral is not observable and
+   the prediction's is kept.
 
 Assumptions, stated: the map frame of the pose is the map's; the wheels of a side turn
 together (a side's joints averaged); without wheel speeds, the drive tracks its commands
@@ -33,6 +34,7 @@ import math
 import numpy as np
 
 from dynamics import kernels as K
+from dynamics.drive import current_window
 
 from ..errors import InputError
 from ..execution import Executor
@@ -62,6 +64,7 @@ class Estimator:
     def reset(self, t: float, m: Measurement) -> np.ndarray:
         """The estimate at a first measurement: the vehicle steady at its measured wheel
         speeds (at rest where none are measured) on the map's grade under it."""
+        self._on_map(m)
         v = self.world.vehicle
         wl = m.wl if m.wl is not None else 0.0
         wr = m.wr if m.wr is not None else 0.0
@@ -105,13 +108,17 @@ class Estimator:
         self.model.pipe = None
         return X
 
+    def _on_map(self, m: Measurement) -> None:
+        e = self.world.emap
+        if not e.contains(m.x, m.y):
+            x0, x1, y0, y1 = e.extent
+            raise InputError(f"measurement: pose ({m.x:.2f}, {m.y:.2f}): expected a position on the map "
+                             f"(x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m), found one off it")
+
     def _correct(self, m: Measurement, X: np.ndarray) -> np.ndarray:
         w = self.world
         v = w.vehicle
-        if not w.emap.contains(m.x, m.y):
-            x0, x1, y0, y1 = w.emap.extent
-            raise InputError(f"measurement: pose ({m.x:.2f}, {m.y:.2f}): expected a position on the map "
-                             f"(x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m), found one off it")
+        self._on_map(m)
         X[K.S_X], X[K.S_Y], X[K.S_YAW] = m.x, m.y, m.yaw
         X[K.S_Z] = w.emap.height(m.x, m.y)
         X[SS.X_YAWW] = math.atan2(math.sin(m.yaw), math.cos(m.yaw))
@@ -121,10 +128,17 @@ class Estimator:
         il, ir = m.il, m.ir
         if il is None and m.tau_l is not None:
             il, ir = m.tau_l / v.torque_constant, m.tau_r / v.torque_constant
-        if il is not None and v.ki > 0.0:
+        if il is not None and v.ki > 0.0 and v.lag == 0.0:
             for side, cur in ((0, il), (1, ir)):
                 wk, rk, ik, ck = ((K.S_WL, K.S_REFL, K.S_INTL, K.S_IL), (K.S_WR, K.S_REFR, K.S_INTR, K.S_IR))[side]
-                if abs(cur) < 0.98 * v.current_limit and abs(X[ck]) < 0.98 * v.current_limit:
+                # the delivered current is the PID's only inside the drive's window (eq. 27:
+                # the current limit and, at speed, the voltage limit): at either bound the
+                # integral is not observed
+                lo, hi = current_window(float(X[wk]), v.v_max, v.torque_constant, v.armature_resistance,
+                                        v.current_limit)
+                tol = 0.02 * max(v.current_limit, abs(lo), abs(hi))
+                inside = lo + tol < cur < hi - tol and lo + tol < X[ck] < hi - tol
+                if inside:
                     # the PID's output is kp e + ki integral + kd d(ref)/dt: what the measured
                     # current differs from the predicted one by, less what the measured
                     # speed's error explains, is the integral's error (the gains are known)

@@ -6,6 +6,7 @@ Units are SI throughout: m, rad, s, rad/s for wheel speeds (positive forwards), 
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -60,7 +61,7 @@ class Measurement:
                 if f.name in ("x", "y", "yaw"):
                     raise InputError(f"{where}: field '{f.name}': expected the pose (x, y, yaw), found none")
                 continue
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+            if isinstance(val, (bool, np.bool_)) or not isinstance(val, numbers.Real) or not math.isfinite(val):
                 raise InputError(f"{where}: field '{f.name}': expected a finite number, found {val!r:.40}")
         for a, b in (("wl", "wr"), ("il", "ir"), ("tau_l", "tau_r")):
             if (getattr(self, a) is None) != (getattr(self, b) is None):

@@ -11,8 +11,11 @@ done from where the robot really was, and how far that is from the driver.
 The pose comes from the bag's odometry (``/odom``), moved so that its first pose is the
 scenario's start (``align='start'``; ``'none'``: the odometry frame is the map's); wheel
 speeds and efforts from the joint states; the voltage from the battery where recorded.
-Each channel is sampled at the controller's times (the last sample at or before each:
-what a robot's loop would have had).
+Each channel is sampled at the controller's times (the last row of the imported run at or
+before each; the import itself interpolates the pose between odometry messages). The
+estimator predicts through the driver's commands, which the drive really got. In lockstep
+the controller's step latencies include the waits for its plans: the latency a robot
+sees is ``bench/bench_controller.py``'s.
 """
 from __future__ import annotations
 
@@ -78,6 +81,7 @@ def shadow(run, t0: float, world, cost: str | None = None, period_s: float = 0.1
     first = int(np.flatnonzero(~np.isnan(x))[0])
     ts = np.arange(t[first], t[-1] + 1e-9, period_s)
     rows, theirs, status = [], [], []
+    prev = None
     try:
         for tk in ts:
             k = int(np.searchsorted(t, tk + 1e-9, side="right")) - 1
@@ -95,7 +99,10 @@ def shadow(run, t0: float, world, cost: str | None = None, period_s: float = 0.1
                 raise InputError(f"{run.source}: the pose at t = {tk:.2f} s, ({x[k]:.2f}, {y[k]:.2f}) in the map's "
                                  f"frame: expected it on the scenario's map (x {x0:g}..{x1:g}, y {y0:g}..{y1:g} m), "
                                  f"found it off (align: {align})")
-            cmd = ctrl.step(float(tk), Measurement(float(x[k]), float(y[k]), float(yaw[k]), **kw))
+            # the estimator predicts through what the drive was given: the driver's commands
+            applied = (prev if prev is not None and np.all(np.isfinite(prev)) else (0.0, 0.0))
+            cmd = ctrl.step(float(tk), Measurement(float(x[k]), float(y[k]), float(yaw[k]), **kw), applied=applied)
+            prev = (float(run["wl_cmd"][k]), float(run["wr_cmd"][k]))
             rows.append((cmd.wl, cmd.wr, cmd.v, cmd.omega))
             status.append(cmd.status)
             wl_c, wr_c = run["wl_cmd"][k], run["wr_cmd"][k]
