@@ -254,7 +254,7 @@ def _fit(fun, x0, lo, hi, max_nfev, starts: int = 1):
         if best is None or cost < best[2]:
             best = (u, se, cost)
     u, se, _ = best
-    return u * scale, se * scale, _jacobian(g, u)
+    return u * scale, se * scale, _jacobian(g, u, lo / scale, hi / scale)
 
 
 def _restart(names, x_prev, names_prev, x0):
@@ -262,17 +262,20 @@ def _restart(names, x_prev, names_prev, x0):
     return np.array([x_prev[names_prev.index(n)] if n in names_prev else a for n, a in zip(names, x0)])
 
 
-def _jacobian(f, u, h: float = 1e-3):
-    """The Jacobian of the residual vector f at u by central differences (relative step
-    h), for the correlations."""
+def _jacobian(f, u, lo, hi, h: float = 1e-3):
+    """The Jacobian of the residual vector f at u by central differences (step h on the
+    scaled parameters), one-sided where a step would leave the bounds [lo, hi], for the
+    correlations."""
     f0 = f(u)
     J = np.zeros((f0.size, u.size))
     for i in range(u.size):
         d = np.zeros_like(u)
         d[i] = h * max(abs(u[i]), 1.0)     # (the parameters are factors of their priors)
-        a, b = f(u + d), f(u - d)
+        up, down = u[i] + d[i] <= hi[i], u[i] - d[i] >= lo[i]
+        a = f(u + d) if up else f0
+        b = f(u - d) if down else f0
         n = min(a.size, b.size, f0.size)
-        J[:n, i] = (a[:n] - b[:n]) / (2.0 * d[i])
+        J[:n, i] = (a[:n] - b[:n]) / (d[i] * (int(up) + int(down)) or 1.0)
     return J
 
 
