@@ -84,7 +84,11 @@ def main() -> int:
     ap.add_argument("--cap", type=float, default=90.0, help="seconds of driving per run at most")
     ap.add_argument("--period", type=float, default=0.1)
     ap.add_argument("--horizon", type=float, default=10.0)
+    ap.add_argument("--plot-only", action="store_true", help="draw the figure from the results file")
     args = ap.parse_args()
+    if args.plot_only:
+        plot(json.loads(OUT.read_text()))
+        return 0
     from dataclasses import replace
     from sbmpc import scenario as SC
     from sbmpc.planning import world as WO
@@ -127,7 +131,10 @@ def plot(doc: dict) -> None:
     ax.set_xticks(x, [f"{a}-{b}" for a, b in zip(edges[:-1], edges[1:])])
     ax.set_xlabel("step latency [ms]")
     ax.set_ylabel("steps [%]")
-    ax.axvline(np.searchsorted(edges, 1e3 * doc["period_s"]) - 1.5, color="k", ls="--", lw=0.8)
+    # the period: the boundary between the bins below and above it
+    ax.axvline(np.searchsorted(edges, 1e3 * doc["period_s"]) - 0.5, color="k", ls="--", lw=0.8)
+    ax.text(np.searchsorted(edges, 1e3 * doc["period_s"]) - 0.45, 90, f"the period, {1e3 * doc['period_s']:g} ms",
+            fontsize=8)
     ax.set_title(f"Controller.step at {doc['period_s']:g} s, one core, planning beside it ({doc['date']})", fontsize=9)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
