@@ -8,7 +8,7 @@ estimator is a predictor corrected by measurement:
 
 1. **Predict**: from the last estimate, the planning vehicle's closed-loop model (at its
    controller rate, the paper's 1 kHz) driven by the commands the controller issued
-   since, up to the measurement's time. This carries what no sensor gives: the
+   since, up to the measurement's time (late by the vehicle's ``delay``, where it has one). This carries what no sensor gives: the
    references (the commands, rate-limited as the drive limits them), the stall timer,
    the friction's shear state.
 2. **Correct** with what was measured: the pose (x, y, yaw; z, pitch and roll from the
@@ -53,7 +53,7 @@ class Estimator:
 
     def __init__(self, world: WO.World, cost: str):
         self.world = world
-        self.model = Executor(world, cost)
+        self.model = Executor(world, cost, world.vehicle.delay)   # a calibrated command delay: the drive gets the commands late
         self.X = None              # the estimate (planner state, SS.NX)
         self.t0 = None             # robot time of the first measurement [s]
 
