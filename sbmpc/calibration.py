@@ -133,7 +133,17 @@ def chosen(exc: dict) -> dict:
     return out
 
 
-def _models(names, x, vehicle, terrain):
+def _bounds(names, priors) -> tuple:
+    """(low, high) bounds of the parameters ``names`` from their priors (:data:`PARAMS`'s
+    factors); a prior of 0 (no rolling resistance) still gets a range of 0.1."""
+    lo = np.array([p * PARAMS[n][1][0] for n, p in zip(names, priors)], float)
+    hi = np.array([p * PARAMS[n][1][1] for n, p in zip(names, priors)], float)
+    return lo, np.where(hi > lo, hi, lo + 0.1)
+
+
+def with_params(names, x, vehicle, terrain) -> tuple:
+    """(vehicle, terrain) with the parameters ``names`` (of :data:`PARAMS`) set to ``x``;
+    the inertia scaled with a fitted mass (a load spread like the body)."""
     v_kw = {n: float(a) for n, a in zip(names, x) if PARAMS[n][0] == "vehicle"}
     t_kw = {n: float(a) for n, a in zip(names, x) if PARAMS[n][0] == "terrain"}
     if "mass" in v_kw:           # a load spread like the body: inertia with the mass
@@ -172,13 +182,10 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
     while names:
         rounds += 1
         x0 = np.array([prior(n) for n in names])
-        lo = np.array([prior(n) * PARAMS[n][1][0] for n in names])
-        hi = np.array([prior(n) * PARAMS[n][1][1] for n in names])
-        # a prior of 0 (no rolling resistance) still gets a range
-        hi = np.where(hi > lo, hi, lo + 0.1)
+        lo, hi = _bounds(names, x0)
 
         def fun(xv, names=names):
-            v, ter = _models(names, xv, vehicle, terrain)
+            v, ter = with_params(names, xv, vehicle, terrain)
             return np.concatenate([_residuals(r, replay(r, v, ter), ch, sc, tr)
                                    for r, (ch, sc, tr, _) in zip(runs, parts)])
         # the first fit from several starts; after a parameter is put back, from the last optimum
@@ -214,7 +221,7 @@ def calibrate(runs: list, vehicle: Vehicle, terrain: Terrain, max_nfev: int = 40
         if worst is None:
             break
         names = [n for k, n in enumerate(names) if k != worst]
-    v, ter = _models(names, x, vehicle, terrain) if names else (vehicle, terrain)
+    v, ter = with_params(names, x, vehicle, terrain) if names else (vehicle, terrain)
     params = {}
     for n in PARAMS:
         if n in names:
@@ -289,9 +296,6 @@ def _correlation(J: np.ndarray) -> np.ndarray:
     return C / np.outer(d, d)
 
 
-__all__ = ["Calibration", "MAX_CORR", "MAX_REL_SE", "PARAMS", "calibrate", "chosen", "excitation"]
-
-
 def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 30) -> list:
     """Calibrate, then diagnose (issue 61): per run, each add-on effect of
     :data:`dynamics.discrepancy.CANDIDATES` fitted *jointly* with the parameters the
@@ -313,7 +317,7 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
         # as each effect's joint fit (else the gain of fitting the base to one run, or of a
         # better optimum, would count as the effect's)
         xb = _base_refit(r, ch, sc, tr, base, cal, max_nfev)
-        vb, tb = _models(base, xb, cal.vehicle, cal.terrain)
+        vb, tb = with_params(base, xb, cal.vehicle, cal.terrain)
         e0 = _error(r, replay(r, vb, tb), ch, sc, ho)
         cands = []
         for eff in (effects or CANDIDATES):
@@ -321,7 +325,7 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
                 continue         # one scale on both: the same model as the fitted pair
             names = _spec(eff)[0]
             x = _joint(eff, r, ch, sc, tr, base, cal, max_nfev)
-            v, ter = _models(base, x[:len(base)], cal.vehicle, cal.terrain)
+            v, ter = with_params(base, x[:len(base)], cal.vehicle, cal.terrain)
             v2, ter2, p = _model_for(eff, x[len(base):], v, ter, names, r)
             pred = replay(r, v2, ter2, p)
             e = _error(r, pred, ch, sc, ho)
@@ -356,17 +360,15 @@ def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):
     held = step > 0
     xcal = np.array([cal.params[n]["value"] for n in base])
     xpri = np.array([cal.params[n]["prior"] for n in base])
-    lob = np.array([cal.params[n]["prior"] * PARAMS[n][1][0] for n in base])
-    hib = np.array([cal.params[n]["prior"] * PARAMS[n][1][1] for n in base])
-    hib = np.where(hib > lob, hib, lob + 0.1)
+    lob, hib = _bounds(base, [cal.params[n]["prior"] for n in base])
     best = None
     for xb0 in ((xcal, xpri) if base else (xcal,)):
-        v0, t0 = _models(base, xb0, cal.vehicle, cal.terrain)
+        v0, t0 = with_params(base, xb0, cal.vehicle, cal.terrain)
         xe = np.asarray(fit_candidate(eff, r, v0, t0, ch, sc, tr)[0], float)
 
         def fun(xv, xe=xe):
             xb, xx = (xv, xe) if held else (xv[:len(base)], xv[len(base):])
-            v, ter = _models(base, xb, cal.vehicle, cal.terrain)
+            v, ter = with_params(base, xb, cal.vehicle, cal.terrain)
             v2, ter2, p = _model_for(eff, xx, v, ter, names, r)
             return _residuals(r, replay(r, v2, ter2, p), ch, sc, tr)
         if not base:
@@ -388,12 +390,10 @@ def _base_refit(r, ch, sc, tr, base, cal, max_nfev):
     calibration and from the priors, the lower residual kept."""
     if not base:
         return np.zeros(0)
-    lob = np.array([cal.params[n]["prior"] * PARAMS[n][1][0] for n in base])
-    hib = np.array([cal.params[n]["prior"] * PARAMS[n][1][1] for n in base])
-    hib = np.where(hib > lob, hib, lob + 0.1)
+    lob, hib = _bounds(base, [cal.params[n]["prior"] for n in base])
 
     def fun(xb):
-        v, ter = _models(base, xb, cal.vehicle, cal.terrain)
+        v, ter = with_params(base, xb, cal.vehicle, cal.terrain)
         return _residuals(r, replay(r, v, ter), ch, sc, tr)
     best = None
     for x0 in (np.array([cal.params[n]["value"] for n in base]), np.array([cal.params[n]["prior"] for n in base])):
@@ -402,3 +402,7 @@ def _base_refit(r, ch, sc, tr, base, cal, max_nfev):
         if best is None or cost < best[0]:
             best = (cost, x)
     return best[1]
+
+
+__all__ = ["Calibration", "MAX_CORR", "MAX_REL_SE", "PARAMS", "calibrate", "chosen", "effects_on_top",
+           "excitation", "with_params"]

@@ -104,12 +104,12 @@ def run_calibrate(args) -> int:
 def _with_sources(cal, names: str):
     """The calibrated vehicle and terrain renamed (``*_calibrated``), each fitted value's
     source saying where and how well it was fitted."""
+    from ..calibration import PARAMS
     vs, ts = dict(cal.vehicle.sources), dict(cal.terrain.sources)
     for n, p in cal.params.items():
         if not p["fitted"]:
             continue
         src = f"fitted by sbmpc calibrate on {names} (+- {p['se']:.3g}; prior {p['prior']:.4g})"
-        from ..calibration import PARAMS
         (vs if PARAMS[n][0] == "vehicle" else ts)[n] = src
         if n == "mass":
             vs["inertia"] = f"scaled with the fitted mass (prior {cal.vehicle.inertia * p['prior'] / p['value']:.4g})"
@@ -131,21 +131,17 @@ def _with_effect(v, t, diagnosis: list, names: str) -> tuple:
     it, and the effect."""
     if len(diagnosis) != 1 or diagnosis[0]["cause"] not in FILE_EFFECTS:
         return v, t, None
+    from dataclasses import fields
+
     from dynamics.synth import apply
-    from ..calibration import PARAMS
-    d = diagnosis[0]
-    c = d["candidates"][0]
-    vk = {n: x for n, x in c["base"].items() if PARAMS[n][0] == "vehicle"}
-    tk = {n: x for n, x in c["base"].items() if PARAMS[n][0] == "terrain"}
-    if "mass" in vk:
-        vk["inertia"] = v.inertia * vk["mass"] / v.mass
+    from ..calibration import with_params
+    c = diagnosis[0]["candidates"][0]
     src = f"fitted by sbmpc calibrate on {names}, jointly with {c['effect']}"
-    v = v.replace(**vk, sources=dict(v.sources, **{n: src for n in vk}))
-    t = t.replace(**tk, sources=dict(t.sources, **{n: src for n in tk}))
-    v2, t2, _ = apply(v, c["effect"], c["params"], t)
-    changed_v = {f: src for f in ("radius_scale_left", "radius_scale_right", "viscous", "delay", "lag", "sag",
-                                  "shear_lag") if getattr(v2, f) != getattr(v, f)}
-    changed_t = {f: src for f in ("mu_sa", "mu_op") if getattr(t2, f) != getattr(t, f)}
+    vb, tb = with_params(list(c["base"]), list(c["base"].values()), v, t)
+    v2, t2, _ = apply(vb, c["effect"], c["params"], tb)
+    # every value the joint fit set (the inertia with the mass)
+    changed_v = {f.name: src for f in fields(v) if f.name != "sources" and getattr(v2, f.name) != getattr(v, f.name)}
+    changed_t = {f.name: src for f in fields(t) if f.name != "sources" and getattr(t2, f.name) != getattr(t, f.name)}
     return (v2.replace(sources=dict(v.sources, **changed_v)), t2.replace(sources=dict(t.sources, **changed_t)),
             {"effect": c["effect"], "params": c["params"], "base": c["base"],
              "note": "the files hold these base values, fitted jointly with the effect, not params' values"})

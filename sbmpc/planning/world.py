@@ -175,17 +175,24 @@ def hold_mode(ps) -> int:
 def start_state(world: World) -> np.ndarray:
     """The model's state at the scenario's start: steady driving at the start speed."""
     s = world.scenario.start
-    e = world.emap
-    yaw = math.radians(s["yaw_deg"])
-    pitch, _ = e.pitch_roll(s["x"], s["y"], yaw, world.half_length, world.half_width)
-    w = s["v"] / world.vehicle.wheel_radius
     v = world.vehicle
-    S = world.model(s["x"], s["y"]).state(w / v.radius_scale_left, w / v.radius_scale_right, pitch,
-                                          s["x"], s["y"], yaw, e.height(s["x"], s["y"]))
+    w = s["v"] / v.wheel_radius
+    return steady_state(world, s["x"], s["y"], math.radians(s["yaw_deg"]), w / v.radius_scale_left,
+                        w / v.radius_scale_right, s["v"])
+
+
+def steady_state(world: World, x: float, y: float, yaw: float, wl: float, wr: float, speed: float) -> np.ndarray:
+    """The planner state of the vehicle at (x, y) [m] heading ``yaw`` [rad], its drive
+    steady at wheel speeds (wl, wr) [rad/s] on the map's grade there (the references at the
+    speeds, the integrals holding the current the load asks for), ``speed`` [m/s] its
+    speed; the margin's twin where the vehicle is."""
+    e = world.emap
+    pitch, _ = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
+    S = world.model(x, y).state(wl, wr, pitch, x, y, yaw, e.height(x, y))
     X = np.zeros(SS.NX)
     X[:K.NS] = S
     X[SS.X_YAWW] = math.atan2(math.sin(yaw), math.cos(yaw))
-    X[SS.X_V] = s["v"]
+    X[SS.X_V] = speed
     X[SS.X_TW:SS.X_TW + K.NS] = S          # the margin's twin starts where the vehicle does
     return X
 

@@ -170,9 +170,7 @@ class Controller:
         done = applied if applied is not None else self._command
         issued = [] if self._last_t is None else [(float(done[0]), float(done[1]), t - self._last_t)]
         X = self.estimator.update(t, m, issued)
-        stalled = m.stalled or (bool(X[K.S_STALLED]) and not self.done)
-        if stalled:
-            X = self.estimator.stalled(m)
+        stalled = self.estimator.stalled_now
         self._X = X
         self._last_t = float(t)
         cmd = self._advance(t, X, stalled)
@@ -243,9 +241,8 @@ class Controller:
                                             f"{' '.join(str(exc).split())[:200]}")
             self._request, send = req, None
             if isinstance(req, _Drive):
-                wl, wr, d = req.control
-                n = max(1, int(round(d / self.period_s)))
-                self._segment_start, self._segment_end = t, t + n * self.period_s
+                wl, wr, d = req.control            # (d whole control periods: _on_ticks)
+                self._segment_start, self._segment_end = t, t + d
                 return self._issue(wl, wr, req.status)
 
     def _issue(self, wl: float, wr: float, status: str) -> Command:
@@ -275,12 +272,17 @@ class Controller:
         p = PL.Plan(self.world.scenario.name, self.cost, "found" if h.found else "no_path", h.reason,
                     list(h.controls), {}, planning_time_s=h.seconds + extra_s, nodes_expanded=h.expansions,
                     found_by=h.found_by)
-        self.plans.append(EX.Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p,
-                                    h.found_by == "previous", self.world.scenario.goal["radius"]))
-        self._plan_t = self._last_t
-        if self.keep_paths and h.found:
-            self._keep_path(h.start, h.controls)
+        self._record(p, X0, why, h.found_by == "previous", h.start)
         return h
+
+    def _record(self, p, X0: np.ndarray, why: str, warm: bool, start: np.ndarray) -> None:
+        """A plan (a :class:`sbmpc.planning.plan.Plan`) kept in the record, made from X0 for
+        ``why``, its path predicted from ``start`` where ``keep_paths``."""
+        self.plans.append(EX.Replan(float(X0[K.S_T]), float(X0[K.S_X]), float(X0[K.S_Y]), why, p, warm,
+                                    self.world.scenario.goal["radius"]))
+        self._plan_t = self._last_t
+        if self.keep_paths and p.found:
+            self._keep_path(start, p.controls)
 
     def _keep_path(self, X0: np.ndarray, controls) -> None:
         """The poses the planning model predicts along ``controls`` from X0 (``paths``)."""
@@ -303,19 +305,21 @@ class Controller:
         p = yield _Await(fut, "waiting")
         self.horizon.fallbacks += 1
         self.horizon.fallback_s.append(p.planning_time_s)
-        self.plans.append(EX.Replan(float(X[K.S_T]), float(X[K.S_X]), float(X[K.S_Y]), why, p, False,
-                                    self.world.scenario.goal["radius"]))
-        self._plan_t = self._last_t
-        if self.keep_paths and p.found:
-            self._keep_path(X, p.controls)
+        self._record(p, X, why, False, X)
         return p
 
-    def _drive(self, control, status):
-        """Drives one period; returns (estimate, stalled) at its end, the period counted."""
+    def _on_ticks(self, control) -> tuple:
+        """``control`` (wl, wr, duration_s) with its duration a whole number of control
+        periods (at least one): how long the robot's loop commands it."""
         wl, wr, d = control
-        n = max(1, int(round(d / self.period_s)))
+        return wl, wr, max(1, int(round(d / self.period_s))) * self.period_s
+
+    def _drive(self, control, status):
+        """Drives one period (``control`` on ticks, :meth:`_on_ticks`); returns (estimate,
+        stalled) at its end, the period counted."""
+        wl, wr, _ = control
         t_start = self._last_t
-        X, stalled = yield _Drive((wl, wr, n * self.period_s), status)
+        X, stalled = yield _Drive(control, status)
         self.periods += 1
         self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
         return X, stalled
@@ -398,8 +402,8 @@ class Controller:
             st.settled += int(settle)
             if guide is not None:
                 guide.pop(0)
-            n = max(1, int(round(control[2] / self.period_s)))
-            _, _, P = self.model.step(X, (control[0], control[1], n * self.period_s), record=False)
+            control = self._on_ticks(control)
+            _, _, P = self.model.step(X, control, record=False)
             nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
                    if guide is None else None)           # made while the period is driven
             X, stalled = yield from self._drive(control, status)

@@ -37,7 +37,7 @@ from dynamics import kernels as K
 from dynamics.drive import current_window
 
 from ..errors import InputError
-from ..execution import Executor
+from ..execution import Executor, protected
 from ..planning import world as WO
 from ..problems import skidsteer as SS
 from .messages import Measurement
@@ -55,6 +55,7 @@ class Estimator:
         self.world = world
         self.model = Executor(world, cost, world.vehicle.delay)   # a calibrated command delay: the drive gets the commands late
         self.X = None              # the estimate (planner state, SS.NX)
+        self.stalled_now = False   # the last update found the drive stalled (and restarted it)
         self.t0 = None             # robot time of the first measurement [s]
 
     def planner_time(self, t: float) -> float:
@@ -65,19 +66,11 @@ class Estimator:
         """The estimate at a first measurement: the vehicle steady at its measured wheel
         speeds (at rest where none are measured) on the map's grade under it."""
         self._on_map(m)
-        v = self.world.vehicle
         wl = m.wl if m.wl is not None else 0.0
         wr = m.wr if m.wr is not None else 0.0
-        pitch, _ = self.world.emap.pitch_roll(m.x, m.y, m.yaw, self.world.half_length, self.world.half_width)
-        S = self.world.model(m.x, m.y).state(wl, wr, pitch, m.x, m.y, m.yaw, self.world.emap.height(m.x, m.y))
-        X = np.zeros(SS.NX)
-        X[:K.NS] = S
-        X[SS.X_YAWW] = math.atan2(math.sin(m.yaw), math.cos(m.yaw))
-        X[SS.X_V] = 0.5 * v.wheel_radius * (wl + wr)
-        X[SS.X_TW:SS.X_TW + K.NS] = S
         self.t0 = float(t)
-        self.X = X
-        return self._correct(m, X)
+        self.X = WO.steady_state(self.world, m.x, m.y, m.yaw, wl, wr, 0.5 * self.world.vehicle.wheel_radius * (wl + wr))
+        return self._correct(m, self.X)
 
     def update(self, t: float, m: Measurement, issued: list) -> np.ndarray:
         """The estimate at robot time ``t`` [s]: predicted through ``issued`` [(wl, wr,
@@ -88,25 +81,19 @@ class Estimator:
         for wl, wr, d in issued:
             if d <= 0.0:
                 continue
-            _, end, S = self.model.step(X, (wl, wr, d), record=False)
             # a prediction cut short (it stalled, tipped or left the map in the model) is
             # taken where it ended: the measurement says where the vehicle is
-            X = S
+            _, _, X = self.model.step(X, (wl, wr, d), record=False)
         X = X.copy()
         X[K.S_T] = self.planner_time(t)
         return self._correct(m, X)
 
-    def stalled(self, m: Measurement) -> np.ndarray:
-        """The estimate after the drive's stall protection restarted it from the measured
-        (else estimated) wheel speeds."""
-        X = self.X
-        X[K.S_STALLT] = 0.0
-        X[K.S_STALLED] = 0.0
-        X[K.S_REFL] = X[K.S_WL]
-        X[K.S_REFR] = X[K.S_WR]
+    def _restarted(self, X: np.ndarray) -> None:
+        """X after the drive's stall protection restarted it from the measured (else
+        estimated) wheel speeds (:func:`sbmpc.execution.protected`), its stall test's
+        window begun again."""
+        protected(X, self.model)
         X[K.S_SWT] = 0.0
-        self.model.pipe = None
-        return X
 
     def _on_map(self, m: Measurement) -> None:
         e = self.world.emap
@@ -145,9 +132,11 @@ class Estimator:
                     X[ik] += (cur - X[ck] + v.kp * (X[wk] - w_pred[side])) / v.ki
                 X[ck] = cur
         X[SS.X_V] = 0.5 * v.wheel_radius * (X[K.S_WL] * v.radius_scale_left + X[K.S_WR] * v.radius_scale_right)
-        if m.stalled:
-            self.X = X
-            X = self.stalled(m)
+        # a stall: the measurement says so (a driver's fault flag), or the model's stall test
+        # on the estimate does
+        self.stalled_now = bool(m.stalled or X[K.S_STALLED])
+        if self.stalled_now:
+            self._restarted(X)
         X[SS.X_TW:SS.X_TW + K.NS] = X[:K.NS]
         self.X = X
         return X.copy()
