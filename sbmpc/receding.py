@@ -41,6 +41,7 @@ import numpy as np
 from dynamics import kernels as K
 from dynamics.params import Vehicle
 
+from .errors import InputError
 from .planning import plan as PL
 from .planning.horizon import periods
 from . import trajectory as TR
@@ -48,8 +49,10 @@ from . import trajectory as TR
 from .planning import world as WO
 from .problems import skidsteer as SS
 from .scenario import RunSettings
+from . import truth as TT
 from .robot.messages import measured  # noqa: F401
-from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
+from .execution import (HELD, SETTLED, STUCK_HORIZONS, Evidence, HorizonStats, Replan, deviation,  # noqa: F401
+                        inference_note,
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
                         protected as _protected, settles as _settles, stopped as _stopped, weaker as _weaker)
 
@@ -65,6 +68,7 @@ class RunResult:
     settings: RunSettings
     status: str = "failed"            # reached | failed
     reason: str | None = None
+    end: str = "failed"               # reached | stopped (rather than tip over) | tipped | off_map | failed
     trajectory: dict = field(default_factory=dict)
     plans: list = field(default_factory=list)        # [Replan], the first plan first
     stalls: int = 0
@@ -73,6 +77,11 @@ class RunResult:
     weaker_from: float | None = None  # t [s] from which the margin's twin planned (the vehicle proved weaker)
     horizon: HorizonStats | None = None   # receding-horizon planning (planner.horizon_s > 0)
     driven: list = field(default_factory=list)    # the controls (wl, wr, duration_s) driven, period by period
+    truth_spec: dict = field(default_factory=dict)   # what the truth was drawn as (sbmpc.truth.Truth.spec)
+    dropped: int = 0                  # periods whose command was lost (the drive held the previous one)
+    inferred: list = field(default_factory=list)     # what each stall said of the vehicle (stall_inference)
+    source: dict = field(default_factory=dict)       # how to make the run again (sbmpc run --replay)
+    truth_at_end: dict = field(default_factory=dict)  # the true vehicle's pose and drive where the run ended
 
     @property
     def replans(self) -> int:
@@ -114,6 +123,7 @@ class RunResult:
             "vehicle": self.vehicle,
             "truth": self.truth,
             "status": self.status,
+            "end": self.end,
             "reason": self.reason,
             "replans": self.replans,
             "planning_time_s": self.planning_time_s,
@@ -128,6 +138,11 @@ class RunResult:
             "periods": self.periods,
             "guarded": self.guarded,
             "weaker_from_t": self.weaker_from,
+            "stall_inference": self.inferred,
+            "dropped": self.dropped,
+            "truth_spec": self.truth_spec,
+            "truth_at_end": self.truth_at_end,
+            "replay": self.source,
             "trigger": s.trigger,
             "tolerance": {"xy_m": s.tol_xy, "yaw_deg": s.tol_yaw_deg, "v_m_s": s.tol_v},
             "warm_start": ("re-plans hand the rest of the previous plan to the search as an incumbent "
@@ -215,17 +230,26 @@ def _named(world: WO.World, planner: WO.World, out: "RunResult") -> str:
             f"x{1.0 + world.scenario.planner.margin:g} mass and grip")
 
 
-def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None) -> RunResult:
-    """The run's outcome, its executed trajectory (the recorded pieces, every
-    ``every``-th row and the last) set on ``out``."""
+def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None, end: str | None = None,
+            Xt: np.ndarray | None = None) -> RunResult:
+    """The run's outcome (``end``: how it ended, default reached or failed), its executed
+    trajectory (the recorded pieces, every ``every``-th row and the last) and the true
+    vehicle's state Xt where it ended, set on ``out``."""
     out.status, out.reason = status, reason
+    out.end = end or ("reached" if status == "reached" else "failed")
+    if Xt is not None:
+        out.truth_at_end = {"t": float(Xt[K.S_T]), "x": float(Xt[K.S_X]), "y": float(Xt[K.S_Y]),
+                            "z": float(Xt[K.S_Z]), "yaw_deg": math.degrees(float(Xt[K.S_YAW])),
+                            "wl": float(Xt[K.S_WL]), "wr": float(Xt[K.S_WR]), "i_l": float(Xt[K.S_IL]),
+                            "i_r": float(Xt[K.S_IR])}
     rec = np.vstack(pieces) if pieces else np.zeros((0, K.NR))
     idx = np.unique(np.r_[np.arange(0, len(rec), every), len(rec) - 1]) if len(rec) else np.zeros(0, int)
     out.trajectory = {name: rec[idx, i].copy() for i, name in enumerate(K.CHANNELS)}
     return out
 
 
-def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", name: str) -> str | None:
+def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", name: str,
+             inferred: dict | None = None) -> str | None:
     """A stall of the true vehicle at the measured state X: counted and placed; the
     failure reason once there are more than ``run.max_stalls``, else None, with the
     stalled drive restarted from where its wheels are, as a stall protection would: its
@@ -236,38 +260,114 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
     out.stalls += 1
     stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
     if out.stalls > out.settings.max_stalls:
-        return _weaker(stalls, name)
+        return _stall_failure(stalls, name, inferred)
     _protected(X, real)
     return None
 
 
-def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
+def _ground(truth: TT.Truth, Xt: np.ndarray) -> str:
+    """What the true vehicle met where it ended: its pitch and roll on the true map, its
+    drive, and what it was (where it differs from the planning vehicle)."""
+    w = truth.world
+    x, y = float(Xt[K.S_X]), float(Xt[K.S_Y])
+    tilt = ""
+    if w.emap.contains(x, y):
+        pitch, roll = w.emap.pitch_roll(x, y, float(Xt[K.S_YAW]), w.half_length, w.half_width)
+        tilt = f"{math.degrees(pitch):+.1f} deg pitch, {math.degrees(roll):+.1f} deg roll on the true ground, "
+    return (f"{tilt}currents {Xt[K.S_IL]:.2f}/{Xt[K.S_IR]:.2f} A of {w.vehicle.current_limit:g}; the true "
+            f"vehicle: {truth.name}")
+
+
+def _stall_failure(stalls: list, name: str, inferred: dict | None) -> str:
+    """Why a run failed after its stalls: weaker than the planning model, unless what was
+    measured before the last stall says otherwise (:meth:`Evidence.infer`)."""
+    if inferred is None or inferred["inferred"] in ("weaker", "unknown"):
+        return _weaker(stalls, name) + (f" ({inference_note(inferred)})" if inferred else "")
+    where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
+    return (f"the vehicle stalled {len(stalls)} time{'s' if len(stalls) > 1 else ''}, at {where}, where the plans of "
+            f"{name} predicted it would get through; {inference_note(inferred)}: the ways the plans took there do "
+            f"not hold for it at the controller rate, though it is not weaker than the planning model")
+
+
+REPLAY_SCHEMA = "sbmpc.run-source/1"
+
+
+def _source(world: WO.World, cost: str, rs: RunSettings) -> dict:
+    """What :func:`replayed` needs to make a run again: the scenario as data (its file's
+    folder for the files it names), the planning vehicle's parameters, the cost, the run
+    settings. Empty where the scenario holds what JSON cannot (arrays given in code)."""
+    import dataclasses
+    import json
+    from . import scenario as SC
+    try:
+        scn = replace(world.scenario, run=rs)
+        data = SC.to_data(scn)
+        v = world.vehicle
+        data["vehicle"] = v.name or "vehicle"
+        doc = {"schema": REPLAY_SCHEMA, "scenario": data, "scenario_path": str(scn.path) if scn.path else None,
+               "vehicle": {f.name: getattr(v, f.name) for f in dataclasses.fields(v) if f.name != "sources"},
+               "cost": cost}
+        json.dumps(doc, allow_nan=False)
+        return doc
+    except (TypeError, ValueError):
+        return {}
+
+
+def replayed(doc: dict, where: str) -> tuple:
+    """(world, cost, truth) of a run JSON (``sbmpc run --json``) made again: its scenario,
+    planning vehicle, cost and settings, and the truth it met (:func:`sbmpc.truth.from_spec`).
+    ``where`` names the file in errors."""
+    from pathlib import Path
+    from dynamics.params import Vehicle
+    from . import scenario as SC
+    src = doc.get("replay") if isinstance(doc, dict) else None
+    if not isinstance(src, dict) or src.get("schema") != REPLAY_SCHEMA:
+        found = "no 'replay' section" if not src else f"replay.schema {src.get('schema')!r}"
+        raise InputError(f"{where}: expected a run JSON of sbmpc run --json with a replay section (schema "
+                         f"{REPLAY_SCHEMA}), found {found}")
+    path = Path(src["scenario_path"]) if src.get("scenario_path") else None
+    scn = SC.parse(src["scenario"], f"{where} (replay.scenario)", path)
+    try:
+        vehicle = Vehicle(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in src["vehicle"].items()})
+    except Exception as exc:
+        raise InputError(f"{where}: replay.vehicle: {exc}") from None
+    world = WO.resolve(replace(scn, vehicle=vehicle))
+    return world, src["cost"], TT.from_spec(world, doc.get("truth_spec") or {})
+
+
+def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | None" = None,
         settings: RunSettings | None = None, progress=None, warm: bool = True,
-        truth_grip: float | None = None) -> RunResult:
+        truth_grip: float | None = None, wall_limit_s: float | None = None) -> RunResult:
     """Execute the scenario of ``world`` with receding-horizon SBMPC (module doc).
 
-    ``truth``: the vehicle that really drives (default: the world's own); ``settings``
-    default to the scenario's ``run`` section; ``progress(label)`` may return a search
-    progress callback; ``warm=False`` plans every re-plan from scratch (for the
-    benchmark); ``truth_grip``: the true ground's mu_sa and mu_op are the world's terrains'
-    times this factor."""
+    ``truth``: the vehicle that really drives: a Vehicle (default: the world's own), or a
+    :class:`sbmpc.truth.Truth` (a drawn vehicle, map errors, odometry error, command delay,
+    dropped commands); ``settings`` default to the scenario's ``run`` section;
+    ``progress(label)`` may return a search progress callback; ``warm=False`` plans every
+    re-plan from scratch (for the benchmark); ``truth_grip``: the true ground's mu_sa and
+    mu_op are the world's terrains' times this factor (with a Vehicle); ``wall_limit_s``:
+    the run fails once it has taken this long on the wall clock (checked every period)."""
+    import time
     cost = WO.checked_cost(world, cost)
-    truth = WO.checked_vehicle(truth, "truth")
+    if not isinstance(truth, TT.Truth):
+        truth = TT.nominal(world, WO.checked_vehicle(truth, "truth"), truth_grip)
     rs = settings or world.scenario.run
     ps = world.scenario.planner
-    twin = world if truth is None else replace(world, vehicle=truth)
-    if truth_grip is not None and truth_grip != 1.0:
-        twin = replace(twin, terrains=WO.gripped(twin.terrains, truth_grip))
-    truth_name = twin.vehicle.name + (f", grip x{truth_grip:g}" if truth_grip not in (None, 1.0) else "")
-    out = RunResult(world.scenario.name, cost, world.vehicle.name, truth_name, rs)
+    twin = truth.world
+    out = RunResult(world.scenario.name, cost, world.vehicle.name, truth.name, rs, truth_spec=truth.spec,
+                    source=_source(world, cost, rs))
+    deadline = time.perf_counter() + wall_limit_s if wall_limit_s else math.inf
     if ps.horizon_s > 0.0:
-        return _run_horizon(world, cost, twin, out)
+        return _run_horizon(world, cost, truth, out, deadline)
     model = _Executor(world, cost)
     guards = _guards(world, cost)
     planner = world                    # the planning model: the world's vehicle, its margin's twin after a stall
     guarded = False                    # the last plan's first period was held back by the guard
     real = _Executor(twin, cost, twin.vehicle.delay)
-    X = WO.start_state(twin)           # the measured state
+    odo, drop = truth.odometer(), truth.dropper()
+    Xt = WO.start_state(twin)          # the true state
+    X = odo.observe(Xt)                # the measured state
+    evidence = Evidence()              # what the periods driven say of the vehicle (a stall's inference)
     pieces = []
     every = max(1, round(TR.RECORD_EVERY / real.dt))
     tol_yaw = math.radians(rs.tol_yaw_deg)
@@ -279,30 +379,41 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
     retraced = 0                       # retraces made (RETRACE_PERIODS)
     backing: list = []                 # periods of a retrace still to drive
 
-    def finish(status, reason):
-        return _finish(out, pieces, every, status, reason)
+    def finish(status, reason, end=None):
+        out.dropped = drop.count
+        return _finish(out, pieces, every, status, reason, end, Xt)
 
-    def drive(control) -> int:
-        """One period of the true vehicle from the measured state X: X advanced, the
-        period recorded and counted. Returns its end code."""
-        nonlocal X
-        rec, end, X = real.step(X, control)
+    def drive(control, predicted=None) -> int:
+        """One period of the true vehicle (its command lost, at times: the drive holds the
+        last): the true state Xt advanced, X measured, the period recorded and counted,
+        with ``predicted`` (the planning model's record of it) the evidence of the stall
+        inference. Returns its end code."""
+        nonlocal X, Xt
+        rec, end, Xt = real.step(Xt, drop.applied(Xt, control))
         pieces.append(rec if not pieces else rec[1:])
         out.periods += 1
+        odo.advance(Xt)
+        X = odo.observe(Xt)
+        if predicted is not None and end != -SS.STALL:
+            evidence.add(rec, predicted)
         return end
 
     def ended(end: int, doing: str = ""):
         """The run's result where the period just driven ended it: in the goal, stalled
         once too often (_stalled), tipped over or off the map (``doing``: what it was
         doing, for the reason); else None (a stall is counted)."""
+        nonlocal X
         if end == SS.IN_GOAL:
             return finish("reached", None)
         if end == -SS.STALL:
-            failed = _stalled(out, stalls, X, real, _named(world, planner, out))
-            return finish("failed", failed) if failed else None
+            out.inferred.append(evidence.infer(X))
+            failed = _stalled(out, stalls, Xt, real, _named(world, planner, out), out.inferred[-1])
+            X = odo.observe(Xt)
+            return finish("failed", f"{failed} ({_ground(truth, Xt)})") if failed else None
         if end < 0:
-            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                    f"t = {X[K.S_T]:.1f} s{doing}")
+            return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({Xt[K.S_X]:.2f}, {Xt[K.S_Y]:.2f}), "
+                                    f"t = {Xt[K.S_T]:.1f} s{doing} ({_ground(truth, Xt)})",
+                          {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end, "failed"))
         return None
 
     def retrace() -> bool:
@@ -324,12 +435,15 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         return False
 
     while True:
+        if time.perf_counter() > deadline:
+            return finish("failed", f"wall-clock limit of {wall_limit_s:g} s reached at t = {X[K.S_T]:.1f} s, "
+                                    f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), after {len(out.plans)} plans", "timeout")
         if backing:
             # driving back along the way it came (retrace), each period guarded from the
             # measured state before it is driven
             control = backing.pop(0)
             if _held(guards, X, control, True):
-                return finish("failed", _stopped(X, ps))
+                return finish("failed", _stopped(X, ps), "stopped")
             end = drive(control)
             result = ended(end, ", driving back along the way it came")
             if result is not None:
@@ -397,11 +511,12 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 why = None
             elif held:
                 if not retrace():
-                    return finish("failed", _stopped(X, ps, ("re-plan", p.reason)))
+                    return finish("failed", _stopped(X, ps, ("re-plan", p.reason)), "stopped")
                 continue
             else:
                 # after stalls where the plans drove it, and from where none is seen now
-                weaker = f"; {_weaker(stalls, _named(world, planner, out))}" if stalls else ""
+                weaker = (f"; {_stall_failure(stalls, _named(world, planner, out), out.inferred[-1])}"
+                          if stalls else "")
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}")
         control = steps[k]
@@ -423,7 +538,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                     planner, model = _weaker_model(world, cost, out, X)
                 elif guarded and since == 0:
                     if not retrace():
-                        return finish("failed", _stopped(X, ps))
+                        return finish("failed", _stopped(X, ps), "stopped")
                     out.guarded += 1
                     continue
                 guarded = True
@@ -431,8 +546,8 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 continue
         guarded = False
-        _, _, P = model.step(P, control, record=False)
-        end = drive(control)
+        predicted, _, P = model.step(P, control)
+        end = drive(control, predicted)
         driven.append(control)
         k += 1
         since += 1
@@ -440,9 +555,12 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
         if result is not None:
             return result
         if end == -SS.STALL:
-            if planner is world and ps.margin > 0.0:
-                # stalled where the plans of the planning vehicle drove it: the vehicle is at
-                # least as weak as the margin's twin, which plans from here on
+            if planner is world and ps.margin > 0.0 and out.inferred[-1]["inferred"] != "stronger":
+                # stalled where the plans of the planning vehicle drove it, and not measured
+                # stronger than it before: the vehicle is taken to be at least as weak as the
+                # margin's twin, which plans from here on (a vehicle that drew less current
+                # than predicted stalled where the plan drove it, not for a weaker drive: it
+                # re-plans with the planning model)
                 planner, model = _weaker_model(world, cost, out, X)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         elif X[K.S_T] - out.plans[0].t > t_limit:
@@ -471,7 +589,7 @@ def run(world: WO.World, cost: str | None = None, truth: Vehicle | None = None,
                 why = ", ".join(off)
 
 
-def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> RunResult:
+def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, deadline: float) -> RunResult:
     """:func:`run` with receding-horizon plans (``planner.horizon_s``): the controller a
     robot calls (:class:`sbmpc.robot.Controller`, its policy in its module doc) against
     the simulated truth. Every ``run.control_period_s`` the truth's state is measured
@@ -480,12 +598,16 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     controller waits for its plans (``lockstep``: the simulated clock stands still while
     it plans); every plan's wall-clock time is kept (``horizon`` in the run JSON). The
     truth's stall protection restarts a stalled drive (:func:`_protected`) and tells the
-    controller (``Measurement.stalled``)."""
+    controller (``Measurement.stalled``). The truth's odometry error is in the measured
+    pose, and a dropped command leaves the drive at the last it received."""
+    import time
     from .robot.controller import Controller
     rs = out.settings
+    twin = truth.world
     ctrl = Controller(world, cost, period_s=rs.control_period_s, lockstep=True, settings=rs)
     out.horizon = ctrl.horizon
     real = _Executor(twin, cost, twin.vehicle.delay)
+    odo, drop = truth.odometer(), truth.dropper()
     X = WO.start_state(twin)
     pieces = []
     every = max(1, round(TR.RECORD_EVERY / real.dt))
@@ -495,19 +617,25 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
     t_limit = rs.max_time_factor * 3.0 * math.hypot(g["x"] - X[K.S_X], g["y"] - X[K.S_Y]) / max(v_top, 1e-6) + 30.0
     stalled = False
 
-    def finish(status, reason):
+    def finish(status, reason, end=None):
         ctrl.ended_at(float(X[K.S_T]))
         ctrl.close()
         out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
-        out.periods, out.driven = ctrl.periods, ctrl.driven
-        return _finish(out, pieces, every, status, reason)
+        out.periods, out.driven, out.dropped = ctrl.periods, ctrl.driven, drop.count
+        if end is None and status != "reached" and (reason or "").startswith("stopped at"):
+            end = "stopped"
+        return _finish(out, pieces, every, status, reason, end, X)
 
     while True:
-        cmd = ctrl.step(float(X[K.S_T]), measured(X, twin.vehicle, stalled))
+        if time.perf_counter() > deadline:
+            return finish("failed", f"wall-clock limit reached at t = {X[K.S_T]:.1f} s, "
+                                    f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", "timeout")
+        cmd = ctrl.step(float(X[K.S_T]), measured(odo.observe(X), twin.vehicle, stalled))
         if cmd.done:
             return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
-        rec, end, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s))
+        rec, end, X = real.step(X, drop.applied(X, (cmd.wl, cmd.wr, ctrl.period_s)))
         pieces.append(rec if not pieces else rec[1:])
+        odo.advance(X)
         stalled = end == -SS.STALL
         if end == SS.IN_GOAL:
             return finish("reached", None)
@@ -517,7 +645,7 @@ def _run_horizon(world: WO.World, cost: str, twin: WO.World, out: RunResult) -> 
             _protected(X, real)
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                    f"t = {X[K.S_T]:.1f} s")
+                                    f"t = {X[K.S_T]:.1f} s", {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end))
 
 
 def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:

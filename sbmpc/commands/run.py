@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 from ..errors import InputError, NoResult
 from .files import Outputs, atomic, path_arg, scenario_inputs, write_json
@@ -16,7 +17,13 @@ def add_parsers(sub):
                        "measured state when it leaves the tolerance around the prediction (or every period). "
                        "Prints predicted vs executed time and energy and the re-plans. Exit code 1 when the run "
                        "fails to reach the goal.")
-    r.add_argument("scenario", type=path_arg, help="scenario YAML file")
+    r.add_argument("scenario", type=path_arg, nargs="?", help="scenario YAML file (not with --replay)")
+    r.add_argument("--replay", type=path_arg, metavar="RUN.json", help="make a run again from its JSON (sbmpc run "
+                   "--json, a sweep's closed-loop runs): the same scenario, planning vehicle, cost, settings and "
+                   "drawn truth; prints whether it ends as recorded")
+    r.add_argument("--draw", type=path_arg, metavar="DRAW.yaml", help="the truth drawn from a YAML mapping {seed, "
+                   "vary, faults} (docs/robustness.md): vehicle and terrain parameters, map errors, command delay, "
+                   "odometry error, dropped commands")
     r.add_argument("--truth", help="the vehicle that really drives: a shipped name or a vehicle YAML "
                    "(e.g. the extended vehicle of sbmpc diagnose); default: the planning vehicle")
     r.add_argument("--truth-mass", type=float, metavar="F", help="the true vehicle's mass (and inertia) times F "
@@ -80,12 +87,57 @@ def summary(res) -> str:
     return "\n".join(lines)
 
 
+def _replay_inputs(args):
+    """(world, cost, truth, recorded run JSON) of ``--replay`` (its other inputs refused)."""
+    import json
+    from .. import receding
+    given = [f for f, v in (("SCENARIO", args.scenario), ("--truth", args.truth), ("--truth-mass", args.truth_mass),
+                            ("--truth-grip", args.truth_grip), ("--vehicle", args.vehicle), ("--cost", args.cost),
+                            ("--draw", args.draw), ("--seed", args.seed)) if v is not None]
+    if given:
+        raise InputError(f"--replay: expected no {', '.join(given)} (the run JSON names them), found them given")
+    try:
+        doc = json.loads(Path(args.replay).read_text())
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{args.replay}: cannot read: {exc}") from None
+    except ValueError as exc:
+        raise InputError(f"{args.replay}: expected a run JSON, found invalid JSON ({exc})") from None
+    world, cost, truth = receding.replayed(doc, str(args.replay))
+    return world, cost, truth, doc
+
+
+def _drawn_truth(args, world):
+    """The truth of ``--draw FILE`` ({seed, vary, faults})."""
+    from dynamics.params import read_yaml_text
+    from .. import truth as TT
+    try:
+        doc = read_yaml_text(args.draw)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{args.draw}: {exc}") from None
+    if not isinstance(doc, dict) or set(doc) - {"seed", "vary", "faults"}:
+        raise InputError(f"{args.draw}: expected a mapping with keys among seed, vary, faults, found "
+                         f"{sorted(doc) if isinstance(doc, dict) else type(doc).__name__}")
+    seed = doc.get("seed", 0)
+    bad = TT.problems(doc.get("vary") or {}, doc.get("faults") or {})
+    if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2 ** 31):
+        bad.insert(0, f"seed: expected an integer in [0, 2^31), found {seed!r}")
+    if bad:
+        raise InputError(f"{args.draw}: {'; '.join(bad)}")
+    return TT.draw(world, doc.get("vary"), doc.get("faults"), seed)
+
+
 def run_run(args) -> int:
-    from .. import receding, recording
     from ..planning.world import checked_vehicle, heavier
-    outs = Outputs(scenario_inputs(args.scenario) + [args.truth, args.vehicle])
+    if args.replay is None and args.scenario is None:
+        raise InputError("expected a scenario YAML file (or --replay RUN.json), found neither")
+    outs = Outputs(([args.replay] if args.replay else scenario_inputs(args.scenario) + [args.truth, args.vehicle])
+                   + [args.draw])
     outs.file(args.json, "--json")
     outs.file(args.rrd, "--rrd")
+    if args.replay is not None:
+        world, cost, drawn, recorded = _replay_inputs(args)
+        bag_out(args)
+        return _run(args, world, cost, drawn, None, world.scenario.run, recorded)
     world = _world(args)          # with --vehicle as its planning vehicle
     bag_out(args)
     truth = checked_vehicle(args.truth, "--truth")
@@ -97,13 +149,26 @@ def run_run(args) -> int:
         truth = heavier(v, args.truth_mass).replace(name=f"{v.name} x{args.truth_mass:g} mass")
     grip = args.truth_grip
     settings = world.scenario.run
+    cost = world.scenario.cost          # --cost applied by _world
+    if args.draw is not None:
+        if truth is not None or grip is not None:
+            raise InputError("--draw: expected no --truth, --truth-mass or --truth-grip with it (the draw is around "
+                             "the planning vehicle), found them given")
+        truth = _drawn_truth(args, world)
+    return _run(args, world, cost, truth, grip, settings)
+
+
+def _run(args, world, cost, truth, grip, settings, recorded=None) -> int:
+    from .. import receding, recording
+    from .. import truth as TT
     if args.trigger:
         settings = replace(settings, trigger=args.trigger)
-    cost = world.scenario.cost          # --cost applied by _world
     compile_note(args.quiet)
     res = receding.run(world, cost, truth, settings, progress=lambda label: Progress(label, args.quiet, cost=cost),
                        truth_grip=grip)
     print(summary(res))
+    if recorded is not None:
+        print(replay_line(recorded, res.to_json()))
     first = res.plans[0].plan if res.plans else None
     write_bag_out(args, world, {cost: first} if first is not None and first.found and first.trajectory else {}, res)
     if args.json:
@@ -111,7 +176,23 @@ def run_run(args) -> int:
     if args.rrd:
         with atomic(args.rrd) as tmp:
             recording.write_run(tmp, world.emap, res, app=f"sbmpc run {world.scenario.name}",
-                                scenario=world.scenario, vehicle=truth or world.vehicle)
+                                scenario=world.scenario, vehicle=truth.world.vehicle if isinstance(truth, TT.Truth) else (truth or world.vehicle))
     if res.status != "reached":
         raise NoResult(f"failed: {res.reason}")
     return 0
+
+
+def replay_line(old: dict, new: dict) -> str:
+    """Whether a replayed run ended as recorded: its end, travel time and energy."""
+    def num(d, k):
+        return d.get(k) if isinstance(d.get(k), (int, float)) else None
+    same = old.get("end", old.get("status")) == new["end"]
+    diffs = []
+    for k, unit in (("travel_time_s", "s"), ("energy_J", "J")):
+        a, b = num(old, k), num(new, k)
+        if a is not None and b is not None:
+            diffs.append(f"{k.split('_')[0]} {b:.2f} {unit} against {a:.2f} {unit}")
+            same = same and abs(a - b) <= 1e-6 * max(1.0, abs(a))
+    return (f"replay: {'ended as recorded' if same else 'ended otherwise than recorded'} "
+            f"({new['end']} against {old.get('end', old.get('status'))}{'; ' if diffs else ''}{'; '.join(diffs)})"
+            + ("" if same else "; a plan's search may end on its wall-clock budget, which a loaded machine changes"))

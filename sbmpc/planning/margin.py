@@ -123,25 +123,27 @@ def drawn_worlds(world, rob: dict, task_id: str):
     distributions (relative standard deviation ``vary[name]``) around ``world``'s
     (``rob``: {"samples", "seed", "vary"} of ``sbmpc sweep``'s robustness; ``task_id``:
     a hex string that, with the seed, seeds the draw)."""
-    from dynamics import ParameterError
     rng = np.random.default_rng([int(rob.get("seed", 0)), int(task_id[:8], 16)])
-    vary = rob.get("vary", {}) or {}
-    out = []
-    for _ in range(int(rob["samples"])):
-        for _ in range(DRAW_TRIES):         # a draw outside a parameter's range is drawn again
-            v, ts = world.vehicle, world.terrains
-            vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
-            tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
-            try:
-                ts = tuple(t.replace(**{k: getattr(t, k) * max(0.05, 1.0 + e) for k, e in tk.items()}) for t in ts)
-                out.append(replace(world, vehicle=v.replace(**vk), terrains=ts))
-                break
-            except ParameterError as exc:
-                last = str(exc).replace("<replace>: ", "")
-        else:
-            raise InputError(f"no draw of {', '.join(sorted(vary))} within the parameters' ranges in {DRAW_TRIES} "
-                             f"tries (the last: {last}); lower the relative standard deviations")
-    return out
+    return [drawn_world(world, rob.get("vary", {}) or {}, rng) for _ in range(int(rob["samples"]))]
+
+
+def drawn_world(world, vary: dict, rng: np.random.Generator):
+    """One world with the vehicle and terrain parameters named in ``vary`` drawn from
+    normal distributions around ``world``'s, ``vary[name]`` their relative standard
+    deviations (each factor at least 0.05; a draw that leaves a parameter's range is
+    drawn again, at most DRAW_TRIES times, then an InputError)."""
+    from dynamics import ParameterError
+    for _ in range(DRAW_TRIES):
+        v, ts = world.vehicle, world.terrains
+        vk = {k: getattr(v, k) * max(0.05, 1.0 + s * rng.standard_normal()) for k, s in vary.items() if hasattr(v, k)}
+        tk = {k: s * rng.standard_normal() for k, s in vary.items() if not hasattr(v, k)}
+        try:
+            ts = tuple(t.replace(**{k: getattr(t, k) * max(0.05, 1.0 + e) for k, e in tk.items()}) for t in ts)
+            return replace(world, vehicle=v.replace(**vk), terrains=ts)
+        except ParameterError as exc:
+            last = str(exc).replace("<replace>: ", "")
+    raise InputError(f"no draw of {', '.join(sorted(vary))} within the parameters' ranges in {DRAW_TRIES} "
+                     f"tries (the last: {last}); lower the relative standard deviations")
 
 
 DRAW_TRIES = 100      # draws per robustness sample before its parameters are said to leave their ranges

@@ -44,12 +44,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
-from .planning.margin import drawn_worlds as _drawn_worlds     # the robustness draw
+from ..errors import InputError
+from ..planning.margin import drawn_worlds as _drawn_worlds     # the robustness draw
+from . import closed_loop as CL
 
 COLUMNS = ("task_id", "scenario", "family_seed", "cost", "seed", "settings", "variant", "status", "reason",
            "failure", "travel_time_s", "energy_J", "length_m", "planning_time_s", "expansions", "reached_at_rate",
-           "robust_samples", "p_stall", "p_miss", "energy_mean_J", "energy_std_J", "task_time_s")
+           "robust_samples", "p_stall", "p_miss", "energy_mean_J", "energy_std_J", "task_time_s") + CL.RUN_COLUMNS
 KNOWN = {"scenarios", "families", "costs", "seeds", "planner", "variants", "robustness"}
 
 
@@ -58,7 +59,7 @@ def load_spec(path: Path) -> dict:
     """A sweep spec, validated (every problem at once), paths resolved against its folder."""
     from dynamics.params import read_yaml_text
     from dynamics.params import did_you_mean
-    from .scenario import shown
+    from ..scenario import shown
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: expected a sweep spec YAML file, found no such file")
@@ -134,10 +135,14 @@ def load_spec(path: Path) -> dict:
                 probs.append(f"variants[{i}].name: expected a name of its own (rows are told apart by it), "
                              f"found {shown(v['name'])} again")
     rob = spec.get("robustness")
-    if rob is not None and not (isinstance(rob, dict) and isinstance(rob.get("samples"), int)
+    if CL.closed(rob) and isinstance(rob.get("samples"), int) and not isinstance(rob["samples"], bool) and \
+            0 < rob["samples"] <= 10_000:
+        probs += CL.problems(rob)
+    elif rob is not None and not (isinstance(rob, dict) and isinstance(rob.get("samples"), int)
                                 and not isinstance(rob["samples"], bool) and 0 < rob["samples"] <= 10_000
                                 and isinstance(rob.get("vary", {}) or {}, dict)):
-        probs.append(f"robustness: expected {{samples: N, seed: S, vary: {{parameter: relative std}}}}, found {shown(rob)}")
+        probs.append(f"robustness: expected {{samples: N, seed: S, vary: {{parameter: relative std}}}} (open loop) "
+                     f"or {{mode: closed_loop, samples: N, ...}}, found {shown(rob)}")
     elif rob is not None:
         probs += _robustness_problems(rob)
     if not files and not families and not probs:
@@ -145,7 +150,7 @@ def load_spec(path: Path) -> dict:
     # a variant's vehicle file is the spec's, like its scenarios: resolved here, once
     variants = [dict(v, vehicle=str((base / v["vehicle"]).resolve()))
                 if isinstance(v.get("vehicle"), str) and (base / v["vehicle"]).is_file() else v for v in variants]
-    from . import scenario as SC
+    from .. import scenario as SC
     family_files = {p for p, _ in families}
     for f in dict.fromkeys(files + [p for p, _ in families]):     # each scenario file checked once, up front
         try:
@@ -160,17 +165,6 @@ def load_spec(path: Path) -> dict:
         raise InputError(f"{path}: " + (probs[0] if len(probs) == 1 else f"{len(probs)} problems:\n  " + "\n  ".join(probs)))
     return {"scenarios": files, "families": families, "costs": costs, "seeds": seeds, "planner": grid,
             "variants": variants, "robustness": rob, "base": base}
-
-
-def _numeric_fields() -> tuple:
-    """(the vehicle's, the terrain's) numeric parameters, which variants change and
-    robustness draws."""
-    from dataclasses import fields
-    from dynamics.params import Terrain, Vehicle
-
-    def numeric(cls):
-        return sorted(f.name for f in fields(cls) if isinstance(f.default, (int, float)) and not isinstance(f.default, bool))
-    return numeric(Vehicle), numeric(Terrain)
 
 
 def _change_ok(c) -> bool:
@@ -193,13 +187,14 @@ def _variant_problems(where: str, v: dict, base: Path) -> list:
     an error row with Python's words)."""
     from dynamics import ParameterError, load_vehicle
     from dynamics.params import did_you_mean
-    from .scenario import shown
+    from ..scenario import shown
     out = []
     for k in v:
         if k not in ("name", "vehicle", "terrain"):
             out.append(f"{where}.{k}: expected one of the keys name, terrain, vehicle, found an unknown key"
                        f"{did_you_mean(k, ('name', 'vehicle', 'terrain'))}")
-    veh, ter = _numeric_fields()
+    from ..truth import numeric_fields
+    veh, ter = numeric_fields()
     for key, names in (("vehicle", veh), ("terrain", ter)):
         spec = v.get(key)
         if spec is None:
@@ -226,29 +221,25 @@ def _variant_problems(where: str, v: dict, base: Path) -> list:
 
 def _robustness_problems(rob: dict) -> list:
     from dynamics.params import did_you_mean
-    from .scenario import shown
+    from ..scenario import shown
+    from .. import truth as TT
+    keys = ("mode", "samples", "seed", "vary")
     out = []
     for k in rob:
-        if k not in ("samples", "seed", "vary"):
-            out.append(f"robustness.{k}: expected one of the keys samples, seed, vary, found an unknown key"
-                       f"{did_you_mean(k, ('samples', 'seed', 'vary'))}")
+        if k not in keys:
+            out.append(f"robustness.{k}: expected one of the keys {', '.join(keys)}, found an unknown key"
+                       f"{did_you_mean(k, keys)} (faults and the keys of runs need mode: closed_loop)")
+    if rob.get("mode", "open_loop") not in ("open_loop", "closed_loop"):
+        out.append(f"robustness.mode: expected open_loop or closed_loop, found {shown(rob['mode'])}")
     seed = rob.get("seed", 0)
     if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2 ** 31):
         out.append(f"robustness.seed: expected an integer in [0, 2^31), found {shown(seed)}")
-    veh, ter = _numeric_fields()
-    names = sorted(set(veh) | set(ter))
-    for name, s in (rob.get("vary") or {}).items():
-        if name not in names:
-            out.append(f"robustness.vary.{name}: expected a numeric vehicle or terrain parameter, found an unknown "
-                       f"one{did_you_mean(name, names)}")
-        elif isinstance(s, bool) or not isinstance(s, (int, float)) or not 0.0 <= s <= 1.0:
-            out.append(f"robustness.vary.{name}: expected a relative standard deviation in [0, 1], found {shown(s)}")
-    return out
+    return out + TT.problems(rob.get("vary") or {}, {}, "robustness.")
 
 
 def _setting_problems(grid: dict) -> list:
     """Each value of the planner grid checked as a scenario's planner section checks it."""
-    from . import scenario as SC
+    from .. import scenario as SC
     out = []
     for k, values in grid.items():
         for val in values:
@@ -279,12 +270,14 @@ def tasks(spec: dict) -> list:
     for (path, fam), settings, variant in itertools.product(sources, grid, spec["variants"]):
         for cost in spec["costs"] or [None]:
             for seed in spec["seeds"] or [None]:
-                t = {"scenario": str(Path(path).resolve()), "family_seed": fam, "cost": cost, "seed": seed,
-                     "settings": settings, "variant": variant, "robustness": spec["robustness"]}
-                # the id hashes the scenario's resolved path: the same task however the spec was named
-                t["task_id"] = hashlib.sha256(json.dumps(t, sort_keys=True, default=str).encode()).hexdigest()[:16]
-                t.update(scenario=str(path), label=labels[Path(path)])
-                out.append(t)
+                base = {"scenario": str(Path(path).resolve()), "family_seed": fam, "cost": cost, "seed": seed,
+                        "settings": settings, "variant": variant, "robustness": spec["robustness"]}
+                # a closed-loop sweep: one task per run (sample and mode)
+                for t in (CL.expand(base, spec["robustness"]) if CL.closed(spec["robustness"]) else [base]):
+                    # the id hashes the scenario's resolved path: the same task however the spec was named
+                    t["task_id"] = hashlib.sha256(json.dumps(t, sort_keys=True, default=str).encode()).hexdigest()[:16]
+                    t.update(scenario=str(path), label=labels[Path(path)])
+                    out.append(t)
     return out
 
 
@@ -334,17 +327,19 @@ def _variant_world(world, variant: dict):
 
 def run_task(task: dict) -> dict:
     """Plan one task (module doc); a row of COLUMNS. Never raises."""
-    from .planning import check as CK
-    from .planning import plan as PL
-    from . import scenario as SC
-    from .planning import world as WO
-    from .problems import skidsteer as SS
+    from ..planning import check as CK
+    from ..planning import plan as PL
+    from .. import scenario as SC
+    from ..planning import world as WO
+    from ..problems import skidsteer as SS
     t0 = time.perf_counter()
     row = {k: None for k in COLUMNS}
     row.update(task_id=task["task_id"], scenario=task.get("label") or Path(task["scenario"]).stem,
                family_seed=task["family_seed"], cost=task["cost"],
                seed=task["seed"], settings=json.dumps(task["settings"], sort_keys=True),
                variant=task["variant"]["name"], status="error")
+    if task.get("sample") is not None:
+        row.update(sample=task["sample"], run_mode=task["run_mode"], end="error")
     try:
         scn = SC.load(task["scenario"])
         if task["family_seed"] is not None:
@@ -356,11 +351,15 @@ def run_task(task: dict) -> dict:
         over = dict(task["settings"], threads=1)
         if task["seed"] is not None:
             over["seed"] = task["seed"]
-        from .api import load_scenario
+        from ..api import load_scenario
         scn = load_scenario(scn, **over)
         cost = task["cost"] or scn.cost
         row["cost"] = cost
         world = _variant_world(WO.resolve(scn), task["variant"])
+        if task.get("sample") is not None:         # a closed-loop run (sbmpc.sweep.closed_loop)
+            row.update(CL.run(world, cost, task))
+            row["task_time_s"] = time.perf_counter() - t0
+            return row
         plan = PL.plan(world, cost)
         row.update(status=plan.status, reason=plan.reason, failure=plan.failure, travel_time_s=plan.travel_time_s, energy_J=plan.energy_J,
                    length_m=plan.length_m, planning_time_s=plan.planning_time_s, expansions=plan.nodes_expanded,
@@ -446,7 +445,7 @@ def execute(task_list: list, out: Path, workers: int = 0, address: str | None = 
         for p in ((out / "parts").glob("*.parquet") if (out / "parts").is_dir() else []):
             p.unlink()
         (out / "results.parquet").unlink(missing_ok=True)
-    todo = [t for t in task_list if t["task_id"] not in done]
+    todo = [dict(t, out=str(out)) for t in task_list if t["task_id"] not in done]   # (runs write files there)
     workers = workers or os.cpu_count() or 1
     # batches: Ray costs about 0.5 ms a task, a plan 0.1-10 s, so one task per batch
     # balances best; only sweeps of thousands of tasks get larger batches
@@ -500,7 +499,10 @@ def _ray():
 
 def summary_table(rows: list) -> str:
     """Per scenario and cost: tasks, found, median travel time and energy (with range),
-    stall/miss probability when measured."""
+    stall/miss probability when measured (a closed-loop sweep's rows: per run,
+    :func:`sbmpc.sweep.closed_loop.summary_table`)."""
+    if rows and all(r.get("sample") is not None for r in rows):
+        return CL.summary_table(rows)
     groups: dict = {}
     for r in rows:
         groups.setdefault((r["scenario"], r["cost"] or "-", r["variant"]), []).append(r)
@@ -524,7 +526,10 @@ def summary_table(rows: list) -> str:
 
 def plot_summary(rows: list, path: Path) -> None:
     """DIR/summary.png: travel time against energy of every found plan, one colour per
-    scenario, filled for time and hollow for energy plans; failures counted in the title."""
+    scenario, filled for time and hollow for energy plans; failures counted in the title
+    (a closed-loop sweep's: :func:`sbmpc.sweep.closed_loop.plot_summary`)."""
+    if rows and all(r.get("sample") is not None for r in rows):
+        return CL.plot_summary(rows, path)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
