@@ -68,7 +68,7 @@ class RunResult:
     settings: RunSettings
     status: str = "failed"            # reached | failed
     reason: str | None = None
-    end: str = "failed"               # reached | stopped (rather than tip over) | tipped | off_map | failed
+    end: str = "failed"     # reached | stopped (rather than tip over) | no_path | tipped | off_map | timeout | failed
     trajectory: dict = field(default_factory=dict)
     plans: list = field(default_factory=list)        # [Replan], the first plan first
     stalls: int = 0
@@ -518,7 +518,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 weaker = (f"; {_stall_failure(stalls, _named(world, planner, out), out.inferred[-1])}"
                           if stalls else "")
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
-                                        f"({why}): {p.reason}{weaker}")
+                                        f"({why}): {p.reason}{weaker}", "no_path")
         control = steps[k]
         if k == len(steps) - 1:
             # the last control was cut where the prediction entered the goal: hold it
@@ -622,8 +622,9 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
         ctrl.close()
         out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
         out.periods, out.driven, out.dropped = ctrl.periods, ctrl.driven, drop.count
-        if end is None and status != "reached" and (reason or "").startswith("stopped at"):
-            end = "stopped"
+        if end is None and status != "reached":
+            end = ("stopped" if (reason or "").startswith("stopped at") else
+                   "no_path" if (reason or "").startswith(("no way on", "no path")) else None)
         return _finish(out, pieces, every, status, reason, end, X)
 
     while True:

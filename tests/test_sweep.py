@@ -1,6 +1,7 @@
 """Sweeps (sbmpc sweep): every combination is one task, rows stream into parquet, a
 crashing task is a row, an interrupted sweep resumes, and Ray gives the serial loop's
 results."""
+import json
 import os
 import signal
 import subprocess
@@ -227,3 +228,59 @@ def test_a_robustness_draw_outside_a_parameters_range_is_drawn_again(monkeypatch
     with pytest.raises(InputError, match=r"no draw of mass within the parameters' ranges in 100 tries \(the last: "
                                          r"key 'mass'"):
         SW._drawn_worlds(world, {"samples": 1, "vary": {"mass": 1.0}}, "0" * 16)
+
+
+CLOSED = f"""
+scenarios: [{ROOT}/scenarios/flat.yaml, {ROOT}/scenarios/unreachable.yaml]
+costs: [time]
+robustness:
+  mode: closed_loop
+  samples: 3
+  seed: 0
+  modes: [whole_route, horizon]
+  vary: {{mass: 0.1, mu_sa: 0.1, mu_op: 0.1}}
+  faults: {{delay_s: 0.05, map: {{noise_sd_m: 0.05, corr_m: 2.0}}, odometry: {{noise_m: 0.02}}}}
+"""
+
+
+def test_a_closed_loop_sweep_runs_each_draw_in_both_modes_and_writes_the_failures_to_replay(tmp_path, capsys):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(CLOSED)
+    out = tmp_path / "out"
+    assert main(["sweep", str(spec), "--out", str(out), "--serial", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    rows = SW.read_rows(out)
+    assert len(rows) == 2 * 3 * 2 and "p_reach crossable" in text and (out / "summary.png").stat().st_size > 10_000
+    flat = [r for r in rows if r["scenario"] == "flat"]
+    for k in range(3):        # one truth per sample, met by both modes
+        a, b = (r for r in flat if r["sample"] == k)
+        assert a["truth_spec"] == b["truth_spec"] and {a["run_mode"], b["run_mode"]} == {"whole_route", "horizon"}
+    assert len({r["truth_spec"] for r in flat}) == 3
+    for r in flat:            # every draw can cross the floor and does; the horizon controller within 10 % of
+        # its own vehicle's plan's time (a whole-route run of a 15 % heavier draw re-plans 3 times: +32 %)
+        assert r["end"] == "reached" and r["can_cross"] and r["run_file"] is None
+        assert 0.9 < r["cost_ratio"] < (1.1 if r["run_mode"] == "horizon" else 1.5)
+        assert json.loads(r["truth_spec"])["delay_s"] == 0.05
+    for r in (r for r in rows if r["scenario"] == "unreachable"):   # no truth can: each stops and says why
+        assert r["end"] == "no_path" and r["can_cross"] is False and "no path can exist" in r["reason"]
+        assert Path(r["run_file"]).is_file()
+    # a run's file makes the same run again
+    bad = next(r for r in rows if r["scenario"] == "unreachable" and r["run_mode"] == "whole_route")
+    assert main(["run", "--replay", bad["run_file"]]) == 1
+    assert "replay: ended as recorded" in capsys.readouterr().out
+    # resumable like every sweep
+    res = SW.execute(SW.tasks(SW.load_spec(spec)), out, resume=True, use_ray=False)
+    assert res["ran"] == 0 and res["skipped"] == 12
+
+
+def test_a_closed_loop_spec_is_checked_before_any_task(tmp_path, capsys):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(CLOSED.replace("modes: [whole_route, horizon]", "modes: [both]\n  wall_limit_s: 0")
+                    .replace("corr_m: 2.0", "corr: 2.0"))
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "robustness.modes: expected a list of whole_route and/or horizon" in err
+    assert "robustness.wall_limit_s: expected seconds" in err and "robustness.faults.map.corr:" in err
+    spec.write_text(CLOSED.replace("  mode: closed_loop\n", ""))        # faults need the closed loop
+    assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
+    assert "faults and the keys of runs need mode: closed_loop" in capsys.readouterr().err

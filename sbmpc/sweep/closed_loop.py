@@ -18,7 +18,8 @@ A spec's ``robustness`` then reads::
 Sample k of a task draws the same truth for every mode (the seed hashes the spec's seed,
 the task without its mode, and k), so whole-route and horizon runs meet the same truths.
 Each run is a row (:data:`RUN_COLUMNS` beside the plan columns): how it ended (``end``:
-reached, stopped (rather than tip over), failed, tipped, off_map, timeout, error) and
+reached, stopped (rather than tip over), no_path (the planner found no way on from
+where it stood, and said why), failed, tipped, off_map, timeout, error) and
 why, what the first plan predicted and what was executed, what a plan for the truth's
 own vehicle on its own map predicts (``own_*``; ``can_cross`` false where no plan exists
 for it), stalls, re-plans, guarded and dropped periods, wall time. A run that does not
@@ -39,7 +40,7 @@ RUN_COLUMNS = ("sample", "run_mode", "end", "truth", "executed_time_s", "execute
                "guarded", "dropped", "run_wall_s", "run_file", "truth_spec")
 KEYS = ("mode", "samples", "seed", "modes", "horizon_s", "wall_limit_s", "own_plan", "vary", "faults")
 MODES = ("whole_route", "horizon")
-ENDS = ("reached", "stopped", "failed", "tipped", "off_map", "timeout", "error")
+ENDS = ("reached", "stopped", "no_path", "failed", "tipped", "off_map", "timeout", "error")
 WALL_LIMIT_S = 600.0
 HORIZON_S = 10.0
 
@@ -138,14 +139,16 @@ def summary_table(rows: list) -> str:
     """Per scenario, cost, mode and variant: runs, how they ended, p_reach (of all, and of
     those whose truth can cross), the executed cost over the own vehicle's plan (median,
     90th percentile), stalls."""
-    lines = [("scenario", "cost", "mode", "variant", "runs", "reached", "stopped", "failed", "tipped/off", "timeout/err",
+    lines = [("scenario", "cost", "mode", "variant", "runs", "reached", "stopped/no path", "failed", "tipped/off",
+              "timeout/err",
               "p_reach", "p_reach crossable", "cost ratio median (p90)", "stalls")]
     for (s, c, m, v), rs in _groups(rows).items():
         n = len(rs)
         count = {e: sum(r["end"] == e for r in rs) for e in ENDS}
         cross = [r for r in rs if r.get("can_cross") is not False]
         ratio = np.array([r["cost_ratio"] for r in rs if r.get("cost_ratio") is not None], float)
-        lines.append((s, c, m, v, str(n), str(count["reached"]), str(count["stopped"]), str(count["failed"]),
+        lines.append((s, c, m, v, str(n), str(count["reached"]), f"{count['stopped']}/{count['no_path']}",
+                      str(count["failed"]),
                       f"{count['tipped']}/{count['off_map']}", f"{count['timeout']}/{count['error']}",
                       f"{count['reached'] / n:.2f}",
                       f"{sum(r['end'] == 'reached' for r in cross) / len(cross):.2f} of {len(cross)}" if cross else "-",

@@ -1,0 +1,198 @@
+"""What can differ from the plan (sbmpc.truth): each fault drawn as documented, each
+executed by a run, which reaches or stops and says why, never tips over or leaves the
+map; a run made again from its JSON ends as recorded; a stall's inference."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from dynamics import kernels as K
+from sbmpc import receding as R
+from sbmpc import truth as TT
+from sbmpc.api import load_world
+from sbmpc.commands.cli import main
+from sbmpc.execution import Evidence
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def flat():
+    return load_world(ROOT / "scenarios" / "flat.yaml")
+
+
+def test_a_draw_is_its_seed_and_its_spec_makes_the_same_truth(flat):
+    vary = {"mass": 0.1, "mu_sa": 0.1}
+    faults = {"map": {"noise_sd_m": 0.05, "bump": {"height_m": 0.1}}, "delay_s": 0.05}
+    a, b, c = (TT.draw(flat, vary, faults, s) for s in (7, 7, 8))
+    assert a.spec == b.spec and a.spec != c.spec
+    again = TT.from_spec(flat, json.loads(json.dumps(a.spec)))
+    assert np.array_equal(again.world.emap.heights, a.world.emap.heights)
+    assert again.world.vehicle == a.world.vehicle and again.world.vehicle.delay == pytest.approx(0.05)
+    # the planning world is left as it was
+    assert flat.emap.heights.max() == flat.emap.heights.min() and flat.vehicle.delay == 0.0
+
+
+def test_map_errors_have_the_sd_correlation_bias_and_tilt_asked_for(flat):
+    e = flat.emap
+    t = TT.draw(flat, None, {"map": {"noise_sd_m": 0.05, "corr_m": 2.0}}, 1)
+    n = t.world.emap.heights - e.heights
+    assert n.std() == pytest.approx(0.05, rel=1e-6)
+    lag = int(round(2.0 / e.resolution))     # the correlation at corr_m: about exp(-1/2)
+    r = np.corrcoef(n[:, :-lag].ravel(), n[:, lag:].ravel())[0, 1]
+    r1 = np.corrcoef(n[:, :-1].ravel(), n[:, 1:].ravel())[0, 1]
+    assert 0.35 < r < 0.8 and r1 > 0.95
+    t = TT.draw(flat, None, {"map": {"bias_m": 0.3, "tilt_deg": 5.0, "tilt_dir_deg": 0.0}}, 1)
+    d = t.world.emap.heights - e.heights
+    assert d.mean() == pytest.approx(0.3, abs=1e-9)
+    assert np.allclose(np.diff(d, axis=1) / e.resolution, math.tan(math.radians(5.0)))
+    assert np.allclose(np.diff(d, axis=0), 0.0)
+
+
+def test_a_patch_and_a_bump_lie_on_the_way_and_only_in_the_truth(flat):
+    t = TT.draw(flat, None, {"map": {"patch": {"terrain": "grass", "radius_m": 1.5}, "bump": {"height_m": 0.12}}}, 3)
+    p, b = t.spec["map"]["patch"], t.spec["map"]["bump"]
+    s, g = flat.scenario.start, flat.scenario.goal
+    for c in (p, b):       # on the straight line from start to goal, a quarter to three quarters along
+        f = (c["x"] - s["x"]) / (g["x"] - s["x"])
+        assert 0.25 <= f <= 0.75 and c["y"] == pytest.approx(s["y"] + f * (g["y"] - s["y"]))
+    assert t.world.terrain_at(p["x"], p["y"]).name == "grass" and flat.terrain_at(p["x"], p["y"]).name == "vinyl"
+    assert t.world.terrain_at(p["x"] + 2.0, p["y"] + 2.0).name == "vinyl"
+    assert t.world.emap.height(b["x"], b["y"]) - flat.emap.height(b["x"], b["y"]) == pytest.approx(0.12, abs=0.01)
+
+
+def test_the_odometer_drifts_with_the_distance_and_is_exact_without_error(flat):
+    X = R.WO.start_state(flat)
+    exact = TT.Truth(flat).odometer()
+    assert exact.observe(X) is X
+    o = TT.Truth(flat, {"drift": 0.02, "drift_deg_per_m": 1.0}, seed=5).odometer()
+    for k in range(11):                      # 10 m driven along x
+        Y = X.copy()
+        Y[K.S_X] += k
+        o.advance(Y)
+    m = o.observe(Y)
+    assert math.hypot(m[K.S_X] - Y[K.S_X], m[K.S_Y] - Y[K.S_Y]) == pytest.approx(0.2, rel=1e-9)
+    assert abs(m[K.S_YAW] - Y[K.S_YAW]) == pytest.approx(math.radians(10.0), rel=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(p=st.floats(0.0, 0.9), seed=st.integers(0, 2 ** 31 - 1))
+def test_a_dropped_command_leaves_the_drive_at_the_last_it_received(p, seed):
+    X = np.zeros(K.NS)
+    X[K.S_REFL], X[K.S_REFR] = 1.0, 2.0
+    d = TT.Truth(None, dropped=p, seed=seed).dropper()
+    last = (1.0, 2.0)
+    for k in range(200):
+        c = (float(k), -float(k), 0.1)
+        a = d.applied(X, c)
+        assert a == c or a == (last[0], last[1], 0.1)
+        last = a[:2]
+    assert d.count == 0 if p == 0.0 else d.count <= 200
+    if p > 0.3:
+        assert 0.5 * p * 200 < d.count < 1.5 * p * 200 + 10
+
+
+@pytest.mark.parametrize("faults", [
+    {"vary": {"mass": 0.1, "inertia": 0.1, "mu_sa": 0.1, "mu_op": 0.1, "mu_roll": 0.1, "v_max": 0.1}},
+    {"map": {"noise_sd_m": 0.05, "corr_m": 2.0}},
+    {"map": {"bias_m": 0.5, "tilt_deg": 2.0}},
+    {"map": {"patch": {"terrain": "grass", "radius_m": 2.0}}},
+    {"map": {"bump": {"height_m": 0.1, "radius_m": 0.5}}},
+    {"delay_s": 0.05},
+    {"odometry": {"noise_m": 0.03, "noise_deg": 1.0, "drift": 0.05}},
+    {"dropped": 0.1},
+], ids=["vehicle", "noise", "bias-tilt", "patch", "bump", "delay", "odometry", "dropped"])
+def test_each_fault_is_executed_and_the_run_reaches_or_stops_saying_why(flat, faults):
+    vary = faults.pop("vary", None)
+    t = TT.draw(flat, vary, faults, 11)
+    res = R.run(flat, "time", t)
+    nominal = R.run(flat, "time")
+    d = res.to_json()
+    assert res.end in ("reached", "stopped") and (res.end == "reached" or res.reason)
+    assert d["truth_at_end"]["x"] == pytest.approx(res.trajectory["x"][-1])
+    assert d["truth_spec"] == t.spec
+    if res.end == "reached":
+        g = flat.scenario.goal      # the true vehicle is in the goal, whatever the odometry says
+        assert math.hypot(res.trajectory["x"][-1] - g["x"], res.trajectory["y"][-1] - g["y"]) <= g["radius"] + 1e-6
+    # the fault made a difference that the nominal run does not have (odometry: the drift
+    # takes the measured pose out of the tolerance: a re-plan from it)
+    # dropped: counted (on flat, a lost command is often the same as the one held)
+    if "odometry" in faults:
+        assert res.replans > nominal.replans
+    elif "dropped" not in faults:
+        assert (res.energy_J, res.travel_time_s) != (nominal.energy_J, nominal.travel_time_s)
+    if "dropped" in faults:
+        assert res.dropped > 0
+    if "bump" in faults.get("map", {}):
+        assert res.trajectory["z"].max() > 0.02 > nominal.trajectory["z"].max()
+    if "patch" in faults.get("map", {}):            # grass rolls harder than vinyl
+        assert res.energy_J > nominal.energy_J
+
+
+def test_a_run_json_makes_the_same_run_again(flat, tmp_path, capsys):
+    draw = tmp_path / "draw.yaml"
+    draw.write_text("seed: 2\nvary: {mass: 0.1}\nfaults: {delay_s: 0.05, odometry: {noise_m: 0.02}, dropped: 0.05}\n")
+    out = tmp_path / "run.json"
+    assert main(["run", str(ROOT / "scenarios" / "flat.yaml"), "--draw", str(draw), "--json", str(out)]) == 0
+    first = json.loads(out.read_text())
+    assert main(["run", "--replay", str(out), "--json", str(tmp_path / "again.json")]) == 0
+    text = capsys.readouterr().out
+    assert "replay: ended as recorded" in text
+    again = json.loads((tmp_path / "again.json").read_text())
+    assert again["energy_J"] == first["energy_J"] and again["truth_spec"] == first["truth_spec"]
+    assert again["dropped"] == first["dropped"]
+
+
+@pytest.mark.parametrize("draw, words", [
+    ("seed: 1\nvary: {mas: 0.1}\n", "vary.mas: expected a numeric vehicle or terrain parameter"),
+    ("faults: {map: {tilt: 3}}\n", "faults.map.tilt: expected one of the keys"),
+    ("faults: {dropped: 2}\n", "faults.dropped: expected a number in [0, 0.9], found 2"),
+    ("seed: -1\n", "seed: expected an integer"),
+    ("other: 1\n", "expected a mapping with keys among seed, vary, faults"),
+])
+def test_a_bad_draw_file_is_one_line_and_exit_2(tmp_path, capsys, draw, words):
+    p = tmp_path / "draw.yaml"
+    p.write_text(draw)
+    assert main(["run", str(ROOT / "scenarios" / "flat.yaml"), "--draw", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1
+
+
+def test_replay_refuses_what_is_not_a_run_json_and_extra_inputs(tmp_path, capsys):
+    p = tmp_path / "x.json"
+    p.write_text(json.dumps({"schema": "sbmpc.run/1"}))
+    assert main(["run", "--replay", str(p)]) == 2
+    assert main(["run", "--replay", str(p), "--cost", "energy"]) == 2
+    err = capsys.readouterr().err
+    assert "with a replay section" in err and "expected no --cost" in err
+
+
+def _rec(i: float, v: float, n: int = 50) -> np.ndarray:
+    r = np.zeros((n, K.NR))
+    r[:, K.R_IL] = r[:, K.R_IR] = i
+    r[:, K.R_V] = v
+    return r
+
+
+@pytest.mark.parametrize("i, v, said", [(1.2, 0.5, "weaker"), (1.0, 0.4, "weaker"), (0.8, 0.5, "stronger"),
+                                        (1.01, 0.5, "as planned")])
+def test_a_stall_is_read_from_the_currents_and_speeds_before_it(i, v, said):
+    ev = Evidence()
+    X = np.zeros(K.NS)
+    assert ev.infer(X)["inferred"] == "unknown"
+    for _ in range(5):
+        ev.add(_rec(i, v), _rec(1.0, 0.5))
+    inf = ev.infer(X)
+    assert inf["inferred"] == said and inf["current_ratio"] == pytest.approx(i) and inf["periods"] == 5
+
+
+def test_a_stronger_vehicles_stalls_are_not_called_weaker():
+    why = R._stall_failure([(1.0, 2.0), (1.5, 2.0)], "p3at", {"inferred": "stronger", "periods": 8,
+                                                              "current_ratio": 0.84, "speed_ratio": 1.0})
+    assert "not weaker" in why and "0.84 x the predicted current" in why
+    assert "weaker there than the planning model" in R._stall_failure([(1.0, 2.0)], "p3at", None)
