@@ -51,7 +51,7 @@ from .problems import skidsteer as SS
 from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
-from .execution import (HELD, SETTLED, STUCK_HORIZONS, Evidence, HorizonStats, Replan, deviation,  # noqa: F401
+from .execution import (EVIDENCE_TOL, HELD, SETTLED, STUCK_HORIZONS, Evidence, HorizonStats, Replan, deviation,  # noqa: F401
                         inference_note,
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
                         protected as _protected, settles as _settles, stopped as _stopped, weaker as _weaker)
@@ -75,6 +75,7 @@ class RunResult:
     periods: int = 0
     guarded: int = 0                  # periods held back: their prediction came within the tip-over margin
     weaker_from: float | None = None  # t [s] from which the margin's twin planned (the vehicle proved weaker)
+    planned_as: str | None = None     # the vehicle whose twin planned from then on (as a stall measured it)
     horizon: HorizonStats | None = None   # receding-horizon planning (planner.horizon_s > 0)
     driven: list = field(default_factory=list)    # the controls (wl, wr, duration_s) driven, period by period
     truth_spec: dict = field(default_factory=dict)   # what the truth was drawn as (sbmpc.truth.Truth.spec)
@@ -138,6 +139,7 @@ class RunResult:
             "periods": self.periods,
             "guarded": self.guarded,
             "weaker_from_t": self.weaker_from,
+            "planned_as": self.planned_as,
             "stall_inference": self.inferred,
             "dropped": self.dropped,
             "truth_spec": self.truth_spec,
@@ -196,15 +198,46 @@ def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
     return back
 
 
-def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray) -> tuple:
-    """(planning world, its executor) once the run has seen the vehicle weaker than the
-    planning one (a stall where its plans drove it, or a fresh plan whose first period
-    the twin's guard holds back): the margin's pessimistic twin
-    (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) plans from the
-    measured state X on, and the run records when (``RunResult.weaker_from``)."""
+def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, inferred: dict | None = None) -> tuple:
+    """(planning world, its executor, the world it is the twin of) once the run has seen
+    the vehicle weaker than the planning one (a stall where its plans drove it, or a
+    fresh plan whose first period the twin's guard holds back): the margin's pessimistic
+    twin (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) of the vehicle
+    as the stall's evidence measured it (:func:`_estimated`) plans from the measured
+    state X on, and the run records when (``RunResult.weaker_from``)."""
     out.weaker_from = float(X[K.S_T])
-    tw = _twin_planner(world)
-    return tw, _Executor(tw, cost)
+    base = world
+    if inferred is not None and inferred["inferred"] == "weaker":
+        base = _estimated(world, round(min(inferred["speed_ratio"], 1.0), 2),
+                          round(max(inferred["current_ratio"], 1.0), 2))
+    tw = _twin_planner(base)
+    out.planned_as = base.vehicle.name
+    return tw, _Executor(tw, cost), base
+
+
+@functools.lru_cache(maxsize=16)
+def _estimated(world: WO.World, speed_ratio: float, current_ratio: float) -> WO.World:
+    """The world whose margin's twin plans once a stall measured the vehicle weaker
+    (:meth:`sbmpc.execution.Evidence.infer`): where it drove slower than predicted, its
+    top speed (``v_max``, the voltage bound of eq. 27) times the speed ratio; where it drew
+    more current (the load it carries), its mass and inertia such that the twin's
+    (x 1 + margin) are the larger of the twin's and the measured (a 10 % heavier vehicle
+    draws about 12 % more current on runup_ramp: the twin of a 12 % heavier one over-
+    predicts it and re-plans three times where the plain twin re-planned once). Cached
+    per world and ratios (re-plans share its grids and value)."""
+    v = world.vehicle
+    ch, said = {}, []
+    if speed_ratio < 1.0 - EVIDENCE_TOL:
+        ch["v_max"] = v.v_max * max(speed_ratio, 0.5)
+        said.append(f"v_max x{ch['v_max'] / v.v_max:.2f}")
+    twin = 1.0 + world.scenario.planner.margin
+    if current_ratio > max(1.0 + EVIDENCE_TOL, twin):
+        f = min(current_ratio, 2.0)
+        ch.update(mass=v.mass * f / twin, inertia=v.inertia * f / twin)
+        said.append(f"mass x{f:.2f}")
+    if not ch:
+        return world
+    return replace(world, vehicle=v.replace(name=f"{v.name} as measured ({', '.join(said)})", **ch))
 
 
 @functools.lru_cache(maxsize=16)
@@ -221,12 +254,14 @@ def _twin_planner(world: WO.World, tip: bool = False) -> WO.World:
     return replace(tw, scenario=replace(tw.scenario, planner=ps))
 
 
-def _named(world: WO.World, planner: WO.World, out: "RunResult") -> str:
+def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World | None = None) -> str:
     """The planning model in a run's messages: the world's vehicle, and from
-    ``out.weaker_from`` on its margin's twin (``planner``)."""
+    ``out.weaker_from`` on the margin's twin (``planner``) of it or of ``base`` (the
+    vehicle as measured, :func:`_estimated`)."""
     if planner is world:
         return world.vehicle.name
-    return (f"{world.vehicle.name}, and from t = {out.weaker_from:.1f} s its margin's twin, "
+    of = "" if base is None or base is world else f" of {base.vehicle.name}"
+    return (f"{world.vehicle.name}, and from t = {out.weaker_from:.1f} s the margin's twin{of}, "
             f"x{1.0 + world.scenario.planner.margin:g} mass and grip")
 
 
@@ -362,6 +397,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     model = _Executor(world, cost)
     guards = _guards(world, cost)
     planner = world                    # the planning model: the world's vehicle, its margin's twin after a stall
+    base = world                       # ... the twin of this: the world's vehicle, or as a stall measured it
     guarded = False                    # the last plan's first period was held back by the guard
     real = _Executor(twin, cost, twin.vehicle.delay)
     odo, drop = truth.odometer(), truth.dropper()
@@ -407,7 +443,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             return finish("reached", None)
         if end == -SS.STALL:
             out.inferred.append(evidence.infer(X))
-            failed = _stalled(out, stalls, Xt, real, _named(world, planner, out), out.inferred[-1])
+            failed = _stalled(out, stalls, Xt, real, _named(world, planner, out, base), out.inferred[-1])
             X = odo.observe(Xt)
             return finish("failed", f"{failed} ({_ground(truth, Xt)})") if failed else None
         if end < 0:
@@ -465,7 +501,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
             budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
                       else rs.replan_time_budget_s)
-            model_world = _twin_planner(world, tip=True) if held and planner is not world else planner
+            model_world = _twin_planner(base, tip=True) if held and planner is not world else planner
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
             target = model_world if first else _aim(model_world)
@@ -515,7 +551,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 continue
             else:
                 # after stalls where the plans drove it, and from where none is seen now
-                weaker = (f"; {_stall_failure(stalls, _named(world, planner, out), out.inferred[-1])}"
+                weaker = (f"; {_stall_failure(stalls, _named(world, planner, out, base), out.inferred[-1])}"
                           if stalls else "")
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}", "no_path")
@@ -535,7 +571,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if guarded and since == 0 and planner is world and ps.margin > 0.0:
                     # the fresh plan's first period is held back too: its model is wrong here
                     # (the guard's twin predicts what the plan does not); plan with the twin
-                    planner, model = _weaker_model(world, cost, out, X)
+                    planner, model, base = _weaker_model(world, cost, out, X)
                 elif guarded and since == 0:
                     if not retrace():
                         return finish("failed", _stopped(X, ps), "stopped")
@@ -561,7 +597,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # margin's twin, which plans from here on (a vehicle that drew less current
                 # than predicted stalled where the plan drove it, not for a weaker drive: it
                 # re-plans with the planning model)
-                planner, model = _weaker_model(world, cost, out, X)
+                planner, model, base = _weaker_model(world, cost, out, X, out.inferred[-1])
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         elif X[K.S_T] - out.plans[0].t > t_limit:
             behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]
@@ -571,7 +607,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 ys = np.median([r.y for r in behind])
                 tail = (f": {len(behind)} re-plans after it fell behind its plans or stalled, around "
                         f"({xs:.2f}, {ys:.2f}); the vehicle is weaker there than the planning model "
-                        f"({_named(world, planner, out)}); plan with a model of this vehicle (sbmpc diagnose on a "
+                        f"({_named(world, planner, out, base)}); plan with a model of this vehicle (sbmpc diagnose on a "
                         f"run of it writes one)")
             return finish("failed", f"took longer than {t_limit:.0f} s ({rs.max_time_factor:g} x the first "
                                     f"plan's travel time + 30 s) without reaching the goal{tail}")

@@ -196,3 +196,21 @@ def test_a_stronger_vehicles_stalls_are_not_called_weaker():
                                                               "current_ratio": 0.84, "speed_ratio": 1.0})
     assert "not weaker" in why and "0.84 x the predicted current" in why
     assert "weaker there than the planning model" in R._stall_failure([(1.0, 2.0)], "p3at", None)
+
+
+def test_a_weaker_stall_plans_as_the_vehicle_measured(flat):
+    slow = R._estimated(flat, 0.83, 1.0)
+    assert slow.vehicle.v_max == pytest.approx(0.83 * flat.vehicle.v_max) and slow.vehicle.mass == flat.vehicle.mass
+    heavy = R._estimated(flat, 1.0, 1.2)     # its twin (x1.1) as heavy as measured
+    assert 1.1 * heavy.vehicle.mass == pytest.approx(1.2 * flat.vehicle.mass)
+    assert 1.1 * heavy.vehicle.inertia == pytest.approx(1.2 * flat.vehicle.inertia)
+    assert heavy.vehicle.v_max == flat.vehicle.v_max and heavy.vehicle.name == "p3at as measured (mass x1.20)"
+    assert R._estimated(flat, 0.99, 1.08) is flat and R._estimated(flat, 0.83, 1.0) is slow      # cached
+    out = R.RunResult("flat", "time", "p3at", "p3at", flat.scenario.run)
+    X = R.WO.start_state(flat)
+    tw, _, base = R._weaker_model(flat, "time", out, X, {"inferred": "weaker", "speed_ratio": 0.834,
+                                                         "current_ratio": 0.95})
+    assert base is slow and out.planned_as == "p3at as measured (v_max x0.83)"
+    assert tw.vehicle.v_max == pytest.approx(slow.vehicle.v_max) and tw.vehicle.mass == pytest.approx(1.1 * 31.0)
+    _, _, base = R._weaker_model(flat, "time", out, X)       # a held period: the plain twin
+    assert base is flat

@@ -57,8 +57,9 @@ def summary(res) -> str:
         lines.append(f"  {d['guarded']} period{'s' if d['guarded'] > 1 else ''} held back by the tip-over guard "
                      f"(predicted within half the tip-over margin)")
     if d.get("weaker_from_t") is not None:
-        lines.append(f"  from t = {d['weaker_from_t']:.1f} s the margin's twin planned: the vehicle proved weaker "
-                     f"than {res.vehicle}")
+        lines.append(f"  from t = {d['weaker_from_t']:.1f} s the margin's twin"
+                     + (f" of {d['planned_as']}" if d.get("planned_as") not in (None, res.vehicle) else "")
+                     + f" planned: the vehicle proved weaker than {res.vehicle}")
     if hz:
         lines.append(f"  {hz['plans']} horizon plans ({hz['horizon_s']:g} s ahead): first {hz['first_s'] * 1e3:.0f} ms, "
                      f"then median {hz['replan_median_s'] * 1e3:.0f} ms, 95th percentile "
