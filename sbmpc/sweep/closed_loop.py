@@ -22,7 +22,8 @@ reached, stopped (rather than tip over), no_path (the planner found no way on fr
 where it stood, and said why), failed, tipped, off_map, timeout, error) and
 why, what the first plan predicted and what was executed, what a plan for the truth's
 own vehicle on its own map predicts (``own_*``; ``can_cross`` false where no plan exists
-for it), stalls, re-plans, guarded and dropped periods, wall time. A run that does not
+for it), the executed cost over that (``cost_ratio``: what not knowing the truth cost)
+and over the first plan's prediction (``predicted_ratio``: the prediction's error), stalls, re-plans, guarded and dropped periods, wall time. A run that does not
 reach the goal writes its run JSON to ``DIR/runs/TASK_ID.json`` (``sbmpc run --replay``).
 """
 from __future__ import annotations
@@ -36,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 RUN_COLUMNS = ("sample", "run_mode", "end", "truth", "executed_time_s", "executed_energy_J", "predicted_time_s",
-               "predicted_energy_J", "own_time_s", "own_energy_J", "can_cross", "cost_ratio", "stalls", "replans",
+               "predicted_energy_J", "own_time_s", "own_energy_J", "can_cross", "cost_ratio", "predicted_ratio", "stalls", "replans",
                "guarded", "dropped", "run_wall_s", "run_file", "truth_spec")
 KEYS = ("mode", "samples", "seed", "modes", "horizon_s", "wall_limit_s", "own_plan", "vary", "faults")
 MODES = ("whole_route", "horizon")
@@ -116,6 +117,8 @@ def run(world, cost: str, task: dict) -> dict:
     done = row[f"executed_{key}"] if res.end == "reached" else None
     ref = row.get(f"own_{key}") or row[f"predicted_{key}"]
     row["cost_ratio"] = done / ref if done is not None and ref else None
+    pred = row[f"predicted_{key}"]
+    row["predicted_ratio"] = done / pred if done is not None and pred else None
     out = task.get("out")
     if res.end != "reached" and out:
         path = Path(out) / "runs" / f"{task['task_id']}.json"
@@ -141,18 +144,21 @@ def summary_table(rows: list) -> str:
     90th percentile), stalls."""
     lines = [("scenario", "cost", "mode", "variant", "runs", "reached", "stopped/no path", "failed", "tipped/off",
               "timeout/err",
-              "p_reach", "p_reach crossable", "cost ratio median (p90)", "stalls")]
+              "p_reach", "p_reach crossable", "over own plan median (p90)", "over prediction median (p90)",
+              "stalls")]
     for (s, c, m, v), rs in _groups(rows).items():
         n = len(rs)
         count = {e: sum(r["end"] == e for r in rs) for e in ENDS}
         cross = [r for r in rs if r.get("can_cross") is not False]
-        ratio = np.array([r["cost_ratio"] for r in rs if r.get("cost_ratio") is not None], float)
+        def mp(key, rs=rs):
+            x = np.array([r[key] for r in rs if r.get(key) is not None], float)
+            return f"{np.median(x):.3f} ({np.percentile(x, 90):.3f})" if x.size else "-"
         lines.append((s, c, m, v, str(n), str(count["reached"]), f"{count['stopped']}/{count['no_path']}",
                       str(count["failed"]),
                       f"{count['tipped']}/{count['off_map']}", f"{count['timeout']}/{count['error']}",
                       f"{count['reached'] / n:.2f}",
                       f"{sum(r['end'] == 'reached' for r in cross) / len(cross):.2f} of {len(cross)}" if cross else "-",
-                      f"{np.median(ratio):.3f} ({np.percentile(ratio, 90):.3f})" if ratio.size else "-",
+                      mp("cost_ratio"), mp("predicted_ratio"),
                       str(sum(int(r["stalls"] or 0) for r in rs))))
     w = [max(len(line[i]) for line in lines) for i in range(len(lines[0]))]
     return "\n".join("  ".join(x.ljust(w[i]) for i, x in enumerate(line)) for line in lines)
