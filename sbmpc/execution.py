@@ -229,62 +229,6 @@ def weaker(stalls: list, name: str) -> str:
 
 
 
-EVIDENCE_PERIODS = 20      # periods before a stall whose currents and speeds say what the vehicle is
-EVIDENCE_TOL = 0.03        # relative: a current or speed ratio this far from 1 says weaker or stronger
-
-
-class Evidence:
-    """What the periods a vehicle drove say of it against the planning model: per period
-    (not ending in a stall), the mean |current| of both sides and the mean |speed|,
-    measured and predicted from the same start (the last EVIDENCE_PERIODS kept)."""
-
-    def __init__(self):
-        from collections import deque
-        self.rows = deque(maxlen=EVIDENCE_PERIODS)
-
-    def add(self, measured: np.ndarray, predicted: np.ndarray) -> None:
-        """A period's records (rows of K.CHANNELS), the measured and the predicted."""
-        k = min(len(measured), len(predicted))
-        if k < 2:
-            return
-        m, p = measured[:k], predicted[:k]
-        self.rows.append((float(np.abs(m[:, K.R_IL]).mean() + np.abs(m[:, K.R_IR]).mean()),
-                          float(np.abs(p[:, K.R_IL]).mean() + np.abs(p[:, K.R_IR]).mean()),
-                          float(np.abs(m[:, K.R_V]).mean()), float(np.abs(p[:, K.R_V]).mean())))
-
-    def infer(self, X: np.ndarray) -> dict:
-        """What a stall at the measured state X says (issue: a vehicle that stalls is not
-        always weaker): ``weaker`` where the periods before it drew more current than the
-        planning model predicted or drove slower (ratios beyond EVIDENCE_TOL), ``stronger``
-        where they drew less at the predicted speed (lighter, or less resistance: the
-        stall came from where and how the plan drove it, not from a weaker drive),
-        ``as planned`` in between, ``unknown`` without such periods (a stall in a fresh
-        plan's first period)."""
-        out = {"t": round(float(X[K.S_T]), 3), "x": round(float(X[K.S_X]), 3), "y": round(float(X[K.S_Y]), 3),
-               "periods": len(self.rows), "current_ratio": None, "speed_ratio": None, "inferred": "unknown"}
-        rows = np.array(self.rows, float).reshape(-1, 4)
-        if not len(rows) or rows[:, 1].sum() <= 1e-9 or rows[:, 3].sum() <= 1e-9:
-            return out
-        ri = rows[:, 0].sum() / rows[:, 1].sum()
-        rv = rows[:, 2].sum() / rows[:, 3].sum()
-        out.update(current_ratio=round(float(ri), 4), speed_ratio=round(float(rv), 4))
-        if ri > 1.0 + EVIDENCE_TOL or rv < 1.0 - EVIDENCE_TOL:
-            out["inferred"] = "weaker"
-        elif ri < 1.0 - EVIDENCE_TOL:
-            out["inferred"] = "stronger"
-        else:
-            out["inferred"] = "as planned"
-        return out
-
-
-def inference_note(inf: dict) -> str:
-    """A stall's inference (:meth:`Evidence.infer`) in words."""
-    if inf["inferred"] == "unknown":
-        return "no period driven before it to compare with the planning model"
-    return (f"over the {inf['periods']} periods before it the vehicle drew {inf['current_ratio']:.2f} x the "
-            f"predicted current at {inf['speed_ratio']:.2f} x the predicted speed: {inf['inferred']}")
-
-
 def protected(X: np.ndarray, real: "Executor") -> None:
     """The drive's stall protection on the simulated truth: its references set to the
     measured speeds, commands still in the pipe dropped (:func:`_stalled`)."""
@@ -295,5 +239,5 @@ def protected(X: np.ndarray, real: "Executor") -> None:
     real.pipe = None
 
 
-__all__ = ["Evidence", "Executor", "HELD", "inference_note", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
+__all__ = ["Executor", "HELD", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker"]

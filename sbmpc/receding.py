@@ -51,8 +51,8 @@ from .problems import skidsteer as SS
 from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
-from .execution import (EVIDENCE_TOL, HELD, SETTLED, STUCK_HORIZONS, Evidence, HorizonStats, Replan, deviation,  # noqa: F401
-                        inference_note,
+from .estimate import FIT, Evidence, fit as fit_vehicle, inference_note, scaled
+from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
                         protected as _protected, settles as _settles, stopped as _stopped, weaker as _weaker)
 
@@ -191,53 +191,38 @@ def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
         return None
     back = [(0.0, 0.0, driven[-1][2])] + [(-wl, -wr, d) for wl, wr, d in reversed(driven[-n:])]
     S = X
-    for c in back:
+    for c in back if guards else ():     # (a run without a tip-over margin has no guard)
         if _held(guards, S, c, True):
             return None
         _, _, S = guards[0].step(S, c, record=False)
     return back
 
 
-def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, inferred: dict | None = None) -> tuple:
+def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None) -> tuple:
     """(planning world, its executor, the world it is the twin of) once the run has seen
     the vehicle weaker than the planning one (a stall where its plans drove it, or a
     fresh plan whose first period the twin's guard holds back): the margin's pessimistic
     twin (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) of the vehicle
-    as the stall's evidence measured it (:func:`_estimated`) plans from the measured
-    state X on, and the run records when (``RunResult.weaker_from``)."""
-    out.weaker_from = float(X[K.S_T])
-    base = world
-    if inferred is not None and inferred["inferred"] == "weaker":
-        base = _estimated(world, round(min(inferred["speed_ratio"], 1.0), 2),
-                          round(max(inferred["current_ratio"], 1.0), 2))
+    as the periods before a stall measured it (``fitted``: :func:`sbmpc.estimate.fit`;
+    without, the planning vehicle) plans from the measured state X on, and the run records
+    when (``RunResult.weaker_from``) and as what (``planned_as``)."""
+    if out.weaker_from is None:
+        out.weaker_from = float(X[K.S_T])
+    base = world if fitted is None else _as_measured(world, tuple(round(fitted[k], 2) for k in FIT))
     tw = _twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
 
 
 @functools.lru_cache(maxsize=16)
-def _estimated(world: WO.World, speed_ratio: float, current_ratio: float) -> WO.World:
-    """The world whose margin's twin plans once a stall measured the vehicle weaker
-    (:meth:`sbmpc.execution.Evidence.infer`): where it drove slower than predicted, its
-    top speed (``v_max``, the voltage bound of eq. 27) times the speed ratio; where it drew
-    more current (the load it carries), its mass and inertia such that the twin's
-    (x 1 + margin) are the larger of the twin's and the measured (a 10 % heavier vehicle
-    draws about 12 % more current on runup_ramp: the twin of a 12 % heavier one over-
-    predicts it and re-plans three times where the plain twin re-planned once). Cached
-    per world and ratios (re-plans share its grids and value)."""
-    v = world.vehicle
-    ch, said = {}, []
-    if speed_ratio < 1.0 - EVIDENCE_TOL:
-        ch["v_max"] = v.v_max * max(speed_ratio, 0.5)
-        said.append(f"v_max x{ch['v_max'] / v.v_max:.2f}")
-    twin = 1.0 + world.scenario.planner.margin
-    if current_ratio > max(1.0 + EVIDENCE_TOL, twin):
-        f = min(current_ratio, 2.0)
-        ch.update(mass=v.mass * f / twin, inertia=v.inertia * f / twin)
-        said.append(f"mass x{f:.2f}")
-    if not ch:
-        return world
-    return replace(world, vehicle=v.replace(name=f"{v.name} as measured ({', '.join(said)})", **ch))
+def _as_measured(world: WO.World, factors: tuple) -> WO.World:
+    """The planning world scaled by the online fit's factors (:data:`sbmpc.estimate.FIT`,
+    :func:`sbmpc.estimate.scaled`), named by those beyond 2 %. Cached per world and
+    factors (rounded to 0.01: re-plans share its grids and value)."""
+    f = dict(zip(FIT, factors))
+    w = scaled(world, f)
+    said = ", ".join(f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02)
+    return replace(w, vehicle=w.vehicle.replace(name=f"{world.vehicle.name} as measured" + (f" ({said})" if said else "")))
 
 
 @functools.lru_cache(maxsize=16)
@@ -257,7 +242,7 @@ def _twin_planner(world: WO.World, tip: bool = False) -> WO.World:
 def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World | None = None) -> str:
     """The planning model in a run's messages: the world's vehicle, and from
     ``out.weaker_from`` on the margin's twin (``planner``) of it or of ``base`` (the
-    vehicle as measured, :func:`_estimated`)."""
+    vehicle as measured, :func:`_as_measured`)."""
     if planner is world:
         return world.vehicle.name
     of = "" if base is None or base is world else f" of {base.vehicle.name}"
@@ -298,6 +283,37 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
         return _stall_failure(stalls, name, inferred)
     _protected(X, real)
     return None
+
+
+MARK_NEAR = 1.5      # m: a stall this close to an earlier one marks the slope ahead impassable
+MARK_RADIUS = 0.6    # m: the radius of such a mark
+
+
+def _ahead(world: WO.World, X: np.ndarray) -> tuple:
+    """(x, y, radius) [m] of the slope a stalled vehicle at X was climbing: a disc of
+    MARK_RADIUS ahead in the direction it was driving, two map cells clear of its
+    footprint at any heading (the vehicle turns where it stands)."""
+    d = world.margin + 2.0 * world.emap.resolution + MARK_RADIUS
+    sign = -1.0 if X[K.S_WL] + X[K.S_WR] < 0.0 else 1.0
+    yaw = float(X[K.S_YAW])
+    return (round(float(X[K.S_X]) + sign * d * math.cos(yaw), 3), round(float(X[K.S_Y]) + sign * d * math.sin(yaw), 3),
+            MARK_RADIUS)
+
+
+@functools.lru_cache(maxsize=16)
+def _marked(world: WO.World, marks: tuple) -> WO.World:
+    """``world`` with each mark (x, y, radius) a wall (100 m above the highest cell, as a
+    map's ``nodata: wall``): no plan crosses it. Cached per world and marks."""
+    e = world.emap
+    H = e.heights.copy()
+    ny, nx = H.shape
+    xs = e.origin[0] + e.resolution * np.arange(nx)
+    ys = e.origin[1] + e.resolution * np.arange(ny)
+    Xg, Yg = np.meshgrid(xs, ys)
+    top = float(H.max()) + 100.0
+    for x, y, r in marks:
+        H[(Xg - x) ** 2 + (Yg - y) ** 2 <= r * r] = top
+    return replace(world, emap=replace(e, heights=H))
 
 
 def _ground(truth: TT.Truth, Xt: np.ndarray) -> str:
@@ -395,6 +411,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     if ps.horizon_s > 0.0:
         return _run_horizon(world, cost, truth, out, deadline)
     model = _Executor(world, cost)
+    nominal = _Executor(world, cost)   # the planning vehicle's one-period predictions (a stall's evidence)
     guards = _guards(world, cost)
     planner = world                    # the planning model: the world's vehicle, its margin's twin after a stall
     base = world                       # ... the twin of this: the world's vehicle, or as a stall measured it
@@ -410,7 +427,9 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     why = "start"
     current, steps, k, P, since = None, [], 0, None, 0
     t_limit = math.inf
+    limit_for = world                  # the planning model the time limit was set for
     stalls = []
+    marks: list = []                   # slopes a second stall marked impassable for the re-plans (_marked)
     driven: list = []                  # the periods driven, in order
     retraced = 0                       # retraces made (RETRACE_PERIODS)
     backing: list = []                 # periods of a retrace still to drive
@@ -425,13 +444,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         with ``predicted`` (the planning model's record of it) the evidence of the stall
         inference. Returns its end code."""
         nonlocal X, Xt
+        X0 = X.copy()
         rec, end, Xt = real.step(Xt, drop.applied(Xt, control))
         pieces.append(rec if not pieces else rec[1:])
         out.periods += 1
         odo.advance(Xt)
         X = odo.observe(Xt)
         if predicted is not None and end != -SS.STALL:
-            evidence.add(rec, predicted)
+            evidence.add(rec, predicted, X0, control)
         return end
 
     def ended(end: int, doing: str = ""):
@@ -502,6 +522,10 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
                       else rs.replan_time_budget_s)
             model_world = _twin_planner(base, tip=True) if held and planner is not world else planner
+            clear = world.margin + world.emap.resolution      # (a mark at the start leaves no plan)
+            near = tuple(m for m in marks if math.hypot(m[0] - X[K.S_X], m[1] - X[K.S_Y]) > m[2] + clear)
+            if near:
+                model_world = _marked(model_world, near)
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
             target = model_world if first else _aim(model_world)
@@ -539,6 +563,11 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             if p.found:
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
+                elif model_world is not limit_for:
+                    # the first plan of a new planning model (the vehicle as measured): the
+                    # time limit as for a first plan of it, from here
+                    t_limit = max(t_limit, X[K.S_T] - out.plans[0].t + rs.max_time_factor * p.travel_time_s + 30.0)
+                limit_for = model_world
                 current, k, P, since, why = p, 0, X.copy(), 0, None
                 steps = periods(p.controls, ps.period_s)
             elif not stranded and not held:
@@ -550,6 +579,10 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     return finish("failed", _stopped(X, ps, ("re-plan", p.reason)), "stopped")
                 continue
             else:
+                # stalled, and no way on from here: drive back along the way it came and
+                # re-plan from there (as after the guard), where the guard lets it
+                if stalls and not first and retrace():
+                    continue
                 # after stalls where the plans drove it, and from where none is seen now
                 weaker = (f"; {_stall_failure(stalls, _named(world, planner, out, base), out.inferred[-1])}"
                           if stalls else "")
@@ -582,7 +615,10 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 continue
         guarded = False
-        predicted, _, P = model.step(P, control)
+        _, _, P = model.step(P, control, record=False)
+        # the evidence of a stall's inference: the period predicted by the planning vehicle
+        # from the measured state (one period: no drift; the same reference all run long)
+        predicted, _, _ = nominal.step(X, control)
         end = drive(control, predicted)
         driven.append(control)
         k += 1
@@ -591,14 +627,23 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         if result is not None:
             return result
         if end == -SS.STALL:
-            if planner is world and ps.margin > 0.0 and out.inferred[-1]["inferred"] != "stronger":
-                # stalled where the plans of the planning vehicle drove it, and not measured
-                # stronger than it before: the vehicle is taken to be at least as weak as the
-                # margin's twin, which plans from here on (a vehicle that drew less current
-                # than predicted stalled where the plan drove it, not for a weaker drive: it
-                # re-plans with the planning model)
-                planner, model, base = _weaker_model(world, cost, out, X, out.inferred[-1])
+            said = out.inferred[-1]["inferred"]
+            fitted = fit_vehicle(evidence, world, cost) if ps.margin > 0.0 else None
+            out.inferred[-1]["fit"] = fitted
+            if ps.margin > 0.0 and (fitted is not None or (planner is world and said != "stronger")):
+                # stalled where the plans drove it: from here on the margin's twin of the
+                # vehicle as the periods before the stall measured it (the online fit; a
+                # vehicle measured lighter or stronger gets a twin no heavier than it needs);
+                # without periods to fit (a stall in a fresh plan's first periods), of the
+                # planning vehicle, unless the run has already measured it
+                planner, model, base = _weaker_model(world, cost, out, X, fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+            if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1]):
+                # stalled again where it stalled before, with the plans of the vehicle as
+                # measured: the slope ahead is steeper than the map says (or the vehicle weaker
+                # there than measured); the re-plans keep off it
+                marks.append(_ahead(world, X))
+                why += f", again: the slope ahead at ({marks[-1][0]:.2f}, {marks[-1][1]:.2f}) is kept off"
         elif X[K.S_T] - out.plans[0].t > t_limit:
             behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]
             tail = ""

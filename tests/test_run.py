@@ -124,12 +124,17 @@ def test_a_slightly_weaker_truth_still_crosses_the_runup_ramp(runup):
     assert res.trajectory["x"].max() > 8.4
 
 
-def test_a_much_weaker_truth_fails_with_the_reason(runup):
+def test_a_much_weaker_truth_is_measured_at_its_stall_and_planned_for_as_it_is(runup):
+    """A drive with 20 % less current stalls on the ramp; the periods before the stall
+    measure its current limit (the online fit, sbmpc.estimate) and the twin of the vehicle
+    as measured plans from there: it takes the long way its own plan takes (35.6 s) and
+    reaches the goal. With the plain twin (x1.1 mass and grip) it stalled four times."""
     truth = runup.vehicle.replace(current_limit=0.8 * runup.vehicle.current_limit)
     res = R.run(runup, "time", truth)
-    assert res.status == "failed"
-    assert "weaker" in res.reason and "(8." in res.reason       # where: the ramp, 8.0-8.4 m
-    assert res.stalls >= 1
+    assert res.status == "reached", res.reason
+    assert res.stalls >= 1 and res.inferred[0]["fit"]["current_limit"] == pytest.approx(0.8, abs=0.08)
+    assert res.planned_as.startswith("p3at as measured (") and "current_limit x0.8" in res.planned_as
+    assert res.travel_time_s > 30.0         # the long way round
 
 
 def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
@@ -156,10 +161,8 @@ def test_cli_run_json_rrd_and_exit_codes(tmp_path, capsys):
     assert {"/terrain", "/paths/executed", "/vehicle/executed", "/plots/energy/executed", "/plans/0",
             "/plans/1"} <= set(ents)
     # a run that fails: exit 1 with the reason
-    weak = tmp_path / "weak.yaml"
-    weak.write_text(vehicle_to_yaml(v.replace(radius_scale_right=1.0, current_limit=0.8 * v.current_limit)))
-    assert main(["run", str(SCN / "runup_ramp.yaml"), "--truth", str(weak), "--quiet"]) == 1
-    assert "weaker" in capsys.readouterr().err
+    assert main(["run", str(SCN / "unreachable.yaml"), "--quiet"]) == 1
+    assert "no path can exist" in capsys.readouterr().err
     # bad input: exit 2, one line
     assert main(["run", str(SCN / "flat.yaml"), "--truth", str(tmp_path / "missing.yaml")]) == 2
     err = capsys.readouterr().err.strip()
@@ -365,9 +368,9 @@ def test_after_a_stall_the_drive_restarts_and_the_re_plans_get_away(runup):
 def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_margins_twin(runup, monkeypatch):
     """runup_ramp's energy plan keeps the margin, but a vehicle 10 % heavier stalls on
     the ramp where the plan's closed loop drove it. The stall proves the vehicle weaker
-    than the planning one: from there the margin's twin (10 % heavier, 10 % more grip)
-    plans, and its plan predicts the heavier vehicle well enough that the run reaches
-    the goal without another stall or re-plan. Planning on with the nominal vehicle, the
+    than the planning one: from there the margin's twin (10 % heavier, 10 % more grip) of
+    the vehicle as the periods before the stall measured it plans, and its plan predicts
+    the heavier vehicle well enough that the run reaches the goal without another stall. Planning on with the nominal vehicle, the
     same run stalled twice and re-planned three times; without the margin, it stalls
     four times and fails (bench/results/margin.json). The vehicle waits for a re-plan
     from a stall: it has run.stall_replan_time_budget_s, not the re-plan budget."""
@@ -381,16 +384,16 @@ def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_ma
     monkeypatch.setattr(PL, "search_plan", spy)
     res = R.run(runup, "energy", WO.heavier(runup.vehicle, 1.1))
     rs = runup.scenario.run
-    # the twin of the vehicle as the periods before the stall measured it: it drew 12 % more
-    # current than predicted (the truth is 10 % heavier): the twin as heavy as that
+    # the twin (x1.1) of the vehicle as the periods before the stall measured it (the
+    # online fit: the truth is 10 % heavier)
     assert seen and seen[0][1] == 0.5 * rs.stall_replan_time_budget_s
-    inf = res.inferred[0]
-    assert inf["inferred"] == "weaker" and 1.1 < inf["current_ratio"] < 1.2
-    assert seen[0][0] == pytest.approx(round(inf["current_ratio"], 2) * runup.vehicle.mass)
+    fit = res.inferred[0]["fit"]
+    assert 1.0 < fit["mass"] < 1.2
+    assert seen[0][0] == pytest.approx(1.1 * round(fit["mass"], 2) * runup.vehicle.mass)
     assert res.status == "reached", res.reason
     assert res.stalls == 1 and res.plans[1].why.startswith("stalled")
     assert res.weaker_from == pytest.approx(res.plans[1].t)
-    assert res.replans == 1
+    assert res.replans <= 2          # (the twin of the measured 8 % heavier vehicle: one more re-plan than the plain twin)
     assert res.to_json()["weaker_from_t"] == pytest.approx(res.plans[1].t)
 
 

@@ -1,0 +1,135 @@
+"""What the periods a vehicle drove say of it against the planning model (``sbmpc run``):
+the sign of a stall (:meth:`Evidence.infer`: weaker, stronger, as planned) and the
+vehicle as measured (:meth:`Evidence.fit`: its mass, battery voltage, grip and rolling
+resistance, current limit fitted online to the periods driven, the calibration's least squares on a
+window of the run).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from dynamics import kernels as K
+
+from .execution import Executor
+from .planning import world as WO
+
+
+EVIDENCE_PERIODS = 20      # periods before a stall whose currents and speeds say what the vehicle is
+EVIDENCE_TOL = 0.03        # relative: a current or speed ratio this far from 1 says weaker or stronger
+
+
+class Evidence:
+    """What the periods a vehicle drove say of it against the planning model: per period
+    (not ending in a stall), the mean |current| of both sides and the mean |speed|,
+    measured and predicted from the same start (the last EVIDENCE_PERIODS kept)."""
+
+    def __init__(self):
+        from collections import deque
+        self.rows = deque(maxlen=EVIDENCE_PERIODS)
+        self.periods = deque(maxlen=EVIDENCE_PERIODS)    # (measured start state, control, measured record)
+
+    def add(self, measured: np.ndarray, predicted: np.ndarray, X0: np.ndarray | None = None,
+            control: tuple | None = None) -> None:
+        """A period's records (rows of K.CHANNELS), the measured and the predicted; with
+        the measured state X0 it began from and its ``control`` (wl, wr, duration_s), kept
+        for :meth:`fit`."""
+        k = min(len(measured), len(predicted))
+        if k < 2:
+            return
+        if X0 is not None and control is not None:
+            self.periods.append((X0.copy(), tuple(control), measured[::FIT_EVERY].copy()))
+        m, p = measured[:k], predicted[:k]
+        self.rows.append((float(np.abs(m[:, K.R_IL]).mean() + np.abs(m[:, K.R_IR]).mean()),
+                          float(np.abs(p[:, K.R_IL]).mean() + np.abs(p[:, K.R_IR]).mean()),
+                          float(np.abs(m[:, K.R_V]).mean()), float(np.abs(p[:, K.R_V]).mean())))
+
+    def infer(self, X: np.ndarray) -> dict:
+        """What a stall at the measured state X says (issue: a vehicle that stalls is not
+        always weaker): ``weaker`` where the periods before it drew more current than the
+        planning model predicted or drove slower (ratios beyond EVIDENCE_TOL), ``stronger``
+        where they drew less at the predicted speed (lighter, or less resistance: the
+        stall came from where and how the plan drove it, not from a weaker drive),
+        ``as planned`` in between, ``unknown`` without such periods (a stall in a fresh
+        plan's first period)."""
+        out = {"t": round(float(X[K.S_T]), 3), "x": round(float(X[K.S_X]), 3), "y": round(float(X[K.S_Y]), 3),
+               "periods": len(self.rows), "current_ratio": None, "speed_ratio": None, "inferred": "unknown"}
+        rows = np.array(self.rows, float).reshape(-1, 4)
+        if not len(rows) or rows[:, 1].sum() <= 1e-9 or rows[:, 3].sum() <= 1e-9:
+            return out
+        ri = rows[:, 0].sum() / rows[:, 1].sum()
+        rv = rows[:, 2].sum() / rows[:, 3].sum()
+        out.update(current_ratio=round(float(ri), 4), speed_ratio=round(float(rv), 4))
+        if ri > 1.0 + EVIDENCE_TOL or rv < 1.0 - EVIDENCE_TOL:
+            out["inferred"] = "weaker"
+        elif ri < 1.0 - EVIDENCE_TOL:
+            out["inferred"] = "stronger"
+        else:
+            out["inferred"] = "as planned"
+        return out
+
+
+def inference_note(inf: dict) -> str:
+    """A stall's inference (:meth:`Evidence.infer`) in words."""
+    if inf["inferred"] == "unknown":
+        return "no period driven before it to compare with the planning model"
+    return (f"over the {inf['periods']} periods before it the vehicle drew {inf['current_ratio']:.2f} x the "
+            f"predicted current at {inf['speed_ratio']:.2f} x the predicted speed: {inf['inferred']}")
+
+
+FIT = ("mass", "v_max", "current_limit", "grip", "mu_roll")   # what the online fit scales (fit)
+FIT_PRIOR = 0.15          # relative sd of the fit's prior: the factors stay near 1 unless the periods say
+FIT_BOUNDS = (0.5, 2.0)   # the least and largest factor
+FIT_EVERY = 20            # compare every 20th row of a period (20 ms at 1 kHz)
+FIT_SCALE = (0.3, 0.3, 0.15)   # rad/s of a wheel speed, A of a current per A of current limit x this: the residuals' units
+FIT_MIN_PERIODS = 3
+
+
+def scaled(world: WO.World, f: dict) -> WO.World:
+    """``world`` with its vehicle's mass and inertia times ``f['mass']``, its ``v_max``
+    (the battery voltage, eq. 27) and ``current_limit`` times theirs, every terrain's
+    mu_sa and mu_op times ``f['grip']`` and mu_roll times ``f['mu_roll']`` (missing: 1)."""
+    v = world.vehicle
+    m, vm, im = f.get("mass", 1.0), f.get("v_max", 1.0), f.get("current_limit", 1.0)
+    g, r = f.get("grip", 1.0), f.get("mu_roll", 1.0)
+    ts = tuple(t.replace(mu_sa=t.mu_sa * g, mu_op=t.mu_op * g, mu_roll=t.mu_roll * r) for t in world.terrains)
+    return replace(world, vehicle=v.replace(mass=v.mass * m, inertia=v.inertia * m, v_max=v.v_max * vm,
+                                            current_limit=v.current_limit * im), terrains=ts)
+
+
+def fit(evidence: "Evidence", world: WO.World, cost: str) -> dict | None:
+    """The vehicle as the periods driven measured it: factors of ``FIT`` (mass with
+    inertia, v_max, current limit, grip, mu_roll) on the planning ``world``'s, by least squares of each
+    period replayed from the measured state it began from, at the controller rate,
+    against the wheel speeds and currents measured (every FIT_EVERY-th row; units
+    FIT_SCALE; a period weighs as one sample per channel), with a prior of relative sd FIT_PRIOR around 1 (a factor the periods do
+    not excite stays near 1). Returns {factor: value, "cost": final cost, "periods": n},
+    or None with fewer than FIT_MIN_PERIODS periods."""
+    from scipy.optimize import least_squares
+    periods = list(evidence.periods)
+    if len(periods) < FIT_MIN_PERIODS:
+        return None
+    imax = world.vehicle.current_limit
+    sw, si = FIT_SCALE[0], FIT_SCALE[2] * imax
+
+    def residuals(u):
+        f = dict(zip(FIT, np.exp(u)))
+        ex = Executor(scaled(world, f), cost)
+        out = [u / FIT_PRIOR]
+        for X0, control, meas in periods:
+            rec, _, _ = ex.step(X0, control)
+            sim = rec[::FIT_EVERY]
+            if len(sim) < len(meas):        # the model stalled or tipped before the period's end: it stays there
+                sim = np.vstack([sim, np.repeat(sim[-1:], len(meas) - len(sim), axis=0)])
+            n = len(meas)
+            w = 1.0 / np.sqrt(n)        # a period weighs as one sample per channel (its rows are correlated)
+            out += [w * (sim[:n, K.R_WL] - meas[:n, K.R_WL]) / sw, w * (sim[:n, K.R_WR] - meas[:n, K.R_WR]) / sw,
+                    w * (sim[:n, K.R_IL] - meas[:n, K.R_IL]) / si, w * (sim[:n, K.R_IR] - meas[:n, K.R_IR]) / si]
+        return np.concatenate(out)
+    lo, hi = np.log(FIT_BOUNDS[0]), np.log(FIT_BOUNDS[1])
+    res = least_squares(residuals, np.zeros(len(FIT)), bounds=(np.full(len(FIT), lo), np.full(len(FIT), hi)),
+                        diff_step=1e-3, max_nfev=40)
+    out = {k: round(float(np.exp(x)), 4) for k, x in zip(FIT, res.x)}
+    out.update(cost=round(float(res.cost), 3), periods=len(periods))
+    return out
