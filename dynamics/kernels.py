@@ -48,8 +48,8 @@ INV_OMEGA_EPS = 1.0 / OMEGA_EPS
 # ---- parameter vector P ----------------------------------------------------------
 (P_M, P_I, P_R, P_B, P_ALPHA, P_MUROLL, P_MUSA, P_MUOP, P_PRESS, P_VMAX, P_K, P_RA,
  P_IMAX, P_KP, P_KI, P_KD, P_AREF, P_REGEN, P_SCL, P_SCR, P_VISC, P_LAG, P_SAG,
- P_SHEARLAG, P_M11, P_M12, P_TC) = range(27)
-NP = 27
+ P_SHEARLAG, P_M11, P_M12, P_TC, P_KSL, P_KSR) = range(29)
+NP = 29
 
 # ---- state vector S --------------------------------------------------------------
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
@@ -96,6 +96,7 @@ def pack(vehicle: Vehicle, terrain: Terrain) -> np.ndarray:
     P[P_LAG], P[P_SAG], P[P_SHEARLAG] = v.lag, v.sag, v.shear_lag
     P[P_M11], P[P_M12] = mass_matrix(v.mass, v.inertia, v.wheel_radius, v.width, t.alpha)
     P[P_TC] = 1.0 / v.controller_rate
+    P[P_KSL], P[P_KSR] = v.torque_scale_left, v.torque_scale_right
     return P
 
 
@@ -163,11 +164,11 @@ def _lagged(S, il, ir, a_lag):
 
 
 @jit_inline
-def _loop_current(P, ref, integral, ref_rate, w, vmax, dt):
-    """The PID current (Fig. 4) of one side with its integral advanced implicitly to the
-    end of a step of dt [s] at wheel speed w, clipped to the drive's window (eq. 27).
-    Returns (current [A], d current / d w [A s/rad], saturated, new integral)."""
-    k = P[P_K]
+def _loop_current(P, k, ref, integral, ref_rate, w, vmax, dt):
+    """The PID current (Fig. 4) of one side (its motor constant k [N m/A]) with its
+    integral advanced implicitly to the end of a step of dt [s] at wheel speed w, clipped
+    to the drive's window (eq. 27). Returns (current [A], d current / d w [A s/rad],
+    saturated, new integral)."""
     ra = P[P_RA]
     e = ref - w
     z = integral + e * dt
@@ -230,7 +231,8 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
     is extrapolated along its slopes (no lookup).
     Returns (wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u): speeds, currents [A],
     integrals [rad], saturation, unit frictions (lagged) and ``u`` at the solution."""
-    k = P[P_K]
+    kl = P[P_K] * P[P_KSL]
+    kr = P[P_K] * P[P_KSR]
     ra = P[P_RA]
     imax = P[P_IMAX]
     m11 = P[P_M11]
@@ -252,11 +254,11 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
         if it > 0 or not known:
             u = unit_friction_fast(table, P[P_SCL] * wl, P[P_SCR] * wr)
         if digital:
-            il, dil, sat_l = _held_current(icl, wl, vmax, k, ra, imax)
-            ir, dir_, sat_r = _held_current(icr, wr, vmax, k, ra, imax)
+            il, dil, sat_l = _held_current(icl, wl, vmax, kl, ra, imax)
+            ir, dir_, sat_r = _held_current(icr, wr, vmax, kr, ra, imax)
         else:
-            il, dil, sat_l, zl = _loop_current(P, refl, zl_b, rdl, wl, vmax, h)
-            ir, dir_, sat_r, zr = _loop_current(P, refr, zr_b, rdr, wr, vmax, h)
+            il, dil, sat_l, zl = _loop_current(P, kl, refl, zl_b, rdl, wl, vmax, h)
+            ir, dir_, sat_r, zr = _loop_current(P, kr, refr, zr_b, rdr, wr, vmax, h)
         if lag > 0.0:
             il, ir = _lagged(S, il, ir, a_lag)
             dil *= a_lag
@@ -264,8 +266,8 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
         res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr = _resistance(P, S, wl, wr, cp, a_shear, u[0], u[1], u[2], u[3], u[4], u[5], g_l, g_r)
         if it == NEWTON_ITERATIONS - 1:
             break
-        rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (k * il - res_l - g_l)
-        rr = m12 * (wl - wl0) + m11 * (wr - wr0) - off_r - h * (k * ir - res_r - g_r)
+        rl = m11 * (wl - wl0) + m12 * (wr - wr0) - off_l - h * (kl * il - res_l - g_l)
+        rr = m12 * (wl - wl0) + m11 * (wr - wr0) - off_r - h * (kr * ir - res_r - g_r)
         norm = abs(rl) + abs(rr)
         if (it > 0 or not known) and norm < tol:
             break
@@ -278,7 +280,7 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
         pl = wl
         pr = wr
         pnorm = norm
-        stl, str_ = newton_step(m11, m12, j_ll - k * dil, j_lr, j_rl, j_rr - k * dir_, rl, rr, h)
+        stl, str_ = newton_step(m11, m12, j_ll - kl * dil, j_lr, j_rl, j_rr - kr * dir_, rl, rr, h)
         lam = 1.0
         wl = pl + stl
         wr = pr + str_
@@ -286,8 +288,8 @@ def _solve(P, table, S, wl0, wr0, wl, wr, u, known, off_l, off_r, h, digital, ic
                 and min(abs(wl), abs(wr)) > REST_BAND):
             # converged unless a current crossed its limit: the currents at the new
             # speeds, the friction extrapolated there
-            il2, dil, sat_l2, zl2 = _loop_current(P, refl, zl_b, rdl, wl, vmax, h)
-            ir2, dir_, sat_r2, zr2 = _loop_current(P, refr, zr_b, rdr, wr, vmax, h)
+            il2, dil, sat_l2, zl2 = _loop_current(P, kl, refl, zl_b, rdl, wl, vmax, h)
+            ir2, dir_, sat_r2, zr2 = _loop_current(P, kr, refr, zr_b, rdr, wr, vmax, h)
             if sat_l2 != sat_l or sat_r2 != sat_r:
                 continue
             il = il2
@@ -312,9 +314,10 @@ def _cached_friction(P, table, S):
 
 
 @jit_inline
-def _battery_power(il, ir, wl, wr, k, ra, regen):
-    """Battery power [W] of both sides (PARAMETERS.md: none regenerated by default)."""
-    pb = electrical_power(il, wl, k, ra) + electrical_power(ir, wr, k, ra)
+def _battery_power(il, ir, wl, wr, kl, kr, ra, regen):
+    """Battery power [W] of both sides (motor constants kl, kr; PARAMETERS.md: none
+    regenerated by default)."""
+    pb = electrical_power(il, wl, kl, ra) + electrical_power(ir, wr, kr, ra)
     return pb if (pb > 0.0 or regen) else 0.0
 
 
@@ -361,7 +364,7 @@ def _reference(ref_l, ref_r, cmd_l, cmd_r, aref, dt):
 
 
 @jit_inline
-def _digital_pid(el, er, int_l, int_r, rdl, rdr, wl0, wr0, vmax, k, ra, imax, kp, ki, kd, dt):
+def _digital_pid(el, er, int_l, int_r, rdl, rdr, wl0, wr0, vmax, kl, kr, ra, imax, kp, ki, kd, dt):
     """Step 2 at the controller period: the paper's digital PID (Fig. 4, gains kp, ki,
     kd) on the speed errors el, er [rad/s] of the measured wheel speeds wl0, wr0 gives
     the current commands (icl, icr) [A], held over the step; ``rdl``, ``rdr`` are the
@@ -371,23 +374,23 @@ def _digital_pid(el, er, int_l, int_r, rdl, rdr, wl0, wr0, vmax, k, ra, imax, kp
     :func:`_loop_current`). Returns (icl, icr, int_l, int_r)."""
     icl = pid_current(el, int_l, rdl, kp, ki, kd)
     icr = pid_current(er, int_r, rdr, kp, ki, kd)
-    lo, hi = current_window(wl0, vmax, k, ra, imax)
+    lo, hi = current_window(wl0, vmax, kl, ra, imax)
     if el * (icl - _clip(icl, lo, hi)) <= 0.0:
         int_l += el * dt
-    lo, hi = current_window(wr0, vmax, k, ra, imax)
+    lo, hi = current_window(wr0, vmax, kr, ra, imax)
     if er * (icr - _clip(icr, lo, hi)) <= 0.0:
         int_r += er * dt
     return icl, icr, int_l, int_r
 
 
 @jit_inline
-def _euler_rates(il, ir, wl0, wr0, wl, wr, k, ra, regen, scl, scr, r, b, alpha, inv_dt):
+def _euler_rates(il, ir, wl0, wr0, wl, wr, kl, kr, ra, regen, scl, scr, r, b, alpha, inv_dt):
     """After step 3 at the controller period (backward Euler from wl0, wr0 to wl, wr
     [rad/s] under the held currents il, ir [A]): the battery power pb [W] (the held
-    current against the wheel speed, linear over the step; eq. 26's motor constant k,
+    current against the wheel speed, linear over the step; eq. 26's motor constants kl, kr,
     resistance ra), eq. 1's speed v [m/s] and yaw rate [rad/s] at the end, their means
     over the step, and the wheel accelerations [rad/s^2]."""
-    pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), k, ra, regen)
+    pb = _battery_power(il, ir, 0.5 * (wl0 + wl), 0.5 * (wr0 + wr), kl, kr, ra, regen)
     v0, yr0 = alpha_model(scl * wl0, scr * wr0, r, b, alpha)
     v, yaw_rate = alpha_model(scl * wl, scr * wr, r, b, alpha)
     return pb, v, yaw_rate, 0.5 * (v0 + v), 0.5 * (yr0 + yaw_rate), (wl - wl0) * inv_dt, (wr - wr0) * inv_dt
@@ -430,7 +433,7 @@ def _stage2_setup(wl0, wr0, w1l, w1r, z1l, z1r, int_l, int_r, m11, m12, inv_dt):
 
 
 @jit_inline
-def _sdirk_rates(i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, k, ra, regen, scl, scr, r, b, alpha,
+def _sdirk_rates(i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, kl, kr, ra, regen, scl, scr, r, b, alpha,
                  inv_dt):
     """After the SDIRK's two stages (stage 1 at gamma dt: w1l, w1r [rad/s], i1l, i1r
     [A]; stage 2 at dt: wl, wr, il, ir): the battery power pb [W] by the stages'
@@ -439,8 +442,8 @@ def _sdirk_rates(i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, k, ra, 
     accelerations at the end [rad/s^2] from stage 2's equation w = w0 + dt ((1 - gamma)
     f1 + gamma f2)."""
     gam = SDIRK_GAMMA
-    pb = ((1.0 - gam) * _battery_power(i1l, i1r, w1l, w1r, k, ra, regen)
-          + gam * _battery_power(il, ir, wl, wr, k, ra, regen))
+    pb = ((1.0 - gam) * _battery_power(i1l, i1r, w1l, w1r, kl, kr, ra, regen)
+          + gam * _battery_power(il, ir, wl, wr, kl, kr, ra, regen))
     v1, yr1 = alpha_model(scl * w1l, scr * w1r, r, b, alpha)
     v, yaw_rate = alpha_model(scl * wl, scr * wr, r, b, alpha)
     return (pb, v, yaw_rate, (1.0 - gam) * v1 + gam * v, (1.0 - gam) * yr1 + gam * yaw_rate,
@@ -544,7 +547,8 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
     """
     wl0 = S[S_WL]
     wr0 = S[S_WR]
-    k = P[P_K]
+    kl = P[P_K] * P[P_KSL]
+    kr = P[P_K] * P[P_KSR]
     ra = P[P_RA]
     regen = P[P_REGEN] != 0.0
     vmax = P[P_VMAX] - P[P_SAG] * S[S_E]
@@ -575,14 +579,14 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
             icr = cmd_r
         else:
             icl, icr, S[S_INTL], S[S_INTR] = _digital_pid(
-                S[S_REFL] - wl0, S[S_REFR] - wr0, S[S_INTL], S[S_INTR], rdl, rdr, wl0, wr0, vmax, k, ra, P[P_IMAX],
+                S[S_REFL] - wl0, S[S_REFR] - wr0, S[S_INTL], S[S_INTR], rdl, rdr, wl0, wr0, vmax, kl, kr, ra, P[P_IMAX],
                 P[P_KP], P[P_KI], P[P_KD], dt)
         # 3: backward Euler on eq. 25 (resistance, gravity, mass matrix: _solve)
         wl, wr, il, ir, zl, zr, sat_l, sat_r, fl, fr, u = _solve(
             P, table, S, wl0, wr0, wl0, wr0, u0, True, 0.0, 0.0, dt, True, icl, icr, 0.0, 0.0,
             0.0, 0.0, 0.0, 0.0, vmax, cp, g_l, g_r)
         pb, v, yaw_rate, vm, ym, S[S_DWL], S[S_DWR] = _euler_rates(
-            il, ir, wl0, wr0, wl, wr, k, ra, regen, scl, scr, P[P_R], P[P_B], P[P_ALPHA], inv_dt)
+            il, ir, wl0, wr0, wl, wr, kl, kr, ra, regen, scl, scr, P[P_R], P[P_B], P[P_ALPHA], inv_dt)
     else:
         # 2-3: the continuous loop, two-stage SDIRK: stage 1 ends at gamma dt, stage 2
         # at dt, each solved implicitly (_solve) for the speeds with the PID current at them
@@ -609,7 +613,7 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
         sat_l = sat_l or s1l
         sat_r = sat_r or s1r
         pb, v, yaw_rate, vm, ym, S[S_DWL], S[S_DWR] = _sdirk_rates(
-            i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, k, ra, regen, scl, scr, P[P_R], P[P_B],
+            i1l, i1r, w1l, w1r, il, ir, wl0, wr0, wl, wr, f1l, f1r, kl, kr, ra, regen, scl, scr, P[P_R], P[P_B],
             P[P_ALPHA], inv_dt)
     S[S_E] += pb * dt
     S[S_IL] = il
@@ -630,12 +634,12 @@ def _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, check):
         (S[S_SWT], S[S_SWL], S[S_SWR], S[S_SWCL], S[S_SWCR], S[S_STALLT], S[S_STALLED]) = _stall_test(
             S[S_SWT], S[S_SWL], S[S_SWR], S[S_SWCL], S[S_SWCR], S[S_STALLT], S[S_STALLED], cmd_l, cmd_r, wl0, wr0,
             wl, wr, sat_l or sat_r, P[P_R], dt)
-    O[O_TAUL] = k * il
-    O[O_TAUR] = k * ir
+    O[O_TAUL] = kl * il
+    O[O_TAUR] = kr * ir
     O[O_IL] = il
     O[O_IR] = ir
-    O[O_PL] = electrical_power(il, wl, k, ra)
-    O[O_PR] = electrical_power(ir, wr, k, ra)
+    O[O_PL] = electrical_power(il, wl, kl, ra)
+    O[O_PR] = electrical_power(ir, wr, kr, ra)
     O[O_PB] = pb
     O[O_V] = v
     O[O_YAWRATE] = yaw_rate
@@ -662,8 +666,8 @@ def state_outputs(P, S, O):
     O[O_V], O[O_YAWRATE] = alpha_model(P[P_SCL] * S[S_WL], P[P_SCR] * S[S_WR], P[P_R], P[P_B], P[P_ALPHA])
     O[O_IL] = S[S_IL]
     O[O_IR] = S[S_IR]
-    O[O_TAUL] = P[P_K] * S[S_IL]
-    O[O_TAUR] = P[P_K] * S[S_IR]
+    O[O_TAUL] = P[P_K] * P[P_KSL] * S[S_IL]
+    O[O_TAUR] = P[P_K] * P[P_KSR] * S[S_IR]
 
 
 @jit

@@ -64,6 +64,8 @@ class Vehicle:
     lag: float = 0.0                   # s, first-order lag of delivered current
     sag: float = 0.0                   # V/J, fall of available voltage per energy drawn
     shear_lag: float = 0.0             # s, lag with which turning friction builds up
+    torque_scale_left: float = 1.0     # the left motors' constant / torque_constant (a weak motor: < 1)
+    torque_scale_right: float = 1.0    # the right motors' constant / torque_constant
     # --- the robot's driver (not the model) ---
     command_separation: float = 0.0    # m: the track its driver turns cmd_vel into wheel speeds with (0: width)
     description: str = ""
@@ -146,6 +148,7 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
     "controller_rate": (1.0, 1e6, True), "kp": (0.0, 1e6, True), "ki": (0.0, 1e6, True),
     "kd": (0.0, 1e6, True), "ref_accel": (0.0, 1e3, True),
     "radius_scale_left": (0.0, 2.0, False), "radius_scale_right": (0.0, 2.0, False),
+    "torque_scale_left": (0.0, 2.0, False), "torque_scale_right": (0.0, 2.0, False),
     "viscous": (-1e3, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),
     "sag": (0.0, 1e3, True), "shear_lag": (0.0, 10.0, True),
     "command_separation": (0.0, 100.0, True),
@@ -192,7 +195,7 @@ def _validated(obj, src: str):
 # keys a parameter file may leave out without naming a ``base``: what the paper's model
 # does without them (no extension, no regeneration, equal wheels) or only labels
 OPTIONAL = {"name", "description", "sources", "regen", "radius_scale_left", "radius_scale_right", "viscous",
-            "delay", "lag", "sag", "shear_lag", "command_separation"}
+            "delay", "lag", "sag", "shear_lag", "command_separation", "torque_scale_left", "torque_scale_right"}
 
 
 def _from_mapping(cls, data: Any, src: str, complete: bool = False, kind: str = "", base_dir: Path | None = None,

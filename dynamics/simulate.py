@@ -87,8 +87,8 @@ class Model:
             v = self.vehicle
             tl, tr = steady_resistance_fast(wl, wr, v, self.terrain, pitch)
             g = gravity_torque(v.mass, G, v.wheel_radius, pitch)     # (times each side's radius scale)
-            il = (float(tl) + g * v.radius_scale_left + v.viscous * wl) / v.torque_constant
-            ir = (float(tr) + g * v.radius_scale_right + v.viscous * wr) / v.torque_constant
+            il = (float(tl) + g * v.radius_scale_left + v.viscous * wl) / (v.torque_constant * v.torque_scale_left)
+            ir = (float(tr) + g * v.radius_scale_right + v.viscous * wr) / (v.torque_constant * v.torque_scale_right)
             S[K.S_IL], S[K.S_IR] = il, ir
             if v.ki > 0:
                 S[K.S_INTL], S[K.S_INTR] = il / v.ki, ir / v.ki

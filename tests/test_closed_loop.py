@@ -647,3 +647,28 @@ def test_a_steady_state_of_a_vehicle_with_scaled_radii_stays_steady(terrain, pit
     assert not tr.stalled
     assert np.max(np.abs(tr.wl - wl)) < 1e-3 and np.max(np.abs(tr.wr - wr)) < 1e-3
     assert np.max(np.abs(tr.i_l - S[K.S_IL])) < 1e-3 and np.max(np.abs(tr.i_r - S[K.S_IR])) < 1e-3
+
+
+@pytest.mark.parametrize("scale", [0.8, 1.15])
+def test_a_weak_motor_draws_the_current_its_torque_needs_and_mirrors(scale):
+    """One side's motor constant scaled (``torque_scale_right``, a weak motor: eq. 26's
+    torque k i and back-EMF k w on that side): held straight at 4 rad/s on a 5 deg grade,
+    the wheel loops hold the speeds, and that side draws 1/scale times the current of
+    the other (the torques balance the same loads); its electrical power at the same
+    torque and speed is i^2 R more by that current. Scaling the left side instead mirrors
+    the currents exactly. The steady state of Model.state is the simulation's."""
+    m = Model.load("p3at", "asphalt")
+    p = math.radians(5.0)
+    right = m.with_(vehicle=m.vehicle.replace(torque_scale_right=scale))
+    left = m.with_(vehicle=m.vehicle.replace(torque_scale_left=scale))
+    runs = []
+    for mm in (right, left):
+        S = mm.state(4.0, 4.0, pitch=p)
+        tr = simulate(mm, hold(4.0, 1.0, 0.001), hold(4.0, 1.0, 0.001), state=S.copy(), pitch=p, dt=0.001)
+        assert not tr.stalled and np.max(np.abs(tr.wl - 4.0)) < 1e-3 and np.max(np.abs(tr.wr - 4.0)) < 1e-3
+        assert np.max(np.abs(tr.i_l - S[K.S_IL])) < 1e-3 and np.max(np.abs(tr.i_r - S[K.S_IR])) < 1e-3
+        runs.append(tr)
+    r, lft = runs
+    assert r.i_r[-1] == pytest.approx(r.i_l[-1] / scale, rel=1e-6)
+    assert r.tau_r[-1] == pytest.approx(r.tau_l[-1], rel=1e-6)
+    assert lft.i_l[-1] == pytest.approx(r.i_r[-1], rel=1e-9) and lft.i_r[-1] == pytest.approx(r.i_l[-1], rel=1e-9)

@@ -123,8 +123,8 @@ def _steady(P, T, S0, which, cmd, pitch, dt, n_settle, n_meas, reserve, out):
                 break
             if reserve > 0.0 and turning:
                 vm = max(Pk[K.P_VMAX] - Pk[K.P_SAG] * S[K.S_E], 0.0)
-                sl = window_share(O[K.O_IL], S[K.S_WL], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
-                sr = window_share(O[K.O_IR], S[K.S_WR], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
+                sl = window_share(O[K.O_IL], S[K.S_WL], vm, Pk[K.P_K] * Pk[K.P_KSL], Pk[K.P_RA], Pk[K.P_IMAX])
+                sr = window_share(O[K.O_IR], S[K.S_WR], vm, Pk[K.P_K] * Pk[K.P_KSR], Pk[K.P_RA], Pk[K.P_IMAX])
                 if sl > 1.0 - reserve or sr > 1.0 - reserve:
                     timer += dt
                     if timer > 0.5:

@@ -205,8 +205,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             # heading error never closes in open loop. (Straight commands drive a
             # symmetric vehicle straight whatever it weighs: there the twin judges.)
             vm = max(Pk[K.P_VMAX] - Pk[K.P_SAG] * S[K.S_E], 0.0)
-            sl = window_share(O[K.O_IL], S[K.S_WL], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
-            sr = window_share(O[K.O_IR], S[K.S_WR], vm, Pk[K.P_K], Pk[K.P_RA], Pk[K.P_IMAX])
+            sl = window_share(O[K.O_IL], S[K.S_WL], vm, Pk[K.P_K] * Pk[K.P_KSL], Pk[K.P_RA], Pk[K.P_IMAX])
+            sr = window_share(O[K.O_IR], S[K.S_WR], vm, Pk[K.P_K] * Pk[K.P_KSR], Pk[K.P_RA], Pk[K.P_IMAX])
             if sl > full or sr > full:
                 S[X_MT] += dt
                 if S[X_MT] > MARGIN_TIME:

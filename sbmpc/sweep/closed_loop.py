@@ -132,9 +132,11 @@ def run(world, cost: str, task: dict) -> dict:
 
 # ---- the report ------------------------------------------------------------------------
 def _groups(rows: list) -> dict:
+    """Rows by (scenario, cost, mode, variant); a family's maps pooled as 'NAME maps'."""
     g: dict = {}
     for r in rows:
-        g.setdefault((r["scenario"], r["cost"] or "-", r["run_mode"] or "-", r["variant"]), []).append(r)
+        name = r["scenario"] if r.get("family_seed") is None else f"{r['scenario']} maps"
+        g.setdefault((name, r["cost"] or "-", r["run_mode"] or "-", r["variant"]), []).append(r)
     return dict(sorted(g.items(), key=lambda kv: tuple(str(x) for x in kv[0])))
 
 
