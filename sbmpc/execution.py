@@ -12,7 +12,7 @@ whole-route loop in :mod:`sbmpc.receding`, the robot's controller in :mod:`sbmpc
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -121,14 +121,20 @@ class Executor:
                 self.pipe.pop(0)
         return out
 
-    def step(self, X: np.ndarray, control, record: bool = True) -> tuple:
+    def step(self, X: np.ndarray, control, record: bool = True, tilt_error: float = 0.0) -> tuple:
         """Apply (wl, wr, duration_s) from state X. Returns (recorded rows (n, NR) from X
-        on, end code, new state)."""
+        on, end code, new state). ``tilt_error`` [rad]: the tip-over limit and margin
+        taken that much lower (a guard's prediction on a map whose tilt is off by it)."""
         wl, wr, d = control
+        Q = self.Q
+        if tilt_error > 0.0:
+            Q = Q.copy()
+            Q[SS.Q_TIP] -= tilt_error
+            Q[SS.Q_TIPM] -= tilt_error
         n = max(1, int(round(d / self.dt)))
         segs = self._applied(X, wl, wr, n) if self.lag > 0 else [[wl, wr, n]]
         rec = np.zeros((n + 1 if record else 1, K.NR))
-        rows, S, end, _ = SS.replay(self.Q, self.data, np.ascontiguousarray(X), np.array([g[0] for g in segs], float),
+        rows, S, end, _ = SS.replay(Q, self.data, np.ascontiguousarray(X), np.array([g[0] for g in segs], float),
                                     np.array([g[1] for g in segs], float), np.array([g[2] for g in segs], np.int64), rec)
         if self.lag > 0:
             # a drive cut short (a stall, the goal) applied fewer steps: what it did not
@@ -153,19 +159,25 @@ SETTLED = "after the wheels were held at rest for a period (the horizon plan fou
 def guards(world: WO.World, cost: str) -> list:
     """The tip-over guard of a run's periods (``planner.margin_tip_deg`` > 0; else none):
     controller-rate executors of the planning vehicle and, with a margin
-    (``planner.margin``), of its pessimistic twin (:func:`sbmpc.planning.world.pessimistic`),
-    each with half the tip-over margin (:class:`Executor`)."""
+    (``planner.margin`` = m), of its pessimistic twin (:func:`sbmpc.planning.world.pessimistic`)
+    and of an optimistic one (mass, inertia, mu_sa and mu_op divided by 1 + m: a vehicle
+    lighter than planned drives further into a period, and a 14 % lighter one rolled
+    over on `narrow_pass`'s flank where both other predictions stopped short of the
+    margin, 2026-12-06), each with half the tip-over margin (:class:`Executor`)."""
     ps = world.scenario.planner
     if ps.margin_tip_deg <= 0.0:
         return []
     out = [Executor(world, cost, tip_guard=True)]
     if ps.margin > 0.0:
         out.append(Executor(WO.pessimistic(world), cost, tip_guard=True))
+        f = 1.0 / (1.0 + ps.margin)
+        light = replace(world, vehicle=WO.heavier(world.vehicle, f), terrains=WO.gripped(world.terrains, f))
+        out.append(Executor(light, cost, tip_guard=True))
     return out
 
 
-def held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
-    """Whether the guards (:func:`guards`: the world's vehicle, then its twin) hold back
+def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> bool:
+    """Whether the guards (:func:`guards`: the world's vehicle, then its twins) hold back
     the period ``control`` from the measured state X. The world's vehicle's prediction holds it back where it tips over, or, for a plan
     that keeps the margin (``kept``), where it comes within half the tip-over margin; a
     plan made without the margin (none kept it: it says so) rides within the margin by
@@ -173,15 +185,32 @@ def held(guards: list, X: np.ndarray, control, kept: bool) -> bool:
     prediction (a vehicle weaker than the planning one: it falls behind, and meets the
     flank of a pass where the plan has passed it) holds it back where it comes within
     half the margin: the one prediction of a fallback plan's periods on a vehicle the
-    plan did not allow for. Once the twin plans (the vehicle proved weaker), the run
+    plan did not allow for; so does the optimistic twin's (a lighter vehicle drives
+    further into the period). Once the twin plans (the vehicle proved weaker), the run
     passes ``kept`` False. The world's vehicle's prediction also holds a period back
     where it leaves the map: a run never drives off its map (a horizon run with 10 %
-    less grip left `hills_field` at (48.4, 59.7), 2026-12-06)."""
+    less grip left `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
+    far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
+    are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
+    `narrow_pass`'s flank 1.6 deg steeper than it says)."""
     for j, g in enumerate(guards):
-        _, end, _ = g.step(X, control, record=False)
+        _, end, _ = g.step(X, control, record=False, tilt_error=tilt_error)
         if end == -SS.TIP or (end == -SS.OFF_MAP and j == 0) or (end == -SS.MARGIN and (kept or j > 0)):
             return True
     return False
+
+
+def tilt_error(world: WO.World, X: np.ndarray, pitch: float, roll: float) -> float:
+    """How far the map's tilt is off [rad] where the vehicle stands: the larger of the
+    measured pitch's and roll's (an IMU's, ``pitch``, ``roll`` [rad]) excess over the
+    planning map's at the measured pose X (0 where the map is as steep or steeper).
+    The guard takes its limits that much lower for the next period: a map's error is
+    smooth, and a metre on it is much the same (at 2 m correlation, 0.88)."""
+    e = world.emap
+    if not e.contains(X[K.S_X], X[K.S_Y]):
+        return 0.0
+    mp, mr = e.pitch_roll(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]), world.half_length, world.half_width)
+    return max(0.0, abs(pitch) - abs(mp), abs(roll) - abs(mr))
 
 
 def stopped(X: np.ndarray, ps, failed: tuple | None = None) -> str:
@@ -239,5 +268,5 @@ def protected(X: np.ndarray, real: "Executor") -> None:
     real.pipe = None
 
 
-__all__ = ["Executor", "HELD", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
+__all__ = ["Executor", "HELD", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker"]

@@ -52,6 +52,7 @@ from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
 from .estimate import FIT, Evidence, fit as fit_vehicle, inference_note, scaled
+from . import execution as EX
 from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
                         protected as _protected, settles as _settles, stopped as _stopped, weaker as _weaker)
@@ -180,7 +181,7 @@ def _aim(world: WO.World) -> WO.World:
 RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (_retrace)
 
 
-def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
+def _retrace(guards: list, X: np.ndarray, driven: list, n: int, tilt: float = 0.0) -> list | None:
     """A stop (wheel speeds 0 for the last period's length), then the last ``n`` driven
     periods ``driven`` [(wl, wr, duration_s)] backwards: each period's wheel speeds
     negated, the latest first (from rest a skid-steered vehicle backs along the way it
@@ -192,7 +193,7 @@ def _retrace(guards: list, X: np.ndarray, driven: list, n: int) -> list | None:
     back = [(0.0, 0.0, driven[-1][2])] + [(-wl, -wr, d) for wl, wr, d in reversed(driven[-n:])]
     S = X
     for c in back if guards else ():     # (a run without a tip-over margin has no guard)
-        if _held(guards, S, c, True):
+        if _held(guards, S, c, True, tilt):
             return None
         _, _, S = guards[0].step(S, c, record=False)
     return back
@@ -316,6 +317,29 @@ def _marked(world: WO.World, marks: tuple) -> WO.World:
     return replace(world, emap=replace(e, heights=H))
 
 
+def _true_tilt(truth: TT.Truth, Xt: np.ndarray) -> tuple | None:
+    """(pitch, roll) [rad] of the true vehicle on the true ground, as its IMU measures
+    them; None off the map."""
+    w = truth.world
+    if not w.emap.contains(Xt[K.S_X], Xt[K.S_Y]):
+        return None
+    return w.emap.pitch_roll(float(Xt[K.S_X]), float(Xt[K.S_Y]), float(Xt[K.S_YAW]), w.half_length, w.half_width)
+
+
+def _attitude(m, truth: TT.Truth, Xt: np.ndarray):
+    """A measurement (:class:`sbmpc.robot.Measurement`) with the IMU's pitch and roll."""
+    pr = _true_tilt(truth, Xt)
+    return m if pr is None else replace(m, pitch=float(pr[0]), roll=float(pr[1]))
+
+
+def _imu(truth: TT.Truth, world: WO.World, Xt: np.ndarray, X: np.ndarray) -> float:
+    """How far the planning map's tilt is off [rad] where the vehicle stands
+    (:func:`sbmpc.execution.tilt_error`): the IMU's pitch and roll against the map's at
+    the measured pose X."""
+    pr = _true_tilt(truth, Xt)
+    return 0.0 if pr is None else EX.tilt_error(world, X, *pr)
+
+
 def _ground(truth: TT.Truth, Xt: np.ndarray) -> str:
     """What the true vehicle met where it ended: its pitch and roll on the true map, its
     drive, and what it was (where it differs from the planning vehicle)."""
@@ -420,6 +444,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     odo, drop = truth.odometer(), truth.dropper()
     Xt = WO.start_state(twin)          # the true state
     X = odo.observe(Xt)                # the measured state
+    tilt = _imu(truth, world, Xt, X)   # how far the map's tilt is off where it stands (the guard's)
     evidence = Evidence()              # what the periods driven say of the vehicle (a stall's inference)
     pieces = []
     every = max(1, round(TR.RECORD_EVERY / real.dt))
@@ -443,13 +468,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         last): the true state Xt advanced, X measured, the period recorded and counted,
         with ``predicted`` (the planning model's record of it) the evidence of the stall
         inference. Returns its end code."""
-        nonlocal X, Xt
+        nonlocal X, Xt, tilt
         X0 = X.copy()
         rec, end, Xt = real.step(Xt, drop.applied(Xt, control))
         pieces.append(rec if not pieces else rec[1:])
         out.periods += 1
         odo.advance(Xt)
         X = odo.observe(Xt)
+        tilt = _imu(truth, world, Xt, X)
         if predicted is not None and end != -SS.STALL:
             evidence.add(rec, predicted, X0, control)
         return end
@@ -481,7 +507,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         while retraced < len(RETRACE_PERIODS):
             n = RETRACE_PERIODS[retraced]
             retraced += 1
-            back = _retrace(guards, X, driven, n)
+            back = _retrace(guards, X, driven, n, tilt)
             if back is not None:
                 backing = back
                 guarded = False                # a fresh place: its first hold gets a re-plan
@@ -498,7 +524,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             # driving back along the way it came (retrace), each period guarded from the
             # measured state before it is driven
             control = backing.pop(0)
-            if _held(guards, X, control, True):
+            if _held(guards, X, control, True, tilt):
                 return finish("failed", _stopped(X, ps), "stopped")
             end = drive(control)
             result = ended(end, ", driving back along the way it came")
@@ -600,7 +626,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             # (once the twin plans, the planning vehicle's prediction is of a vehicle the run
             # has seen it is not: it holds a period back only where it would tip over)
             kept = (current is None or _keeps_margin(current)) and planner is world
-            if _held(guards, X, control, kept):
+            if _held(guards, X, control, kept, tilt):
                 if guarded and since == 0 and planner is world and ps.margin > 0.0:
                     # the fresh plan's first period is held back too: its model is wrong here
                     # (the guard's twin predicts what the plan does not); plan with the twin
@@ -712,7 +738,7 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
         if time.perf_counter() > deadline:
             return finish("failed", f"wall-clock limit reached at t = {X[K.S_T]:.1f} s, "
                                     f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", "timeout")
-        cmd = ctrl.step(float(X[K.S_T]), measured(odo.observe(X), twin.vehicle, stalled))
+        cmd = ctrl.step(float(X[K.S_T]), _attitude(measured(odo.observe(X), twin.vehicle, stalled), truth, X))
         if cmd.done:
             return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
         rec, end, X = real.step(X, drop.applied(X, (cmd.wl, cmd.wr, ctrl.period_s)))

@@ -212,9 +212,15 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
     off = int(Q[SS.Q_OFFTW])
     assert np.array_equal(data[off:off + block.size], block)
     guards = R._guards(w, "time")
-    assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 2)
+    assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 3)
     o = int(guards[1].Q[SS.Q_OFFT])           # the guard's twin drives as the vehicle of its own world
     assert np.array_equal(guards[1].data[o:o + block.size], block)
+    # ... and an optimistic one, mass, inertia and grip divided by 1 + margin (a lighter
+    # vehicle drives further into a period)
+    light = K.pack(w.vehicle.replace(mass=w.vehicle.mass / 1.1, inertia=w.vehicle.inertia / 1.1),
+                   w.terrains[0].replace(mu_sa=w.terrains[0].mu_sa / 1.1, mu_op=w.terrains[0].mu_op / 1.1))
+    o = int(guards[2].Q[SS.Q_OFFT])
+    assert np.allclose(guards[2].data[o:o + K.NP], light, rtol=1e-12)
     ps = R._twin_planner(w).scenario.planner
     assert (ps.margin, ps.margin_turn, ps.margin_tip_deg) == (0.0, 0.0, 0.0)
     assert R._twin_planner(w, tip=True).scenario.planner.margin_tip_deg == 5.0
@@ -229,7 +235,7 @@ class _Prediction:
     def __init__(self, end):
         self.end = end
 
-    def step(self, X, control, record=False):
+    def step(self, X, control, record=False, tilt_error=0.0):
         return None, self.end, X
 
 

@@ -404,7 +404,7 @@ class _Predicts:
     def __init__(self, *ends):
         self.ends = list(ends)
 
-    def step(self, X, control, record=False):
+    def step(self, X, control, record=False, tilt_error=0.0):
         return None, (self.ends.pop(0) if len(self.ends) > 1 else self.ends[0]), X
 
 

@@ -229,3 +229,36 @@ def test_a_stall_plans_as_the_vehicle_the_periods_before_it_measured(flat):
     assert R._weaker_model(flat, "time", out, X, f)[2] is base          # cached: re-plans share its grids
     _, _, plain = R._weaker_model(flat, "time", out, X)                 # nothing to fit: the planning vehicle's twin
     assert plain is flat
+
+
+def test_the_maps_tilt_error_is_what_the_imu_shows_beyond_it(flat):
+    from sbmpc import execution as EX
+    X = R.WO.start_state(flat)                  # on the level floor the map says 0
+    assert EX.tilt_error(flat, X, 0.02, -0.05) == pytest.approx(0.05)
+    assert EX.tilt_error(flat, X, 0.0, 0.0) == 0.0
+    Y = X.copy()
+    Y[K.S_X] = -5.0                              # off the map: nothing to compare
+    assert EX.tilt_error(flat, Y, 0.3, 0.3) == 0.0
+
+
+NARROW_TIPPED = {   # a truth drawn by the closed-loop sweep (seed 0) on which narrow_pass's time run rolled over
+    "delay_s": 0.05, "dropped": 0.0, "map": {"corr_m": 2.0, "noise_sd_m": 0.05, "seed": 791543436}, "odometry": {},
+    "seed": 1648038474, "terrains": [{"mu_op": 0.5589791791057591, "mu_roll": 0.044407442023833954,
+                                      "mu_sa": 0.6615215642207078}],
+    "vehicle": {"inertia": 0.7477725348850713, "mass": 26.576334411916985, "v_max": 12.52229465247352}}
+
+
+@pytest.mark.slow
+def test_a_lighter_vehicle_on_a_map_5_cm_off_stops_rather_than_roll_over_on_the_pass():
+    """A P3-AT 14 % lighter on narrow_pass's map with its heights 5 cm off (2 m
+    correlation) and 50 ms of delay: its time run rolled over on the pass's flank at
+    (16.6, 10.4), 30 deg of roll, where the planning vehicle's prediction of the period
+    stopped at 28.4 and the heavier twin's short of the margin. The guard's optimistic
+    twin (a lighter vehicle drives further into the period) holds that period back: the
+    run stops and says why, or reaches the goal; it never tips over."""
+    w = load_world(ROOT / "scenarios" / "narrow_pass.yaml")
+    res = R.run(w, "time", TT.from_spec(w, NARROW_TIPPED))
+    assert res.end in ("reached", "stopped"), res.reason
+    assert res.guarded >= 1
+    if res.end == "stopped":
+        assert "the run stops rather than tip over" in res.reason

@@ -196,4 +196,5 @@ def replay_line(old: dict, new: dict) -> str:
             same = same and abs(a - b) <= 1e-6 * max(1.0, abs(a))
     return (f"replay: {'ended as recorded' if same else 'ended otherwise than recorded'} "
             f"({new['end']} against {old.get('end', old.get('status'))}{'; ' if diffs else ''}{'; '.join(diffs)})"
-            + ("" if same else "; a plan's search may end on its wall-clock budget, which a loaded machine changes"))
+            + ("" if same else "; a different version of sbmpc plans otherwise, and a plan's search may end on its "
+               "wall-clock budget, which a loaded machine changes"))

@@ -137,6 +137,7 @@ class Controller:
         self._last = None             # the last Command
         self._plan_t = None           # when the plan driven was made (robot time)
         self._X = None                # the estimate at the last step
+        self._tilt = 0.0              # how far the map's tilt is off where the vehicle stands [rad]
 
     @classmethod
     def from_scenario(cls, scenario, cost: str | None = None, period_s: float = 0.1, horizon_s: float | None = None,
@@ -171,6 +172,8 @@ class Controller:
         issued = [] if self._last_t is None else [(float(done[0]), float(done[1]), t - self._last_t)]
         X = self.estimator.update(t, m, issued)
         stalled = self.estimator.stalled_now
+        # the map's tilt error where the vehicle stands, from the IMU (the guard's)
+        self._tilt = 0.0 if m.pitch is None else EX.tilt_error(self.world, X, m.pitch, m.roll)
         self._X = X
         self._last_t = float(t)
         cmd = self._advance(t, X, stalled)
@@ -381,7 +384,7 @@ class Controller:
                 control, status = step[0], "horizon"
                 if h.goal and len(step) == 1:
                     control = (control[0], control[1], max(control[2], ps.period_s))
-            if self.guards and EX.held(self.guards, X, control, kept):
+            if self.guards and EX.held(self.guards, X, control, kept, self._tilt):
                 # the guard: the period is not driven; a plan from where the vehicle
                 # stands: a horizon plan, then a whole-route one, then it stops
                 self.guarded += 1

@@ -32,6 +32,9 @@ class Measurement:
       ``tau_l``, ``tau_r`` [N m]: the joint efforts, a side's wheels summed); either
       pins the drive's PID integral;
     * ``voltage`` [V]: the battery's;
+    * ``pitch``, ``roll`` [rad]: the body's attitude (an IMU's; pitch nose-up positive,
+      roll as the map's ``pitch_roll`` gives it): where they show the ground steeper
+      than the map says, the tip-over guard takes its limits that much lower;
     * ``stalled``: the drive's own stall protection tripped (a motor driver's fault
       flag); the controller also infers a stall from the wheel speeds.
     """
@@ -48,6 +51,8 @@ class Measurement:
     tau_l: float | None = None
     tau_r: float | None = None
     voltage: float | None = None
+    pitch: float | None = None
+    roll: float | None = None
     stalled: bool = False
 
     def checked(self, where: str = "measurement") -> "Measurement":
@@ -63,9 +68,10 @@ class Measurement:
                 continue
             if isinstance(val, (bool, np.bool_)) or not isinstance(val, numbers.Real) or not math.isfinite(val):
                 raise InputError(f"{where}: field '{f.name}': expected a finite number, found {val!r:.40}")
-        for a, b in (("wl", "wr"), ("il", "ir"), ("tau_l", "tau_r")):
+        for a, b in (("wl", "wr"), ("il", "ir"), ("tau_l", "tau_r"), ("pitch", "roll")):
             if (getattr(self, a) is None) != (getattr(self, b) is None):
-                raise InputError(f"{where}: fields '{a}', '{b}': expected both sides or neither, found one")
+                both = "both" if a == "pitch" else "both sides"
+                raise InputError(f"{where}: fields '{a}', '{b}': expected {both} or neither, found one")
         return self
 
 
