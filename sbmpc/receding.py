@@ -307,10 +307,7 @@ def _marked(world: WO.World, marks: tuple) -> WO.World:
     map's ``nodata: wall``): no plan crosses it. Cached per world and marks."""
     e = world.emap
     H = e.heights.copy()
-    ny, nx = H.shape
-    xs = e.origin[0] + e.resolution * np.arange(nx)
-    ys = e.origin[1] + e.resolution * np.arange(ny)
-    Xg, Yg = np.meshgrid(xs, ys)
+    Xg, Yg = TT.centres(e)
     top = float(H.max()) + 100.0
     for x, y, r in marks:
         H[(Xg - x) ** 2 + (Yg - y) ** 2 <= r * r] = top
