@@ -104,8 +104,9 @@ def fit(evidence: "Evidence", world: WO.World, cost: str) -> dict | None:
     period replayed from the measured state it began from, at the controller rate,
     against the wheel speeds and currents measured (every FIT_EVERY-th row; units
     FIT_SCALE; a period weighs as one sample per channel), with a prior of relative sd FIT_PRIOR around 1 (a factor the periods do
-    not excite stays near 1). Returns {factor: value, "cost": final cost, "periods": n},
-    or None with fewer than FIT_MIN_PERIODS periods."""
+    not excite stays near 1). Returns {factor: value, "se": {factor: relative standard
+    error}, "cost": final cost, "periods": n}, or None with fewer than FIT_MIN_PERIODS
+    periods."""
     from scipy.optimize import least_squares
     periods = list(evidence.periods)
     if len(periods) < FIT_MIN_PERIODS:
@@ -131,5 +132,21 @@ def fit(evidence: "Evidence", world: WO.World, cost: str) -> dict | None:
     res = least_squares(residuals, np.zeros(len(FIT)), bounds=(np.full(len(FIT), lo), np.full(len(FIT), hi)),
                         diff_step=1e-3, max_nfev=40)
     out = {k: round(float(np.exp(x)), 4) for k, x in zip(FIT, res.x)}
-    out.update(cost=round(float(res.cost), 3), periods=len(periods))
+    # standard errors (relative: the factors are fitted as logarithms) from the Jacobian,
+    # the residuals' scale estimated from the fit (the prior rows included: at most FIT_PRIOR)
+    J = res.jac
+    dof = max(1, len(res.fun) - len(FIT))
+    try:
+        cov = np.linalg.inv(J.T @ J) * (2.0 * res.cost / dof)
+        se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        se = np.full(len(FIT), FIT_PRIOR)
+    out.update(se={k: round(float(e), 4) for k, e in zip(FIT, se)}, cost=round(float(res.cost), 3),
+               periods=len(periods))
     return out
+
+
+def confident(f: dict, tol: float = 0.05) -> bool:
+    """Whether a fit (:func:`fit`) pins every factor it moved more than 3 % from 1 to a
+    relative standard error within ``tol``."""
+    return all(f["se"][k] <= tol for k in FIT if abs(f[k] - 1.0) > 0.03)

@@ -51,7 +51,7 @@ from .problems import skidsteer as SS
 from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
-from .estimate import FIT, Evidence, fit as fit_vehicle, inference_note, scaled
+from .estimate import FIT, Evidence, confident, fit as fit_vehicle, inference_note, scaled
 from . import execution as EX
 from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
@@ -83,6 +83,7 @@ class RunResult:
     dropped: int = 0                  # periods whose command was lost (the drive held the previous one)
     inferred: list = field(default_factory=list)     # what each stall said of the vehicle (stall_inference)
     source: dict = field(default_factory=dict)       # how to make the run again (sbmpc run --replay)
+    adapted: list = field(default_factory=list)      # when the vehicle was refitted and planned for as measured
     truth_at_end: dict = field(default_factory=dict)  # the true vehicle's pose and drive where the run ended
 
     @property
@@ -141,6 +142,7 @@ class RunResult:
             "guarded": self.guarded,
             "weaker_from_t": self.weaker_from,
             "planned_as": self.planned_as,
+            "adapted": self.adapted,
             "stall_inference": self.inferred,
             "dropped": self.dropped,
             "truth_spec": self.truth_spec,
@@ -199,17 +201,21 @@ def _retrace(guards: list, X: np.ndarray, driven: list, n: int, tilt: float = 0.
     return back
 
 
-def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None) -> tuple:
+def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None,
+                  base: WO.World | None = None) -> tuple:
     """(planning world, its executor, the world it is the twin of) once the run has seen
     the vehicle weaker than the planning one (a stall where its plans drove it, or a
     fresh plan whose first period the twin's guard holds back): the margin's pessimistic
     twin (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) of the vehicle
     as the periods before a stall measured it (``fitted``: :func:`sbmpc.estimate.fit`;
-    without, the planning vehicle) plans from the measured state X on, and the run records
-    when (``RunResult.weaker_from``) and as what (``planned_as``)."""
+    without, ``base``: the vehicle as last measured, or the planning vehicle) plans from
+    the measured state X on, and the run records when (``RunResult.weaker_from``) and as
+    what (``planned_as``)."""
     if out.weaker_from is None:
         out.weaker_from = float(X[K.S_T])
-    base = world if fitted is None else _as_measured(world, tuple(round(fitted[k], 2) for k in FIT))
+    if fitted is not None:
+        base = _as_measured(world, tuple(round(fitted[k], 2) for k in FIT))
+    base = base or world
     tw = _twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
@@ -436,6 +442,9 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     guards = _guards(world, cost)
     planner = world                    # the planning model: the world's vehicle, its margin's twin after a stall
     base = world                       # ... the twin of this: the world's vehicle, or as a stall measured it
+    as_twin = False                    # the margin's twin of ``base`` plans (the vehicle proved weaker)
+    since_fit = 0                      # periods driven since the vehicle was last fitted (run.adapt_periods)
+    base_key = (1.0,) * len(FIT)       # the factors of ``base`` on the world's vehicle
     guarded = False                    # the last plan's first period was held back by the guard
     real = _Executor(twin, cost, twin.vehicle.delay)
     odo, drop = truth.odometer(), truth.dropper()
@@ -544,7 +553,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
             budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
                       else rs.replan_time_budget_s)
-            model_world = _twin_planner(base, tip=True) if held and planner is not world else planner
+            model_world = _twin_planner(base, tip=True) if held and as_twin else planner
             clear = world.margin + world.emap.resolution      # (a mark at the start leaves no plan)
             near = tuple(m for m in marks if math.hypot(m[0] - X[K.S_X], m[1] - X[K.S_Y]) > m[2] + clear)
             if near:
@@ -622,12 +631,13 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             # (and stops for good where the fresh plan's first period is held back too)
             # (once the twin plans, the planning vehicle's prediction is of a vehicle the run
             # has seen it is not: it holds a period back only where it would tip over)
-            kept = (current is None or _keeps_margin(current)) and planner is world
+            kept = (current is None or _keeps_margin(current)) and not as_twin
             if _held(guards, X, control, kept, tilt):
-                if guarded and since == 0 and planner is world and ps.margin > 0.0:
+                if guarded and since == 0 and not as_twin and ps.margin > 0.0:
                     # the fresh plan's first period is held back too: its model is wrong here
                     # (the guard's twin predicts what the plan does not); plan with the twin
-                    planner, model, base = _weaker_model(world, cost, out, X)
+                    planner, model, base = _weaker_model(world, cost, out, X, None, base)
+                    as_twin = True
                 elif guarded and since == 0:
                     if not retrace():
                         return finish("failed", _stopped(X, ps), "stopped")
@@ -653,13 +663,16 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             said = out.inferred[-1]["inferred"]
             fitted = fit_vehicle(evidence, world, cost) if ps.margin > 0.0 else None
             out.inferred[-1]["fit"] = fitted
-            if ps.margin > 0.0 and (fitted is not None or (planner is world and said != "stronger")):
+            if ps.margin > 0.0 and (fitted is not None or (not as_twin and said != "stronger")):
                 # stalled where the plans drove it: from here on the margin's twin of the
                 # vehicle as the periods before the stall measured it (the online fit; a
                 # vehicle measured lighter or stronger gets a twin no heavier than it needs);
                 # without periods to fit (a stall in a fresh plan's first periods), of the
                 # planning vehicle, unless the run has already measured it
-                planner, model, base = _weaker_model(world, cost, out, X, fitted)
+                planner, model, base = _weaker_model(world, cost, out, X, fitted, base)
+                as_twin = True
+                if fitted is not None:
+                    base_key = tuple(round(fitted[k], 2) for k in FIT)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
             if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1]):
                 # stalled again where it stalled before, with the plans of the vehicle as
@@ -691,6 +704,22 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             off += [f"speed off by {dv:.2f} m/s"] if dv > rs.tol_v else []
             if off:
                 why = ", ".join(off)
+        if rs.adapt_periods and end != -SS.STALL:
+            since_fit += 1
+            if since_fit >= rs.adapt_periods:
+                # adaptation: the vehicle refitted from the periods driven; where the fit is
+                # confident and says another vehicle than the one planned for, re-plan as it
+                since_fit = 0
+                f = fit_vehicle(evidence, world, cost)
+                if f is not None and confident(f):
+                    key = tuple(round(f[k], 2) for k in FIT)
+                    if max(abs(a - b) for a, b in zip(key, base_key)) > 0.03:     # another vehicle than planned for
+                        base, base_key = _as_measured(world, key), key
+                        planner = _twin_planner(base) if as_twin else base
+                        model = _Executor(planner, cost)
+                        out.planned_as = base.vehicle.name
+                        out.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
+                        why = (why + "; " if why else "") + f"adapted: {base.vehicle.name}"
 
 
 def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, deadline: float) -> RunResult:

@@ -184,7 +184,10 @@ class RunSettings:
     (each followed by a re-plan from where it stopped) before the run fails;
     max_time_factor: the run fails when it takes longer than this times the first
     plan's travel time (plus 30 s); control_period_s: how often a horizon run's controller
-    is called (:class:`sbmpc.robot.Controller`, the robot's loop: 0.05-1 s).
+    is called (:class:`sbmpc.robot.Controller`, the robot's loop: 0.05-1 s);
+    adapt_periods: a whole-route run refits the vehicle (:func:`sbmpc.estimate.fit`) every
+    this many periods driven and, where the fit is confident and differs, re-plans with
+    the vehicle as measured (0: only at stalls).
     """
 
     trigger: str = "tolerance"
@@ -198,6 +201,7 @@ class RunSettings:
     max_stalls: int = 3
     max_time_factor: float = 3.0
     control_period_s: float = 0.1
+    adapt_periods: int = 0
 
 
 _RUN_RANGES = {
@@ -211,6 +215,7 @@ _RUN_RANGES = {
     "max_stalls": (int, 0, 1000),
     "max_time_factor": (float, 1.0, 1000.0),
     "control_period_s": (float, 0.05, 1.0),
+    "adapt_periods": (int, 0, 1000),
 }
 TRIGGERS = ("tolerance", "every")
 

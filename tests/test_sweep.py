@@ -275,12 +275,30 @@ def test_a_closed_loop_sweep_runs_each_draw_in_both_modes_and_writes_the_failure
 
 def test_a_closed_loop_spec_is_checked_before_any_task(tmp_path, capsys):
     spec = tmp_path / "spec.yaml"
-    spec.write_text(CLOSED.replace("modes: [whole_route, horizon]", "modes: [both]\n  wall_limit_s: 0")
-                    .replace("corr_m: 2.0", "corr: 2.0"))
+    spec.write_text(CLOSED.replace("modes: [whole_route, horizon]", "modes: [both]\n  wall_limit_s: 0\n"
+                                   "  run: {adapt_periods: -1}").replace("corr_m: 2.0", "corr: 2.0"))
     assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
+    assert "robustness.run.adapt_periods: expected an integer in [0, 1000], found -1" in err
     assert "robustness.modes: expected a list of whole_route and/or horizon" in err
     assert "robustness.wall_limit_s: expected seconds" in err and "robustness.faults.map.corr:" in err
     spec.write_text(CLOSED.replace("  mode: closed_loop\n", ""))        # faults need the closed loop
     assert main(["sweep", str(spec), "--out", str(tmp_path / "out")]) == 2
     assert "faults and the keys of runs need mode: closed_loop" in capsys.readouterr().err
+
+
+def test_specs_that_differ_only_in_how_they_run_meet_the_same_truths(tmp_path):
+    """A closed-loop A/B (adaptation on and off, one mode or two, more samples): sample k
+    of a scenario and cost draws the same truth in both."""
+    a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    a.write_text(CLOSED)
+    b.write_text(CLOSED.replace("samples: 3", "samples: 5").replace("modes: [whole_route, horizon]",
+                                                                    "modes: [whole_route]\n  run: {adapt_periods: 5}"))
+    key = {}
+    for t in SW.tasks(SW.load_spec(a)):
+        key[(t["scenario"], t["sample"])] = t["draw_key"]
+    tb = SW.tasks(SW.load_spec(b))
+    assert len(tb) == 2 * 5 and {t["task_id"] for t in tb}.isdisjoint({t["task_id"] for t in SW.tasks(SW.load_spec(a))})
+    for t in tb:
+        if t["sample"] < 3:
+            assert t["draw_key"] == key[(t["scenario"], t["sample"])]

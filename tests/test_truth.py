@@ -262,3 +262,19 @@ def test_a_lighter_vehicle_on_a_map_5_cm_off_stops_rather_than_roll_over_on_the_
     assert res.guarded >= 1
     if res.end == "stopped":
         assert "the run stops rather than tip over" in res.reason
+
+
+def test_a_run_that_adapts_plans_for_the_vehicle_it_measures(flat):
+    """A P3-AT with 20 % less battery voltage (its top speed 20 % lower) on the floor:
+    refitted every 3 periods (run.adapt_periods), the first fit pins v_max at 0.80 (the
+    others at 1) and the run re-plans once as that vehicle: it arrives 2.9 s sooner, with
+    1 re-plan instead of 9, and its prediction is nearer what it executes."""
+    from dataclasses import replace
+    slow = flat.vehicle.replace(v_max=0.8 * flat.vehicle.v_max)
+    plain = R.run(flat, "time", slow)
+    res = R.run(flat, "time", slow, replace(flat.scenario.run, adapt_periods=3))
+    assert plain.end == res.end == "reached"
+    assert len(res.adapted) == 1 and res.adapted[0]["fit"]["v_max"] == pytest.approx(0.8, abs=0.01)
+    assert all(abs(res.adapted[0]["fit"][k] - 1.0) < 0.02 for k in ("mass", "current_limit", "grip", "mu_roll"))
+    assert res.planned_as == "p3at as measured (v_max x0.80)" and not plain.adapted
+    assert res.replans < plain.replans and res.travel_time_s < plain.travel_time_s - 2.0

@@ -12,6 +12,7 @@ A spec's ``robustness`` then reads::
       horizon_s: 10                     # the horizon of the horizon runs (default: the scenario's, else 10)
       wall_limit_s: 600                 # a run that takes longer on the wall clock fails ("timeout")
       own_plan: true                    # also plan for each truth's own vehicle on its own map
+      run: {adapt_periods: 5}           # run settings of every run (the scenario's otherwise)
       vary: {mass: 0.10, mu_sa: 0.10, mu_op: 0.10}
       faults: {delay_s: 0.05, map: {noise_sd_m: 0.05, corr_m: 2.0}}
 
@@ -39,7 +40,8 @@ import numpy as np
 RUN_COLUMNS = ("sample", "run_mode", "end", "truth", "executed_time_s", "executed_energy_J", "predicted_time_s",
                "predicted_energy_J", "own_time_s", "own_energy_J", "can_cross", "cost_ratio", "predicted_ratio", "stalls", "replans",
                "guarded", "dropped", "run_wall_s", "run_file", "truth_spec")
-KEYS = ("mode", "samples", "seed", "modes", "horizon_s", "wall_limit_s", "own_plan", "vary", "faults")
+KEYS = ("mode", "samples", "seed", "modes", "horizon_s", "wall_limit_s", "own_plan", "run", "vary", "faults")
+DRAWN_BY = ("seed", "vary", "faults")    # what a sample's truth depends on (with the task's scenario, cost, ...)
 MODES = ("whole_route", "horizon")
 ENDS = ("reached", "stopped", "no_path", "failed", "tipped", "off_map", "timeout", "error")
 WALL_LIMIT_S = 600.0
@@ -67,12 +69,21 @@ def problems(rob: dict) -> list:
             out.append(f"robustness.{key}: expected seconds in [{lo:g}, {hi:g}], found {shown(v)}")
     if not isinstance(rob.get("own_plan", True), bool):
         out.append(f"robustness.own_plan: expected true or false, found {shown(rob['own_plan'])}")
+    if rob.get("run") is not None:
+        from .. import scenario as SC
+        probs = SC._Problems("")
+        SC._run(rob["run"], probs)
+        out += [f"robustness.{line.lstrip(': ')}" for line in probs.items]
     return out + TT.problems(rob.get("vary") or {}, rob.get("faults") or {}, "robustness.")
 
 
 def expand(task: dict, rob: dict) -> list:
-    """The run tasks of a task: one per sample and mode (``draw_key`` shared by modes)."""
-    key = hashlib.sha256(json.dumps(task, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    """The run tasks of a task: one per sample and mode. ``draw_key`` (with the sample,
+    the seed of its truth) hashes the task without what only the runs read (the modes,
+    their settings, the sample count): two specs that differ only there meet the same
+    truths, sample for sample."""
+    drawn = dict(task, robustness={k: rob.get(k) for k in DRAWN_BY})
+    key = hashlib.sha256(json.dumps(drawn, sort_keys=True, default=str).encode()).hexdigest()[:16]
     return [dict(task, sample=k, run_mode=m, draw_key=key)
             for k in range(int(rob["samples"])) for m in rob.get("modes", ["whole_route"])]
 
@@ -93,7 +104,10 @@ def run(world, cost: str, task: dict) -> dict:
     mode = task["run_mode"]
     ps = world.scenario.planner
     hz = (rob.get("horizon_s") or ps.horizon_s or HORIZON_S) if mode == "horizon" else 0.0
-    w = replace(world, scenario=replace(world.scenario, planner=replace(ps, horizon_s=float(hz))))
+    rs = world.scenario.run
+    if rob.get("run"):
+        rs = replace(rs, **rob["run"])
+    w = replace(world, scenario=replace(world.scenario, planner=replace(ps, horizon_s=float(hz)), run=rs))
     row = {"sample": task["sample"], "run_mode": mode, "truth": truth.name,
            "truth_spec": json.dumps(truth.spec, sort_keys=True)}
     t0 = time.perf_counter()
