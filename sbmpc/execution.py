@@ -177,7 +177,12 @@ def guards(world: WO.World, cost: str) -> list:
 
 
 def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> bool:
-    """Whether the guards (:func:`guards`: the world's vehicle, then its twins) hold back
+    """Whether the guards hold back the period (:func:`holder`)."""
+    return holder(guards, X, control, kept, tilt_error) > 0
+
+
+def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> int:
+    """Which of the guards (:func:`guards`: the world's vehicle, then its twins) holds back
     the period ``control`` from the measured state X. The world's vehicle's prediction holds it back where it tips over, or, for a plan
     that keeps the margin (``kept``), where it comes within half the tip-over margin; a
     plan made without the margin (none kept it: it says so) rides within the margin by
@@ -192,12 +197,14 @@ def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0
     less grip left `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
-    `narrow_pass`'s flank 1.6 deg steeper than it says)."""
+    `narrow_pass`'s flank 1.6 deg steeper than it says). Returns which guard holds the
+    period back, 1-based (1: the planning vehicle, 2: the pessimistic twin, 3: the
+    optimistic one), 0: none."""
     for j, g in enumerate(guards):
         _, end, _ = g.step(X, control, record=False, tilt_error=tilt_error)
         if end == -SS.TIP or (end == -SS.OFF_MAP and j == 0) or (end == -SS.MARGIN and (kept or j > 0)):
-            return True
-    return False
+            return j + 1
+    return 0
 
 
 def tilt_error(world: WO.World, X: np.ndarray, pitch: float, roll: float) -> float:
@@ -268,5 +275,5 @@ def protected(X: np.ndarray, real: "Executor") -> None:
     real.pipe = None
 
 
-__all__ = ["Executor", "HELD", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
+__all__ = ["Executor", "HELD", "holder", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker"]

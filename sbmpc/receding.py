@@ -252,6 +252,8 @@ def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World 
     vehicle as measured, :func:`_as_measured`)."""
     if planner is world:
         return world.vehicle.name
+    if out.weaker_from is None:          # adapted (run.adapt_periods), no stall yet: the vehicle as measured
+        return f"{world.vehicle.name}, then {planner.vehicle.name}"
     of = "" if base is None or base is world else f" of {base.vehicle.name}"
     return (f"{world.vehicle.name}, and from t = {out.weaker_from:.1f} s the margin's twin{of}, "
             f"x{1.0 + world.scenario.planner.margin:g} mass and grip")
@@ -275,9 +277,9 @@ def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str |
     return out
 
 
-def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", name: str,
+def _stalled(out: RunResult, stalls: list, X: np.ndarray, Xt: np.ndarray, real: "_Executor", name: str,
              inferred: dict | None = None) -> str | None:
-    """A stall of the true vehicle at the measured state X: counted and placed; the
+    """A stall of the true vehicle (its state Xt) at the measured state X: counted and placed; the
     failure reason once there are more than ``run.max_stalls``, else None, with the
     stalled drive restarted from where its wheels are, as a stall protection would: its
     references set to the measured speeds, commands still in the pipe dropped. Left at
@@ -288,7 +290,7 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, real: "_Executor", nam
     stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
     if out.stalls > out.settings.max_stalls:
         return _stall_failure(stalls, name, inferred)
-    _protected(X, real)
+    _protected(Xt, real)
     return None
 
 
@@ -296,12 +298,12 @@ MARK_NEAR = 1.5      # m: a stall this close to an earlier one marks the slope a
 MARK_RADIUS = 0.6    # m: the radius of such a mark
 
 
-def _ahead(world: WO.World, X: np.ndarray) -> tuple:
+def _ahead(world: WO.World, X: np.ndarray, control: tuple) -> tuple:
     """(x, y, radius) [m] of the slope a stalled vehicle at X was climbing: a disc of
-    MARK_RADIUS ahead in the direction it was driving, two map cells clear of its
+    MARK_RADIUS ahead in the direction it was commanded (``control``), two map cells clear of its
     footprint at any heading (the vehicle turns where it stands)."""
     d = world.margin + 2.0 * world.emap.resolution + MARK_RADIUS
-    sign = -1.0 if X[K.S_WL] + X[K.S_WR] < 0.0 else 1.0
+    sign = -1.0 if control[0] + control[1] < 0.0 else 1.0      # (the wheels may roll back at the stall)
     yaw = float(X[K.S_YAW])
     return (round(float(X[K.S_X]) + sign * d * math.cos(yaw), 3), round(float(X[K.S_Y]) + sign * d * math.sin(yaw), 3),
             MARK_RADIUS)
@@ -384,6 +386,8 @@ def _source(world: WO.World, cost: str, rs: RunSettings) -> dict:
         data["vehicle"] = v.name or "vehicle"
         doc = {"schema": REPLAY_SCHEMA, "scenario": data, "scenario_path": str(scn.path) if scn.path else None,
                "vehicle": {f.name: getattr(v, f.name) for f in dataclasses.fields(v) if f.name != "sources"},
+               "terrains": [{f.name: getattr(t, f.name) for f in dataclasses.fields(t) if isinstance(getattr(t, f.name), float)}
+                            for t in world.terrains],
                "cost": cost}
         json.dumps(doc, allow_nan=False)
         return doc
@@ -403,14 +407,23 @@ def replayed(doc: dict, where: str) -> tuple:
         found = "no 'replay' section" if not src else f"replay.schema {src.get('schema')!r}"
         raise InputError(f"{where}: expected a run JSON of sbmpc run --json with a replay section (schema "
                          f"{REPLAY_SCHEMA}), found {found}")
+    if not (isinstance(src.get("scenario"), dict) and isinstance(src.get("vehicle"), dict)
+            and src.get("cost") in ("time", "energy") and isinstance(src.get("scenario_path") or "", str)):
+        raise InputError(f"{where}: replay: expected scenario (a mapping), scenario_path (a path or null), vehicle "
+                         f"(a mapping) and cost (time or energy), found {sorted(src)}")
     path = Path(src["scenario_path"]) if src.get("scenario_path") else None
     scn = SC.parse(src["scenario"], f"{where} (replay.scenario)", path)
     try:
-        vehicle = Vehicle(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in src["vehicle"].items()})
+        vehicle = Vehicle().replace(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in src["vehicle"].items()})
+        world = WO.resolve(replace(scn, vehicle=vehicle))
+        ts = src.get("terrains") or [{}] * len(world.terrains)
+        if len(ts) == len(world.terrains):       # (a sweep variant's terrain changes)
+            world = replace(world, terrains=tuple(t.replace(**d) for t, d in zip(world.terrains, ts)))
+        return world, src["cost"], TT.from_spec(world, doc.get("truth_spec") or {})
+    except InputError:
+        raise
     except Exception as exc:
-        raise InputError(f"{where}: replay.vehicle: {exc}") from None
-    world = WO.resolve(replace(scn, vehicle=vehicle))
-    return world, src["cost"], TT.from_spec(world, doc.get("truth_spec") or {})
+        raise InputError(f"{where}: replay: {' '.join(str(exc).replace('<replace>: ', '').split())[:300]}") from None
 
 
 def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | None" = None,
@@ -458,7 +471,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     why = "start"
     current, steps, k, P, since = None, [], 0, None, 0
     t_limit = math.inf
-    limit_for = world                  # the planning model the time limit was set for
+    limit_for = (world, False)         # the planning model (base, as_twin) the time limit was set for
     stalls = []
     marks: list = []                   # slopes a second stall marked impassable for the re-plans (_marked)
     driven: list = []                  # the periods driven, in order
@@ -476,13 +489,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         inference. Returns its end code."""
         nonlocal X, Xt, tilt
         X0 = X.copy()
-        rec, end, Xt = real.step(Xt, drop.applied(Xt, control))
+        applied = drop.applied(Xt, control)
+        rec, end, Xt = real.step(Xt, applied)
         pieces.append(rec if not pieces else rec[1:])
         out.periods += 1
         odo.advance(Xt)
         X = odo.observe(Xt)
         tilt = _imu(truth, world, Xt, X)
-        if predicted is not None and end != -SS.STALL:
+        if predicted is not None and end != -SS.STALL and applied is control:   # (a lost command: no evidence)
             evidence.add(rec, predicted, X0, control)
         return end
 
@@ -495,7 +509,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             return finish("reached", None)
         if end == -SS.STALL:
             out.inferred.append(evidence.infer(X))
-            failed = _stalled(out, stalls, Xt, real, _named(world, planner, out, base), out.inferred[-1])
+            failed = _stalled(out, stalls, X, Xt, real, _named(world, planner, out, base), out.inferred[-1])
             X = odo.observe(Xt)
             return finish("failed", f"{failed} ({_ground(truth, Xt)})") if failed else None
         if end < 0:
@@ -595,11 +609,11 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             if p.found:
                 if first:
                     t_limit = rs.max_time_factor * p.travel_time_s + 30.0
-                elif model_world is not limit_for:
+                elif (base, as_twin) != limit_for:
                     # the first plan of a new planning model (the vehicle as measured): the
                     # time limit as for a first plan of it, from here
                     t_limit = max(t_limit, X[K.S_T] - out.plans[0].t + rs.max_time_factor * p.travel_time_s + 30.0)
-                limit_for = model_world
+                limit_for = (base, as_twin)
                 current, k, P, since, why = p, 0, X.copy(), 0, None
                 steps = periods(p.controls, ps.period_s)
             elif not stranded and not held:
@@ -614,6 +628,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # stalled, and no way on from here: drive back along the way it came and
                 # re-plan from there (as after the guard), where the guard lets it
                 if stalls and not first and retrace():
+                    why = why.replace(HELD, "stalled with no way on", 1)   # (not the guard's: no stop on its failure)
                     continue
                 # after stalls where the plans drove it, and from where none is seen now
                 weaker = (f"; {_stall_failure(stalls, _named(world, planner, out, base), out.inferred[-1])}"
@@ -632,8 +647,9 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             # (once the twin plans, the planning vehicle's prediction is of a vehicle the run
             # has seen it is not: it holds a period back only where it would tip over)
             kept = (current is None or _keeps_margin(current)) and not as_twin
-            if _held(guards, X, control, kept, tilt):
-                if guarded and since == 0 and not as_twin and ps.margin > 0.0:
+            who = EX.holder(guards, X, control, kept, tilt)
+            if who:
+                if guarded and since == 0 and not as_twin and ps.margin > 0.0 and who != 3:
                     # the fresh plan's first period is held back too: its model is wrong here
                     # (the guard's twin predicts what the plan does not); plan with the twin
                     planner, model, base = _weaker_model(world, cost, out, X, None, base)
@@ -678,7 +694,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # stalled again where it stalled before, with the plans of the vehicle as
                 # measured: the slope ahead is steeper than the map says (or the vehicle weaker
                 # there than measured); the re-plans keep off it
-                marks.append(_ahead(world, X))
+                marks.append(_ahead(world, X, control))
                 why += f", again: the slope ahead at ({marks[-1][0]:.2f}, {marks[-1][1]:.2f}) is kept off"
         elif X[K.S_T] - out.plans[0].t > t_limit:
             behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]

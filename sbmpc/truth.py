@@ -302,11 +302,11 @@ class Odometer:
                              self.turn * self.drift_yaw * self.distance + self.noise_yaw * n[2]])
 
     def observe(self, Xt: np.ndarray) -> np.ndarray:
-        """The measured state: the true state Xt with the pose error (z from the planning
-        map where the error moved it)."""
-        if self.exact:
-            return Xt
+        """The measured state: a copy of the true state Xt with the pose error (z the true
+        ground's where the error moved it)."""
         X = Xt.copy()
+        if self.exact:
+            return X
         X[K.S_X] += self.err[0]
         X[K.S_Y] += self.err[1]
         X[K.S_YAW] += self.err[2]

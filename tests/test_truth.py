@@ -69,7 +69,7 @@ def test_a_patch_and_a_bump_lie_on_the_way_and_only_in_the_truth(flat):
 def test_the_odometer_drifts_with_the_distance_and_is_exact_without_error(flat):
     X = R.WO.start_state(flat)
     exact = TT.Truth(flat).odometer()
-    assert exact.observe(X) is X
+    assert exact.observe(X) is not X and np.array_equal(exact.observe(X), X)
     o = TT.Truth(flat, {"drift": 0.02, "drift_deg_per_m": 1.0}, seed=5).odometer()
     for k in range(11):                      # 10 m driven along x
         Y = X.copy()
@@ -170,6 +170,18 @@ def test_replay_refuses_what_is_not_a_run_json_and_extra_inputs(tmp_path, capsys
     assert main(["run", "--replay", str(p), "--cost", "energy"]) == 2
     err = capsys.readouterr().err
     assert "with a replay section" in err and "expected no --cost" in err
+    # a run JSON edited by hand: one line each, never a traceback
+    good = tmp_path / "run.json"
+    assert main(["run", str(ROOT / "scenarios" / "flat.yaml"), "--json", str(good)]) == 0
+    doc = json.loads(good.read_text())
+    capsys.readouterr()
+    for broken in ({**doc, "replay": {**doc["replay"], "cost": "speed"}},
+                   {**doc, "replay": {**doc["replay"], "vehicle": {"mass": -1.0}}},
+                   {**doc, "truth_spec": {"map": {"bump": {"height_m": 0.1}}}}):
+        p.write_text(json.dumps(broken))
+        assert main(["run", "--replay", str(p)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "replay" in err, err
 
 
 def _rec(i: float, v: float, n: int = 50) -> np.ndarray:
@@ -278,3 +290,10 @@ def test_a_run_that_adapts_plans_for_the_vehicle_it_measures(flat):
     assert all(abs(res.adapted[0]["fit"][k] - 1.0) < 0.02 for k in ("mass", "current_limit", "grip", "mu_roll"))
     assert res.planned_as == "p3at as measured (v_max x0.80)" and not plain.adapted
     assert res.replans < plain.replans and res.travel_time_s < plain.travel_time_s - 2.0
+
+
+def test_a_run_that_adapted_names_its_planning_vehicle_before_any_stall(flat):
+    """(Adapted, no stall yet: no 'from t = None s'.)"""
+    out = R.RunResult("flat", "time", "p3at", "p3at", flat.scenario.run)
+    measured = R._as_measured(flat, (1.0, 0.8, 1.0, 1.0, 1.0))
+    assert R._named(flat, measured, out, measured) == "p3at, then p3at as measured (v_max x0.80)"

@@ -64,10 +64,10 @@ def drive_shares(vehicle, traj: dict) -> np.ndarray:
     out = np.zeros(len(traj["t"]))
     for k in range(len(out)):
         vm = max(v.v_max - v.sag * traj["energy_J"][k], 0.0)
-        out[k] = max(window_share(float(traj["i_l"][k]), float(traj["wl"][k]), vm, v.torque_constant,
-                                  v.armature_resistance, v.current_limit),
-                     window_share(float(traj["i_r"][k]), float(traj["wr"][k]), vm, v.torque_constant,
-                                  v.armature_resistance, v.current_limit))
+        out[k] = max(window_share(float(traj["i_l"][k]), float(traj["wl"][k]), vm,
+                                  v.torque_constant * v.torque_scale_left, v.armature_resistance, v.current_limit),
+                     window_share(float(traj["i_r"][k]), float(traj["wr"][k]), vm,
+                                  v.torque_constant * v.torque_scale_right, v.armature_resistance, v.current_limit))
     return out
 
 
