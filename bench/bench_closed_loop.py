@@ -34,19 +34,19 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-OUT = ROOT / "bench" / "results" / "closed_loop.json"
-FIG = ROOT / "docs" / "closed_loop.png"
+RESULTS = ROOT / "bench" / "results"
 VARY = {"mass": 0.1, "inertia": 0.1, "mu_sa": 0.1, "mu_op": 0.1, "mu_roll": 0.1, "v_max": 0.1}
 FAULTS = {"delay_s": 0.05, "map": {"noise_sd_m": 0.05, "corr_m": 2.0}}
 
 
-def spec_text(samples: int, modes: list, families: list, scenarios: list) -> str:
+def spec_text(samples: int, modes: list, families: list, scenarios: list, adapt: int = 0) -> str:
     return json.dumps({
         "scenarios": [str(ROOT / "scenarios" / f"{s}.yaml") for s in scenarios],
         "families": [{"scenario": str(ROOT / "scenarios" / "hills_field.yaml"), "seeds": families}] if families else [],
         "costs": ["time", "energy"],
         "robustness": {"mode": "closed_loop", "samples": samples, "seed": 0, "modes": modes, "wall_limit_s": 300,
-                       "vary": VARY, "faults": FAULTS}})     # (JSON is YAML)
+                       "vary": VARY, "faults": FAULTS, **({"run": {"adapt_periods": adapt}} if adapt else {})}})
+    # (JSON is YAML)
 
 
 def summarise(rows: list) -> dict:
@@ -90,39 +90,52 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=20)
     ap.add_argument("--modes", nargs="+", default=["whole_route", "horizon"])
-    ap.add_argument("--scenarios", nargs="+", default=["flat", "hill_tradeoff", "mixed_terrain", "steep_hill",
+    ap.add_argument("--scenarios", nargs="*", default=["flat", "hill_tradeoff", "mixed_terrain", "steep_hill",
                                                         "runup_ramp", "narrow_pass", "hills_field", "unreachable"])
     ap.add_argument("--families", nargs="*", type=int, default=[100, 101, 102])
     ap.add_argument("--workers", type=int, default=0)
     ap.add_argument("--serial", action="store_true")
     ap.add_argument("--resume", action="store_true")
+    ap.add_argument("--no-run", dest="no_run", action="store_true",
+                    help="summarise the rows already in --out (an interrupted sweep's), run nothing")
     ap.add_argument("--out", type=Path, default=Path("/tmp/sbmpc_closed_loop"))
     ap.add_argument("--label", default="", help="a note kept in the results (which code, which machine load)")
+    ap.add_argument("--adapt", type=int, default=0, help="run.adapt_periods of every run (0: the scenarios')")
+    ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
+    ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
     spec = a.out / "spec.yaml"
-    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios))
+    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios, a.adapt))
     tasks = SW.tasks(SW.load_spec(spec))
     t0 = time.perf_counter()
 
     def progress(done, total, elapsed):
         print(f"  {done}/{total} runs, {elapsed:.0f} s", file=sys.stderr, flush=True)
-    res = SW.execute(tasks, a.out, workers=a.workers, resume=a.resume, progress=progress, use_ray=not a.serial)
-    rows = res["rows"]
+    if a.no_run:        # (by scenario and map seed: the rows of an earlier version's task ids too)
+        rows = [r for r in SW.read_rows(a.out) if r.get("sample") is not None and (
+            (r["family_seed"] is None and r["scenario"] in a.scenarios) or r["family_seed"] in a.families)]
+        res = {"rows": rows, "engine": "(summarised)", "workers": a.workers, "ran": 0, "skipped": len(rows)}
+    else:
+        res = SW.execute(tasks, a.out, workers=a.workers, resume=a.resume, progress=progress, use_ray=not a.serial)
+        rows = res["rows"]
     print(SW.summary_table(rows))
     SW.plot_summary(rows, a.out / "summary.png")
-    shutil.copy(a.out / "summary.png", FIG)
+    if a.figure:
+        shutil.copy(a.out / "summary.png", ROOT / "docs" / a.figure)
     doc = {"what": "closed-loop runs on drawn truths (bench/bench_closed_loop.py)", "label": a.label,
            "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"),
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
+           "scenarios": a.scenarios, "adapt_periods": a.adapt,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),
            "ran": res["ran"], "skipped": res["skipped"], **summarise(rows),
            "not_reached": [{"scenario": r["scenario"], "family_seed": r["family_seed"], "cost": r["cost"],
                             "mode": r["run_mode"], "sample": r["sample"], "end": r["end"], "can_cross": r["can_cross"],
                             "truth": r["truth"], "reason": r["reason"]} for r in rows if r["end"] != "reached"]}
-    OUT.write_text(json.dumps(doc, indent=1))
-    print(f"wrote {OUT}, {FIG}")
+    out = RESULTS / a.results
+    out.write_text(json.dumps(doc, indent=1))
+    print(f"wrote {out}" + (f", docs/{a.figure}" if a.figure else ""))
     return 0
 
 
