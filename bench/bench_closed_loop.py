@@ -72,12 +72,17 @@ def summarise(rows: list) -> dict:
                        "wall_s_max": round(max(float(r["run_wall_s"] or 0) for r in rs), 1)}
     cross = [r for r in rows if r.get("can_cross") is not False]
     own = np.array([r["cost_ratio"] for r in rows if r.get("cost_ratio") is not None], float)
+    pred = np.array([r["predicted_ratio"] for r in rows if r.get("predicted_ratio") is not None], float)
     totals = {"runs": len(rows), "ends": {e: sum(r["end"] == e for r in rows) for e in CL.ENDS},
+              "replans_median": float(np.median([int(r["replans"] or 0) for r in rows])) if rows else None,
+              "over_prediction": {"median": round(float(np.median(pred)), 4),
+                                  "p90": round(float(np.percentile(pred, 90)), 4)} if pred.size else None,
               "p_reach": round(sum(r["end"] == "reached" for r in rows) / max(len(rows), 1), 3),
               "crossable": len(cross),
               "p_reach_crossable": round(sum(r["end"] == "reached" for r in cross) / max(len(cross), 1), 3),
               "groups_meeting_p_reach_0.95": sum(1 for g in groups.values()
                                                  if (g["p_reach_crossable"] or 0) >= 0.95),
+              "groups_crossable": sum(1 for g in groups.values() if g["crossable"]),
               "groups_meeting_cost_p90_1.10": sum(1 for g in groups.values()
                                                   if g["over_own_plan"] and g["over_own_plan"]["p90"] <= 1.10),
               "groups": len(groups),

@@ -42,8 +42,9 @@ def closed_loop_table() -> str:
              f"({d['date']}; {d.get('label') or 'no label'}): {d['samples']} truths per row, vehicle "
              f"{', '.join(sorted(d['vary']))} at {100 * max(d['vary'].values()):.0f} % relative sd, map heights off by "
              f"{100 * d['faults']['map']['noise_sd_m']:.0f} cm at {d['faults']['map']['corr_m']:g} m correlation, "
-             f"{1000 * d['faults']['delay_s']:.0f} ms delay; hills_field maps: its generator at map seeds "
-             f"{', '.join(map(str, d['families']))}.*", "",
+             f"{1000 * d['faults']['delay_s']:.0f} ms delay"
+             + (f"; hills_field maps: its generator at map seeds {', '.join(map(str, d['families']))}"
+                if d["families"] else "") + ".*", "",
              "| scenario | cost | mode | runs | reached | how the others ended | p_reach (crossable) | executed / own plan, median (p90) | executed / prediction, median (p90) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for key, g in d["groups"].items():
@@ -68,9 +69,9 @@ def closed_loop_totals(name: str = "closed_loop.json") -> str:
             f"(stalls, the time or re-plan limit); tipped over {bad['tipped']}, off the map {bad['off_map']}, "
             f"timeouts {bad['timeout']}, tracebacks {bad['error']}. p_reach {t['p_reach_crossable']:.2f} over the "
             f"{t['crossable']} runs whose truth the planner finds a way for (target 0.95: met on "
-            f"{t['groups_meeting_p_reach_0.95']} of {t['groups']} rows); executed cost over the own vehicle's "
+            f"{t['groups_meeting_p_reach_0.95']} of the {t.get('groups_crossable', t['groups'])} rows with such runs); executed cost over the own vehicle's "
             f"plan median {t['over_own_plan']['median']:.2f}, p90 {t['over_own_plan']['p90']:.2f} (p90 within "
-            f"10 %: {t['groups_meeting_cost_p90_1.10']} of {t['groups']} rows).")
+            f"10 %: {t['groups_meeting_cost_p90_1.10']} of {t.get('groups_crossable', t['groups'])} rows).")
 
 
 def readme_closed_loop() -> str:
@@ -78,15 +79,36 @@ def readme_closed_loop() -> str:
     d = _load("closed_loop.json")
     t = d["totals"]
     e = t["ends"]
-    return (f"Closed loop on drawn vehicles ([details](docs/robustness.md#measured)): {t['runs']} runs of the shipped "
-            f"and unseen maps, the vehicle drawn at 10 %, the map 5 cm off, commands 50 ms late: "
+    where = "the shipped maps" + (" and unseen ones" if d["families"] else "")
+    return (f"Closed loop on drawn vehicles ([details](docs/robustness.md#measured)): {t['runs']} runs on {where}, "
+            f"the vehicle drawn at 10 %, the map 5 cm off, commands 50 ms late: "
             f"{_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn vehicle, "
             f"{e.get('tipped', 0)} tip over, {e.get('off_map', 0)} leave the map; the others stop or fail and say why "
             f"({d['date']}).")
 
 
+def closed_loop_adapt() -> str:
+    """Adaptation on and off on the same truths (closed_loop_adapt_off/on.json)."""
+    off, on = _load("closed_loop_adapt_off.json"), _load("closed_loop_adapt_on.json")
+    lines = [f"*`python bench/bench_closed_loop.py --modes whole_route --adapt N` on "
+             f"{', '.join(on['scenarios'])}, both costs, {on['samples']} truths each ({on['date']}; the same truths "
+             f"in both: the draw does not depend on the run settings).*", "",
+             "| run.adapt_periods | runs | reached (crossable) | stopped / no path / failed | re-plans, median | "
+             "executed / own plan, median (p90) | executed / prediction, median (p90) |", "|---|---|---|---|---|---|---|"]
+    for d in (off, on):
+        t = d["totals"]
+        e = t["ends"]
+        lines.append(f"| {d.get('adapt_periods', 0)} | {t['runs']} | {e.get('reached', 0)} "
+                     f"({t['p_reach_crossable']:.2f}) | {e.get('stopped', 0)} / {e.get('no_path', 0)} / "
+                     f"{e.get('failed', 0)} | {t.get('replans_median', '-')} | {_ratio(t['over_own_plan'])} | "
+                     f"{_ratio(t.get('over_prediction'))} |")
+    return "\n".join(lines)
+
+
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
+          "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
+          "closed-loop-adapt": closed_loop_adapt,
           "readme-closed-loop": readme_closed_loop}
 
 
