@@ -293,18 +293,11 @@ def test_the_polish_runs_on_the_planners_threads(monkeypatch):
         return real(*a, **k)
 
     monkeypatch.setattr(RP, "polish", spy)
-    outer = numba.get_num_threads()
-    # (from every thread numba has: a test run before this one in the same process may
-    # have left fewer; seen once in the full suite on two workers, not traced)
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     before = numba.get_num_threads()
-    try:
-        for threads in (1, 0):
-            p = PL.search_plan(_world(threads=threads), "energy")
-            assert p.found and p.polish is not None
-            assert numba.get_num_threads() == before
-    finally:
-        numba.set_num_threads(outer)
+    for threads in (1, 0):
+        p = PL.search_plan(_world(threads=threads), "energy")
+        assert p.found and p.polish is not None
+        assert numba.get_num_threads() == before
     assert seen[0] == 1 and seen[-1] == numba.config.NUMBA_NUM_THREADS
 
 
