@@ -214,11 +214,17 @@ def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, f
     if out.weaker_from is None:
         out.weaker_from = float(X[K.S_T])
     if fitted is not None:
-        base = _as_measured(world, tuple(round(fitted[k], 2) for k in FIT))
+        base = _as_measured(world, _factors(fitted))
     base = base or world
     tw = _twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
+
+
+def _factors(fitted: dict) -> tuple:
+    """A fit's factors (:data:`sbmpc.estimate.FIT`) rounded to 0.01: the key of
+    :func:`_as_measured` (re-plans share its grids and value)."""
+    return tuple(round(fitted[k], 2) for k in FIT)
 
 
 @functools.lru_cache(maxsize=16)
@@ -349,11 +355,9 @@ def _ground(truth: TT.Truth, Xt: np.ndarray) -> str:
     """What the true vehicle met where it ended: its pitch and roll on the true map, its
     drive, and what it was (where it differs from the planning vehicle)."""
     w = truth.world
-    x, y = float(Xt[K.S_X]), float(Xt[K.S_Y])
-    tilt = ""
-    if w.emap.contains(x, y):
-        pitch, roll = w.emap.pitch_roll(x, y, float(Xt[K.S_YAW]), w.half_length, w.half_width)
-        tilt = f"{math.degrees(pitch):+.1f} deg pitch, {math.degrees(roll):+.1f} deg roll on the true ground, "
+    pr = _true_tilt(truth, Xt)
+    tilt = "" if pr is None else (f"{math.degrees(pr[0]):+.1f} deg pitch, {math.degrees(pr[1]):+.1f} deg roll on "
+                                  f"the true ground, ")
     return (f"{tilt}currents {Xt[K.S_IL]:.2f}/{Xt[K.S_IR]:.2f} A of {w.vehicle.current_limit:g}; the true "
             f"vehicle: {truth.name}")
 
@@ -688,7 +692,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 planner, model, base = _weaker_model(world, cost, out, X, fitted, base)
                 as_twin = True
                 if fitted is not None:
-                    base_key = tuple(round(fitted[k], 2) for k in FIT)
+                    base_key = _factors(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
             if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1]):
                 # stalled again where it stalled before, with the plans of the vehicle as
@@ -728,7 +732,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 since_fit = 0
                 f = fit_vehicle(evidence, world, cost)
                 if f is not None and confident(f):
-                    key = tuple(round(f[k], 2) for k in FIT)
+                    key = _factors(f)
                     if max(abs(a - b) for a, b in zip(key, base_key)) > 0.03:     # another vehicle than planned for
                         base, base_key = _as_measured(world, key), key
                         planner = _twin_planner(base) if as_twin else base
