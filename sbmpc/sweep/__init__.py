@@ -34,7 +34,6 @@ id, a hash of the task's inputs).
 from __future__ import annotations
 
 import copy
-import hashlib
 import itertools
 import json
 import time
@@ -275,7 +274,7 @@ def tasks(spec: dict) -> list:
                 # a closed-loop sweep: one task per run (sample and mode)
                 for t in (CL.expand(base, spec["robustness"]) if CL.closed(spec["robustness"]) else [base]):
                     # the id hashes the scenario's resolved path: the same task however the spec was named
-                    t["task_id"] = hashlib.sha256(json.dumps(t, sort_keys=True, default=str).encode()).hexdigest()[:16]
+                    t["task_id"] = CL.digest(t)
                     t.update(scenario=str(path), label=labels[Path(path)])
                     out.append(t)
     return out

@@ -77,13 +77,18 @@ def problems(rob: dict) -> list:
     return out + TT.problems(rob.get("vary") or {}, rob.get("faults") or {}, "robustness.")
 
 
+def digest(doc: dict) -> str:
+    """16 hex digits of a task's inputs (its JSON, keys sorted): a task id, a draw key."""
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
 def expand(task: dict, rob: dict) -> list:
     """The run tasks of a task: one per sample and mode. ``draw_key`` (with the sample,
     the seed of its truth) hashes the task without what only the runs read (the modes,
     their settings, the sample count): two specs that differ only there meet the same
     truths, sample for sample."""
     drawn = dict(task, robustness={k: rob.get(k) for k in DRAWN_BY})
-    key = hashlib.sha256(json.dumps(drawn, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    key = digest(drawn)
     return [dict(task, sample=k, run_mode=m, draw_key=key)
             for k in range(int(rob["samples"])) for m in rob.get("modes", ["whole_route"])]
 
