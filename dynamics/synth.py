@@ -116,18 +116,27 @@ def synth_run(effect: str, seed: int, vehicle: Vehicle | None = None, terrain: T
     params = hidden(effect, seed) if params is None else params
     truth, ground, pitch = apply(vehicle, effect, params, terrain)
     model = Model(truth, ground, step_s)
-    dt = model.step_s
-    cl, cr = excitation(seed, duration, vehicle, dt)
-    tr = simulate(model, cl, cr, state=model.state(0.0, 0.0, pitch), pitch=pitch, record_dt=1.0 / RATE)
-    every = int(round(1.0 / RATE / dt))
-    idx = np.minimum(np.arange(len(tr.t)) * every, len(cl) - 1)
-    rng = np.random.default_rng([seed, 13])
-    cols = {"t": tr.t.copy(), "wl_cmd": cl[idx], "wr_cmd": cr[idx]}
-    for name in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw"):
-        y = tr.data[name].copy()
-        if noise:
-            y = y + rng.normal(0.0, NOISE[name], y.shape)
-        cols[name] = y
+    cl, cr = excitation(seed, duration, vehicle, model.step_s)
+    cols = measured(model, cl, cr, seed if noise else None, pitch)
     meta = {"vehicle": vehicle.name, "terrain": terrain.name, "slope_deg": "0",
             "note": f"synthetic run, seed {seed}"}
     return Run(cols, meta, f"synth:{effect}:{seed}"), params
+
+
+def measured(model: Model, cl: np.ndarray, cr: np.ndarray, seed: int | None = None, pitch: float = 0.0) -> dict:
+    """The run CSV's columns of ``model`` driven from rest by the commanded wheel speeds
+    ``cl``, ``cr`` [rad/s, one per model step]: t, the commands, wheel speeds, torques,
+    currents and pose sampled at ``RATE``, with the sensor noise ``NOISE`` drawn from
+    ``seed`` (none when None). On a plane of grade ``pitch`` [rad]."""
+    dt = model.step_s
+    tr = simulate(model, cl, cr, state=model.state(0.0, 0.0, pitch), pitch=pitch, record_dt=1.0 / RATE)
+    every = int(round(1.0 / RATE / dt))
+    idx = np.minimum(np.arange(len(tr.t)) * every, len(cl) - 1)
+    rng = np.random.default_rng([seed, 13]) if seed is not None else None
+    cols = {"t": tr.t.copy(), "wl_cmd": cl[idx], "wr_cmd": cr[idx]}
+    for name in ("wl", "wr", "tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw"):
+        y = tr.data[name].copy()
+        if rng is not None:
+            y = y + rng.normal(0.0, NOISE[name], y.shape)
+        cols[name] = y
+    return cols

@@ -62,11 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
     p.add_argument("--version", action="version", version=f"sbmpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    from . import calibrate, diagnose, importer, plan, run, schema, shadow, simulate, sweep
+    from . import calibrate, diagnose, importer, plan, protocol, run, schema, shadow, simulate, sweep
     simulate.add_parser(sub)
     plan.add_parsers(sub)
     diagnose.add_parsers(sub)
     calibrate.add_parsers(sub)
+    protocol.add_parsers(sub)
     run.add_parsers(sub)
     shadow.add_parsers(sub)
     sweep.add_parsers(sub)

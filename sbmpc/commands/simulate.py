@@ -23,12 +23,18 @@ def add_parser(sub):
     p.add_argument("--v0", type=float, help="speed entering the ramp [m/s]")
     p.add_argument("--length", type=float, help="ramp length along the slope [m]")
     p.add_argument("--lemniscate", action="store_true", help="follow the paper's lemniscate (eqs. 29, 30)")
+    p.add_argument("--commands", type=path_arg, metavar="CSV", help="drive the commanded wheel speeds of a "
+                   "commands CSV (sbmpc protocol's, or any with t, wl_cmd, wr_cmd), each held until the next")
     p.add_argument("--duration", type=float, help="simulated time [s] (default 10; ramp 20; lemniscate 18 + 3 s run-up)")
     p.add_argument("--dt", type=float, help="integration step [s] (default: the controller period, 1 ms)")
     p.add_argument("--open-loop", action="store_true",
                    help="drive the open-loop model (no PID, paper Fig. 16) with the current profile the closed loop applies")
     p.add_argument("--json", type=path_arg, help="write the trajectory JSON here")
     p.add_argument("--plot", type=path_arg, help="write a PNG of speeds, torques, power and path here")
+    p.add_argument("--run", type=path_arg, metavar="CSV", help="write the drive as a measured run CSV (100 Hz: "
+                   "commands, wheel speeds, torques, currents, pose) for sbmpc calibrate and diagnose")
+    p.add_argument("--noise", type=int, metavar="SEED", help="with --run: add sensor noise drawn from SEED (the "
+                   "levels of sbmpc synth)")
     p.set_defaults(func=run)
     return p
 
@@ -69,8 +75,11 @@ def run(args) -> int:
     from dynamics.manoeuvres import circle, lemniscate, ramp_run, straight
     from dynamics.simulate import Model, simulate
 
-    outs = Outputs([args.vehicle, args.terrain])
+    outs = Outputs([args.vehicle, args.terrain, args.commands])
     outs.file(args.json, "--json")
+    outs.file(args.run, "--run")
+    if args.noise is not None and args.run is None:
+        raise InputError(f"--noise: expected with --run (the measured run it adds noise to), found --noise {args.noise} alone")
     outs.file(args.plot, "--plot")
     fmt = plot_format(args.plot)
     if args.dt is not None and not (1e-5 <= args.dt <= 0.05):
@@ -81,8 +90,12 @@ def run(args) -> int:
         raise InputError(str(exc)) from None
     model_note()
     ramp = any(x is not None for x in (args.slope_deg, args.v0, args.length))
-    if sum([ramp, args.radius is not None, args.lemniscate]) > 1:
-        raise InputError("expected one manoeuvre (--radius, the ramp options, or --lemniscate), found several")
+    if sum([ramp, args.radius is not None, args.lemniscate, args.commands is not None]) > 1:
+        raise InputError("expected one manoeuvre (--radius, the ramp options, --lemniscate or --commands), found several")
+    if args.open_loop and args.run is not None:
+        raise InputError("--run: expected a closed-loop manoeuvre (the run logs commanded wheel speeds), found --open-loop")
+    if ramp and args.run is not None:
+        raise InputError("--run: expected a straight, circle, lemniscate or --commands manoeuvre, found a ramp")
     if args.duration is not None and not (0 < args.duration <= 3600):
         raise InputError(f"--duration: expected seconds in (0, 3600], found {args.duration}")
     steps = (args.duration or 21.0) / model.step_s
@@ -94,7 +107,19 @@ def run(args) -> int:
         raise InputError(f"--v: expected a speed of at most 20 m/s in magnitude, found {args.v}")
     info: dict = {}
     dt = model.step_s
-    if args.lemniscate:
+    if args.commands is not None:
+        from ..protocol import ProtocolError, held, read_commands
+        try:
+            t_cmd, wl_cmd, wr_cmd, cmd_meta = read_commands(args.commands)
+        except ProtocolError as exc:
+            raise InputError(str(exc)) from None
+        end = args.duration or (t_cmd[-1] + float(np.median(np.diff(t_cmd))))
+        if end / dt > MAX_STEPS:
+            raise InputError(f"--commands: expected at most {MAX_STEPS:,} steps, found {end / dt:,.0f}")
+        cl, cr = held(t_cmd, wl_cmd, dt, end), held(t_cmd, wr_cmd, dt, end)
+        manoeuvre = "commands"
+        info = {"commands": str(args.commands)}
+    elif args.lemniscate:
         dur = args.duration or 18.0
         cl, cr = lemniscate(model, duration=dur, dt=dt)
         manoeuvre = "lemniscate"
@@ -153,11 +178,26 @@ def run(args) -> int:
                "terrain": model.terrain.name, "open_loop": bool(args.open_loop), "dt_s": dt,
                "stalled": traj.stalled, **info, "summary": summary, "trajectory": traj.to_json()}
         write_json(args.json, doc)
+    if args.run:
+        _write_measured(args, model, cl, cr, manoeuvre)
     if args.plot:
         from ..figures import plot_trajectory
         with atomic(args.plot) as tmp:
             plot_trajectory(traj, tmp, f"{manoeuvre} on {model.terrain.name}", fmt)
     return 0
+
+
+def _write_measured(args, model, cl, cr, manoeuvre: str) -> None:
+    """--run: the manoeuvre as a measured run CSV (dynamics.synth.measured: 100 Hz, noise from --noise)."""
+    from dynamics.runs import Run, write_run
+    from dynamics.synth import measured
+    cols = measured(model, cl, cr, args.noise)
+    note = f"sbmpc simulate {manoeuvre}" + (f" {args.commands.name}" if args.commands is not None else "")
+    meta = {"vehicle": model.vehicle.name, "terrain": model.terrain.name, "slope_deg": "0",
+            "note": note + (f", sensor noise seed {args.noise}" if args.noise is not None else ", no noise")}
+    with atomic(args.run) as tmp:
+        write_run(tmp, Run(cols, meta, str(args.run)))
+    print(f"wrote {args.run} ({len(cols['t'])} rows at 100 Hz)")
 
 
 def _short_of_command(traj, cmd_l: float, cmd_r: float, settle_s: float = 1.0) -> str:
