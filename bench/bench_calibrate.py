@@ -36,6 +36,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from stamp import commit  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "calibration.json"
 REAL = ROOT.parent / "shared" / "data" / "real"
 EFFECTS = ("none", "viscous_friction", "wheel_radius", "command_delay")
@@ -114,7 +115,7 @@ def main() -> int:
     args = ap.parse_args()
     if args.closed_loop:
         doc = {"what": "closed-loop runs planned with the shipped and the calibrated model (bench_calibrate.py "
-                       "--closed-loop)", "date": time.strftime("%Y-%m-%d"), **closed_loop()}
+                       "--closed-loop)", "date": time.strftime("%Y-%m-%d"), "commit": commit(), **closed_loop()}
         path = OUT.with_name("calibration_closed_loop.json")
         path.write_text(json.dumps(doc, indent=1, default=float))
         print(f"wrote {path}")
@@ -145,7 +146,7 @@ def main() -> int:
             real.append(r)
             print(f"warthog {terr}: {r['cause']} held out {r['heldout']['nominal']:.2f} -> "
                   f"{r['heldout']['calibrated']:.2f} -> {r['heldout']['with_effect']:.2f} ({r['seconds']} s)", flush=True)
-    doc = {"what": __doc__.split("\n\n")[0], "date": time.strftime("%Y-%m-%d"), "generated": rows, "real": real}
+    doc = {"what": __doc__.split("\n\n")[0], "date": time.strftime("%Y-%m-%d"), "commit": commit(), "generated": rows, "real": real}
     OUT.write_text(json.dumps(doc, indent=1, default=float))
     print(f"wrote {OUT}")
     return 0

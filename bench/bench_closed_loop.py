@@ -34,6 +34,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from stamp import commit  # noqa: E402  (bench/, beside this script)
 RESULTS = ROOT / "bench" / "results"
 VARY = {"mass": 0.1, "inertia": 0.1, "mu_sa": 0.1, "mu_op": 0.1, "mu_roll": 0.1, "v_max": 0.1}
 FAULTS = {"delay_s": 0.05, "map": {"noise_sd_m": 0.05, "corr_m": 2.0}}
@@ -130,7 +131,7 @@ def main() -> int:
     if a.figure:
         shutil.copy(a.out / "summary.png", ROOT / "docs" / a.figure)
     doc = {"what": "closed-loop runs on drawn truths (bench/bench_closed_loop.py)", "label": a.label,
-           "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"),
+           "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"), "commit": commit(),
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
            "scenarios": a.scenarios, "adapt_periods": a.adapt,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),

@@ -19,7 +19,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 PAGES = [ROOT / "README.md", ROOT / "docs" / "status.md", ROOT / "docs" / "validation.md",
-         ROOT / "docs" / "robustness.md"]
+         ROOT / "docs" / "robustness.md", ROOT / "scenarios" / "README.md"]
 MARK = re.compile(r"(<!-- report:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /report:(?P=name) -->)", re.S)
 
 
@@ -74,19 +74,6 @@ def closed_loop_totals(name: str = "closed_loop.json") -> str:
             f"10 %: {t['groups_meeting_cost_p90_1.10']} of {t.get('groups_crossable', t['groups'])} rows).")
 
 
-def readme_closed_loop() -> str:
-    """The README's line under its table (closed_loop.json)."""
-    d = _load("closed_loop.json")
-    t = d["totals"]
-    e = t["ends"]
-    where = "the shipped maps" + (" and unseen ones" if d["families"] else "")
-    return (f"Closed loop on drawn vehicles ([details](docs/robustness.md#measured)): {t['runs']} runs on {where}, "
-            f"the vehicle drawn at 10 %, the map 5 cm off, commands 50 ms late: "
-            f"{_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn vehicle, "
-            f"{e.get('tipped', 0)} tip over, {e.get('off_map', 0)} leave the map; the others stop or fail and say why "
-            f"({d['date']}).")
-
-
 def closed_loop_adapt() -> str:
     """Adaptation on and off on the same truths (closed_loop_adapt_off/on.json)."""
     off, on = _load("closed_loop_adapt_off.json"), _load("closed_loop_adapt_on.json")
@@ -105,11 +92,137 @@ def closed_loop_adapt() -> str:
     return "\n".join(lines)
 
 
+def _when(*docs: dict) -> str:
+    """Results files' dates and commits (the measured code's, or the commit that stored
+    the file): '2026-12-06, f20e6bc, 9e03f87'."""
+    dates = sorted({d.get("date", "undated") for d in docs})
+    commits = [c for c in (d.get("commit") or d.get("stored_in") for d in docs) if c]
+    return ", ".join(dates + commits)
+
+
+def _range(xs, fmt: str = ".2f") -> str:
+    lo, hi = min(xs), max(xs)
+    return f"{lo:{fmt}}" if f"{lo:{fmt}}" == f"{hi:{fmt}}" else f"{lo:{fmt}}-{hi:{fmt}}"
+
+
+def readme_caption() -> str:
+    """The README figure's caption: hill_tradeoff's two plans (energy_plans.json)."""
+    d = _load("energy_plans.json")
+    t, e = (d["scenarios"]["hill_tradeoff"]["reported"][c] for c in ("time", "energy"))
+    return (f"*`sbmpc compare scenarios/hill_tradeoff.yaml --out out` ({_when(d)}; one core):*\n"
+            f"- *The time-optimal plan (orange) drives straight over the 1.6 m hill in {t['travel_time_s']:.1f} s.*\n"
+            f"- *The energy-optimal plan (violet) skirts the hill's flank: {e['travel_time_s']:.1f} s, but "
+            f"{e['energy_J']:.0f} J instead of\n  {t['energy_J']:.0f} J (planned in {e['planning_time_s']:.1f} s, the "
+            f"time plan in {t['planning_time_s']:.2f} s).*\n"
+            "- *Both are driven at the vehicle's 1 kHz controller rate, as every plan is before it is\n  reported.*\n"
+            "- *Seed 0 is shown. The spread over seeds is in [docs/status.md](docs/status.md).*")
+
+
+def readme_table() -> str:
+    """The README's table of what a user gets, every row from its results file."""
+    rows = []
+    u, ep = _load("unseen_value.json"), _load("energy_plans.json")
+    s = u["summary"]
+    sp = s["energy_plan_saved_pct"]
+    ht = ep["scenarios"]["hill_tradeoff"]["reported"]
+    cheaper = ("always costs less than" if s["energy_plan_no_dearer"] == s["both_found"] else
+               f"costs no more than on {s['energy_plan_no_dearer']} of them")
+    rows.append(("[energy saved against time added](docs/status.md#shipped-scenarios)",
+                 f"on {s['both_found']} unseen hilly maps the energy plan {cheaper} the time plan: median "
+                 f"{sp['median']:.1f} % less energy for {s['time_cost_pct_median']:.1f} % more time "
+                 f"({sp['min']:.1f}-{sp['max']:.0f} %); on `hill_tradeoff` "
+                 f"{100 * (1 - ht['energy']['energy_J'] / ht['time']['energy_J']):.0f} % less for "
+                 f"{100 * (ht['energy']['travel_time_s'] / ht['time']['travel_time_s'] - 1):.0f} % more",
+                 _when(u, ep)))
+    v = _load("value.json")
+    plans = [p for p in v["plans"] if p["value"]]
+    tp = {p["scenario"]: p["planning_s"] for p in plans if p["cost"] == "time"}
+    en = [p["planning_s"] for p in plans if p["cost"] == "energy"]
+    slow = max(tp, key=tp.get)
+    rows.append(("[planning time, one core](docs/status.md)",
+                 f"time plans {_range([x for k, x in tp.items() if k != slow])} s (`{slow}` {tp[slow]:.1f} s); "
+                 f"energy plans {min(en):.2f}-{max(en):.1f} s on the {len(en)} shipped maps, median "
+                 f"{s['planning_time_s_median']['energy_reported']:.1f} s on unseen ones", _when(v, u)))
+    rows.append(("[plans that hold](docs/planner.md)",
+                 "every reported plan is its drive at the vehicle's 1 kHz controller rate", "always"))
+    c = _load("closed_loop.json")
+    t = c["totals"]
+    rows.append(("[a drawn vehicle, closed loop](docs/robustness.md#measured)",
+                 f"{t['runs']} runs on the shipped maps, the vehicle drawn at 10 %, the map 5 cm off, commands "
+                 f"50 ms late: {_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn "
+                 f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} leave the map; "
+                 "the others stop or fail and say why", _when(c)))
+    k = _load("controller.json")
+    runs = k["runs"].values()
+    rows.append(("[on a robot](docs/performance.md#the-controllers-step)",
+                 f"`Controller.step` at {k['period_s']:g} s on one core: p95 at most "
+                 f"{max(r['p95_ms'] for r in runs):.1f} ms, "
+                 + ("never past the period" if sum(r["over_period"] for r in runs) == 0 else
+                    f"{sum(r['over_period'] for r in runs)} steps past the period"), _when(k)))
+    cal = _load("calibration.json")
+    real = [r for r in cal["real"] if r["robot"] == "warthog"]
+    h = lambda key: _range([r["heldout"][key] for r in real], ".0f")
+    rows.append(("[model error, real Warthog runs](docs/validation.md#calibration)",
+                 f"held-out wheel-speed error {h('nominal')} noise units as shipped, {h('calibrated')} calibrated "
+                 f"(`sbmpc calibrate`), {h('with_effect')} with the effect `diagnose` names "
+                 f"({', '.join(r['terrain'] for r in real)})", _when(cal)))
+    cl = _load("calibration_closed_loop.json")
+    shipped = [x for key, x in cl["runs"].items() if key.endswith("/shipped")]
+    calib = [x for key, x in cl["runs"].items() if key.endswith("/calibrated")]
+    prior = cl["calibrated"]
+    fails = sum(x["status"] != "reached" for x in shipped)
+    fails_c = sum(x["status"] != "reached" for x in calib)
+    rows.append(("[calibrate your robot](docs/validation.md#calibration)",
+                 f"a P3-AT {100 * (cl['truth']['mass'] / prior['mass']['prior'] - 1):.0f} % heavier with its torque "
+                 f"constant {100 * (1 - cl['truth']['torque_constant'] / prior['torque_constant']['prior']):.0f} % "
+                 f"low: planned with the shipped model it uses "
+                 f"{_range([100 * x['energy_error'] for x in shipped if x['status'] == 'reached'], '.0f')} % more "
+                 f"energy than predicted" + (f" ({fails} of {len(shipped)} runs {'fails' if fails == 1 else 'fail'})" if fails else "")
+                 + "; calibrated on a 90 s drive, within "
+                 f"{max(100 * abs(x['energy_error']) for x in calib if x['status'] == 'reached'):.2f} %"
+                 + (f" ({fails_c} fail)" if fails_c else ""), _when(cl)))
+    lines = ["| | measured at the defaults | when, commit |", "|---|---|---|"]
+    lines += [f"| {a} | {b} | {w} |" for a, b, w in rows]
+    return "\n".join(lines)
+
+
+SHOWS = {
+    "flat": "sanity: level vinyl, 15 m",
+    "hill_tradeoff": "crosses the hill (time) vs skirts it on its lower flank (energy)",
+    "hills_field": "60 m x 60 m of hills, ridge and valley",
+    "mixed_terrain": "a road around, a rough field across",
+    "narrow_pass": "a ridge too steep to cross with one pass 1.5 m wide: both plans take the pass",
+    "runup_ramp": "a 20.6° ramp crossed only with momentum (0.7 m/s stalls)",
+    "steep_hill": "a 26° hill (13.9° is the limit): every plan goes around",
+}
+
+
+def shipped_scenarios() -> str:
+    """status.md's table of the shipped scenarios' plans at the defaults (energy_plans.json)."""
+    d = _load("energy_plans.json")
+    lines = [f"*`taskset -c 0 python bench/bench_energy_plans.py` ({_when(d)}): the defaults (margin 0.1, guided "
+             "by the value), seed 0, one core; every number is the plan driven at the 1 kHz controller rate; the "
+             "energy plan's planning time includes the time search it is checked against.*", "",
+             "| scenario | shows | time-optimal | energy-optimal |", "|---|---|---|---|"]
+    for name, sc in d["scenarios"].items():
+        cells = []
+        for cost in ("time", "energy"):
+            r = sc["reported"][cost]
+            kept = " (the time plan: it uses less energy than the energy search's)" if (
+                cost == "energy" and (r.get("found_by") or "").startswith("time search")) else ""
+            cells.append(f"{r['travel_time_s']:.1f} s, {r['energy_J']:.0f} J ({r['planning_time_s']:.2f} s to plan){kept}"
+                         if r["status"] == "found" else f"{r['status']}: {r.get('reason') or ''}")
+        lines.append(f"| `{name}` | {SHOWS.get(name, '')} | {cells[0]} | {cells[1]} |")
+    lines.append("| `unreachable` | goal on a mesa with 72° cliffs | exit 1 with the reason |  |")
+    return "\n".join(lines)
+
+
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
-          "readme-closed-loop": readme_closed_loop}
+          "readme-caption": readme_caption, "readme-table": readme_table,
+          "shipped-scenarios": shipped_scenarios}
 
 
 def updated(text: str) -> str:
