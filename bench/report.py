@@ -217,12 +217,87 @@ def shipped_scenarios() -> str:
     return "\n".join(lines)
 
 
+def _params(d: dict, digits: int = 3) -> str:
+    return ", ".join(f"{k} {v:.{digits}g}" for k, v in d.items())
+
+
+def calibration_generated() -> str:
+    """validation.md: calibrate, then diagnose, on generated runs (calibration.json)."""
+    d = _load("calibration.json")
+    rows = d["generated"]
+    lines = [f"*`taskset -c 0 python bench/bench_calibrate.py --seeds {len(rows)} --real` ({_when(d)}): a P3-AT "
+             "5-15 % off in mass, torque constant, mu_roll, mu_sa and mu_op per seed, 90 s of the synthetic "
+             "excitation; held-out error in noise units (1 is the noise); the base error is the joint fit's "
+             "against the generating vehicle.*", "",
+             "| seed | hidden | named | held out: shipped → calibrated → with the effect | largest base error (joint fit) |",
+             "|---|---|---|---|---|"]
+    right = 0
+    for r in rows:
+        h = r["heldout"]
+        worst = max(r["relative_error"].items(), key=lambda kv: abs(kv[1]))
+        hid = r["hidden"] + (f" ({_params(r['hidden_params'])})" if r["hidden_params"] else "")
+        named = r["cause"] + (f" ({_params(r['best']['params'])})" if r["best"] and r["cause"] == r["best"]["effect"]
+                              else "")
+        right += r["cause"] == r["hidden"]
+        lines.append(f"| {r['seed']} | {hid} | {named} | {h['nominal']:.2f} → {h['calibrated']:.2f} → "
+                     f"{h['with_effect']:.2f} | {worst[0]} {100 * worst[1]:+.1f} % |")
+    clean = [r for r in rows if r["hidden"] == "none"]
+    clean_err = max((abs(x) for r in clean for x in r["relative_error"].values()), default=0.0)
+    within = sum(all(abs(z) <= 2.0 for z in r["z"].values()) for r in rows)
+    floor = sum(r["heldout"]["with_effect"] <= 1.2 for r in rows)
+    lines += ["", f"Causes named right: {right} of {len(rows)} (the clean runs `none`: "
+              f"{sum(r['cause'] == 'none' for r in clean)} of {len(clean)}). Held-out error at the noise (1.2 or "
+              f"less) with the named effect: {floor} of {len(rows)}. Base parameters of the clean runs within "
+              f"{100 * clean_err:.1f} % of the truth; every fitted parameter within two standard errors on "
+              f"{within} of {len(rows)} runs."]
+    return "\n".join(lines)
+
+
+def calibration_real() -> str:
+    """validation.md: calibrate on the real Warthog runs (calibration.json)."""
+    d = _load("calibration.json")
+    lines = ["| terrain | held out | fitted | named (joint) |", "|---|---|---|---|"]
+    for r in d["real"]:
+        h = r["heldout"]
+        fitted = ", ".join(f"{n} {p['prior']:.3g} → {p['value']:.3g}" for n, p in r["params"].items() if p["fitted"])
+        named = r["cause"] + (f" ({_params(r['best']['params'])})" if r["best"] and r["cause"] == r["best"]["effect"]
+                              else "")
+        lines.append(f"| {r['terrain']} | {h['nominal']:.1f} → {h['calibrated']:.1f} → {h['with_effect']:.1f} | "
+                     f"{fitted} | {named} |")
+    secs = ", ".join(f"{r['seconds']:.0f}" for r in d["real"])
+    lines += ["", f"*({_when(d)}; {secs} s a run on one core.)*"]
+    return "\n".join(lines)
+
+
+def calibration_closed_loop() -> str:
+    """validation.md: what calibration buys in planning (calibration_closed_loop.json)."""
+    d = _load("calibration_closed_loop.json")
+    cal, truth = d["calibrated"], d["truth"]
+    kept = [f"{n} kept ({p['kept']})" for n, p in cal.items() if not p["fitted"] and n in ("current_limit",)]
+    lines = [f"*`taskset -c 0 python bench/bench_calibrate.py --closed-loop` ({_when(d)}): calibrated mass "
+             f"{cal['mass']['value']:.2f} ± {cal['mass']['se']:.2f} kg for {truth['mass']:.2f}, k "
+             f"{cal['torque_constant']['value']:.4f} for {truth['torque_constant']:.4f}"
+             + (f"; {'; '.join(kept)}" if kept else "") + ".*", "",
+             "| scenario | shipped model: status, stalls, re-plans, executed against predicted energy | calibrated: the same |",
+             "|---|---|---|"]
+    scen = list(dict.fromkeys(k.split("/")[0] for k in d["runs"]))
+    for s_ in scen:
+        cells = []
+        for m in ("shipped", "calibrated"):
+            r = d["runs"][f"{s_}/{m}"]
+            cells.append(f"{r['status']}, {r['stalls']} stall{'s' if r['stalls'] != 1 else ''}, {r['replans']} "
+                         f"re-plans, {100 * r['energy_error']:+.2f} %")
+        lines.append(f"| `{s_}` | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines)
+
+
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "readme-caption": readme_caption, "readme-table": readme_table,
-          "shipped-scenarios": shipped_scenarios}
+          "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
+          "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop}
 
 
 def updated(text: str) -> str:
