@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -291,13 +292,32 @@ def calibration_closed_loop() -> str:
     return "\n".join(lines)
 
 
+def husky() -> str:
+    """validation.md: eq. 28 on the Husky's BorealTC runs (husky.json)."""
+    d = _load("husky.json")
+    lines = ["| terrain | steady stretches (fit / held-out) | fitted μ_roll, μ_sa, μ_op | held-out torque RMSE [N m]: "
+             "nearest shipped → fitted |", "|---|---|---|---|"]
+    for name, r in d.items():
+        if not isinstance(r, dict) or "fitted" not in r:
+            continue
+        f = r["fitted"]
+        se = r["fitted"].get("stderr") or []
+        bad = " (standard errors unbounded)" if any(x is None or not math.isfinite(x) for x in se) else ""
+        h = r["heldout_rmse_Nm"]
+        lines.append(f"| {name.lower().replace('_', ' ')} | {r['steady_train']} / {r['steady_heldout']} | "
+                     f"{f['mu_roll']:.2g}, {f['mu_sa']:.2g}, {f['mu_op']:.2g}{bad} | {h['nominal']:.1f} "
+                     f"({r['nominal'].replace('_', ' ')}) → {h['fitted']:.1f} |")
+    return "\n".join(lines + ["", f"*`python bench/real_husky.py` ({_when(d)}).*"])
+
+
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
-          "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop}
+          "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop,
+          "husky": husky}
 
 
 def updated(text: str) -> str:
