@@ -310,6 +310,80 @@ def husky() -> str:
     return "\n".join(lines + ["", f"*`python bench/real_husky.py` ({_when(d)}).*"])
 
 
+def status_defaults() -> str:
+    """status.md: the rows measured at today's defaults, each from its results file."""
+    rows = []
+    v = _load("value.json")
+    plans = [p for p in v["plans"] if p["value"]]
+    en = sorted(((p["planning_s"], p["scenario"]) for p in plans if p["cost"] == "energy"))
+    tp = {p["scenario"]: p["planning_s"] for p in plans if p["cost"] == "time"}
+    slow = max(tp, key=tp.get)
+    met_e = sum(x <= 2.0 for x, _ in en)
+    met_t = sum(x <= 0.5 for x in tp.values())
+    rows.append(("planning time on one core at the defaults (margin 0.1, the value; the polish, the time plan an "
+                 "energy plan is checked against and the 1 kHz check included)",
+                 "energy plans " + ", ".join(f"{x:.2f} (`{n}`)" for x, n in en) + f" s; time plans "
+                 f"{_range([x for k, x in tp.items() if k != slow])} s, `{slow}` {tp[slow]:.1f} s ({_when(v)})",
+                 f"issue 59: energy 2 s met on {met_e} of {len(en)}, time 0.5 s on {met_t} of {len(tp)}",
+                 "`taskset -c 0 python bench/bench_value.py`"))
+    e = _load("energy_plans.json")
+    spread = sorted((sc["seed_spread_pct"], n) for n, sc in e["scenarios"].items())
+    secs = [x for sc in e["scenarios"].values() for _, x in sc["planning_s_by_seed"]]
+    rows.append(("energy plans over Halton seeds 0-7 (the defaults)",
+                 "spread " + ", ".join(f"{x:.1f} % (`{n}`)" for x, n in spread)
+                 + f"; energy plans {min(secs):.2f}-{max(secs):.0f} s a seed ({_when(e)}, one core)",
+                 f"issue 59, 5 % on every scenario: met on {sum(x <= 5.0 for x, _ in spread)} of {len(spread)}",
+                 "`taskset -c 0 python bench/bench_energy_plans.py --keep-reference`"))
+    u = _load("unseen_value.json")
+    s = u["summary"]
+    sp = s["energy_plan_saved_pct"]
+    pt = s["planning_time_s_median"]
+    rows.append((f"energy plan against time plan, {s['maps']} random hilly maps no setting was tuned for (the "
+                 "defaults, one core)",
+                 f"both found on {s['both_found']} ({s['neither_found']} with no way, {s['one_found']} with one plan "
+                 f"only); the energy plan no dearer on {s['energy_plan_no_dearer']} of {s['both_found']} (median "
+                 f"saving {sp['median']:.1f} %, {sp['min']:.1f}-{sp['max']:.0f} %; time +{s['time_cost_pct_median']:.1f} "
+                 f"% median); planning time median {pt['time']:.2f} s (time), {pt['energy_reported']:.1f} s (the energy "
+                 f"plan, its time plan included) ({_when(u)})",
+                 "issue 59: found and cheaper on every map both exist: "
+                 + ("met" if s["energy_plan_no_dearer"] == s["both_found"] else "not met"),
+                 "`taskset -c 0 python bench/bench_unseen.py --first 100 --maps 20 --threads 1 --out "
+                 "bench/results/unseen_value.json`"))
+    h = _load("horizon.json")
+    hs = h["summary"]
+    rng = hs["cost_ratio_range"]
+    rows.append(("receding-horizon runs (`sbmpc run --horizon 10`: the controller against the simulated truth; "
+                 "one core, 7 scenarios and 70/170 m fields, both costs)",
+                 f"{hs['horizon_reached']} of {hs['cases']} reach the goal; horizon plans within 0.1 s: "
+                 f"{100 * hs['replan_within_0.1s']:.0f} % of {hs['horizon_plans']} (p95 "
+                 f"{1000 * hs['replan_p95_s']:.0f} ms), first plans at most {1000 * hs['first_max_s']:.0f} ms; executed "
+                 f"cost median {hs['cost_ratio_median']:.2f}x the whole-route run's ({rng[0]:.2f}-{rng[1]:.2f}), within "
+                 f"5 % on {hs['within_5pct']}; {hs['cases_with_fallback']} needed a whole-route fallback "
+                 f"({_when(h)})",
+                 f"issue 59: {hs['horizon_reached']} of {hs['cases']} reach; within 5 % on 16: "
+                 + ("met" if hs["within_5pct"] >= 16 else "not met"),
+                 "`taskset -c 0 python bench/bench_horizon.py --threads 1`"))
+    k = _load("controller.json")
+    runs = k["runs"]
+    rows.append((f"the controller a robot calls (`sbmpc.Controller.step` at {k['period_s']:g} s, one core, the "
+                 "simulated truth driven in real time, planning in worker threads; 7 scenarios and the 340 m field, "
+                 f"{k['cap_s']:.0f} s each at most)",
+                 f"`step` median {_range([r['median_ms'] for r in runs.values()])} ms, p95 "
+                 f"{_range([r['p95_ms'] for r in runs.values()], '.1f')} ms, max "
+                 f"{max(r['max_ms'] for r in runs.values()):.1f} ms; {sum(r['over_period'] for r in runs.values())} of "
+                 f"{sum(r['steps'] for r in runs.values())} steps over the period; "
+                 f"{sum(r['fallbacks'] for r in runs.values())} whole-route hand-overs, the wheels held at rest while "
+                 f"each is made ({_when(k)})",
+                 "issue 60: p95 ≤ 50 ms, never past the period: "
+                 + ("met" if all(r["p95_ms"] <= 50 and r["over_period"] == 0 for r in runs.values()) else "not met")
+                 + "; never waiting on a whole-route plan: "
+                 + ("met" if sum(r["fallbacks"] for r in runs.values()) == 0 else "not met"),
+                 "`taskset -c 0 python bench/bench_controller.py`"))
+    lines = ["| what | measured | goal | command |", "|---|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    return "\n".join(lines)
+
+
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
@@ -317,7 +391,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
           "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop,
-          "husky": husky}
+          "husky": husky, "status-defaults": status_defaults}
 
 
 def updated(text: str) -> str:
