@@ -11,6 +11,7 @@ whole-route loop in :mod:`sbmpc.receding`, the robot's controller in :mod:`sbmpc
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -277,3 +278,68 @@ def protected(X: np.ndarray, real: "Executor") -> None:
 
 __all__ = ["Executor", "HELD", "holder", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker"]
+
+
+# ---- planning as a weaker vehicle after a stall (whole-route runs and the controller) ----
+MARK_NEAR = 1.5      # m: a stall this close to an earlier one marks the slope ahead impassable
+MARK_RADIUS = 0.6    # m: the radius of such a mark
+
+
+def ahead(world: WO.World, X: np.ndarray, control: tuple) -> tuple:
+    """(x, y, radius) [m] of the slope a stalled vehicle at X was climbing: a disc of
+    MARK_RADIUS ahead in the direction it was commanded (``control``), two map cells clear of its
+    footprint at any heading (the vehicle turns where it stands)."""
+    d = world.margin + 2.0 * world.emap.resolution + MARK_RADIUS
+    sign = -1.0 if control[0] + control[1] < 0.0 else 1.0      # (the wheels may roll back at the stall)
+    yaw = float(X[K.S_YAW])
+    return (round(float(X[K.S_X]) + sign * d * math.cos(yaw), 3), round(float(X[K.S_Y]) + sign * d * math.sin(yaw), 3),
+            MARK_RADIUS)
+
+
+@functools.lru_cache(maxsize=16)
+def marked(world: WO.World, marks: tuple) -> WO.World:
+    """``world`` with each mark (x, y, radius) a wall (100 m above the highest cell, as a
+    map's ``nodata: wall``): no plan crosses it. Cached per world and marks."""
+    e = world.emap
+    H = e.heights.copy()
+    Xg, Yg = WO.centres(e)
+    top = float(H.max()) + 100.0
+    for x, y, r in marks:
+        H[(Xg - x) ** 2 + (Yg - y) ** 2 <= r * r] = top
+    return replace(world, emap=replace(e, heights=H))
+
+
+
+@functools.lru_cache(maxsize=16)
+def twin_planner(world: WO.World, tip: bool = False) -> WO.World:
+    """The margin's pessimistic twin as a run's planning model. It is the margin, so it
+    plans with no twin or turn reserve of its own, and, unless ``tip``, without the
+    tip-over margin, which the run's guard keeps at 1 kHz: with it, hills_field's energy
+    search took 174 000 expansions (98 s) for the plan the search without it finds in
+    24 000 (10 s). A re-plan after the guard held a period back plans with it (``tip``).
+    Cached per world, so that the re-plans share its cost-to-go grids."""
+    tw = WO.pessimistic(world)
+    ps = replace(tw.scenario.planner, margin=0.0, margin_turn=0.0,
+                 margin_tip_deg=world.scenario.planner.margin_tip_deg if tip else 0.0)
+    return replace(tw, scenario=replace(tw.scenario, planner=ps))
+
+
+RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (retrace)
+
+
+def retrace(guards: list, X: np.ndarray, driven: list, n: int, tilt: float = 0.0) -> list | None:
+    """A stop (wheel speeds 0 for the last period's length), then the last ``n`` driven
+    periods ``driven`` [(wl, wr, duration_s)] backwards: each period's wheel speeds
+    negated, the latest first (from rest a skid-steered vehicle backs along the way it
+    came, up to its slip); where every one of them, predicted from the measured state X
+    by the guards, stays out of half the tip-over margin; else None (too few periods
+    driven, or one held back)."""
+    if len(driven) < n:
+        return None
+    back = [(0.0, 0.0, driven[-1][2])] + [(-wl, -wr, d) for wl, wr, d in reversed(driven[-n:])]
+    S = X
+    for c in back if guards else ():     # (a run without a tip-over margin has no guard)
+        if held(guards, S, c, True, tilt):
+            return None
+        _, _, S = guards[0].step(S, c, record=False)
+    return back

@@ -180,33 +180,12 @@ def _aim(world: WO.World) -> WO.World:
     return replace(world, scenario=replace(world.scenario, goal=dict(g, radius=g["radius"] - m), planner=ps))
 
 
-RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (_retrace)
-
-
-def _retrace(guards: list, X: np.ndarray, driven: list, n: int, tilt: float = 0.0) -> list | None:
-    """A stop (wheel speeds 0 for the last period's length), then the last ``n`` driven
-    periods ``driven`` [(wl, wr, duration_s)] backwards: each period's wheel speeds
-    negated, the latest first (from rest a skid-steered vehicle backs along the way it
-    came, up to its slip); where every one of them, predicted from the measured state X
-    by the guards, stays out of half the tip-over margin; else None (too few periods
-    driven, or one held back)."""
-    if len(driven) < n:
-        return None
-    back = [(0.0, 0.0, driven[-1][2])] + [(-wl, -wr, d) for wl, wr, d in reversed(driven[-n:])]
-    S = X
-    for c in back if guards else ():     # (a run without a tip-over margin has no guard)
-        if _held(guards, S, c, True, tilt):
-            return None
-        _, _, S = guards[0].step(S, c, record=False)
-    return back
-
-
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None,
                   base: WO.World | None = None) -> tuple:
     """(planning world, its executor, the world it is the twin of) once the run has seen
     the vehicle weaker than the planning one (a stall where its plans drove it, or a
     fresh plan whose first period the twin's guard holds back): the margin's pessimistic
-    twin (:func:`sbmpc.planning.world.pessimistic`, :func:`_twin_planner`) of the vehicle
+    twin (:func:`sbmpc.planning.world.pessimistic`, :func:`sbmpc.execution.twin_planner`) of the vehicle
     as the periods before a stall measured it (``fitted``: :func:`sbmpc.estimate.fit`;
     without, ``base``: the vehicle as last measured, or the planning vehicle) plans from
     the measured state X on, and the run records when (``RunResult.weaker_from``) and as
@@ -216,7 +195,7 @@ def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, f
     if fitted is not None:
         base = _as_measured(world, _factors(fitted))
     base = base or world
-    tw = _twin_planner(base)
+    tw = EX.twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
 
@@ -236,20 +215,6 @@ def _as_measured(world: WO.World, factors: tuple) -> WO.World:
     w = scaled(world, f)
     said = ", ".join(f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02)
     return replace(w, vehicle=w.vehicle.replace(name=f"{world.vehicle.name} as measured" + (f" ({said})" if said else "")))
-
-
-@functools.lru_cache(maxsize=16)
-def _twin_planner(world: WO.World, tip: bool = False) -> WO.World:
-    """The margin's pessimistic twin as a run's planning model. It is the margin, so it
-    plans with no twin or turn reserve of its own, and, unless ``tip``, without the
-    tip-over margin, which the run's guard keeps at 1 kHz: with it, hills_field's energy
-    search took 174 000 expansions (98 s) for the plan the search without it finds in
-    24 000 (10 s). A re-plan after the guard held a period back plans with it (``tip``).
-    Cached per world, so that the re-plans share its cost-to-go grids."""
-    tw = WO.pessimistic(world)
-    ps = replace(tw.scenario.planner, margin=0.0, margin_turn=0.0,
-                 margin_tip_deg=world.scenario.planner.margin_tip_deg if tip else 0.0)
-    return replace(tw, scenario=replace(tw.scenario, planner=ps))
 
 
 def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World | None = None) -> str:
@@ -298,34 +263,6 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, Xt: np.ndarray, real: 
         return _stall_failure(stalls, name, inferred)
     _protected(Xt, real)
     return None
-
-
-MARK_NEAR = 1.5      # m: a stall this close to an earlier one marks the slope ahead impassable
-MARK_RADIUS = 0.6    # m: the radius of such a mark
-
-
-def _ahead(world: WO.World, X: np.ndarray, control: tuple) -> tuple:
-    """(x, y, radius) [m] of the slope a stalled vehicle at X was climbing: a disc of
-    MARK_RADIUS ahead in the direction it was commanded (``control``), two map cells clear of its
-    footprint at any heading (the vehicle turns where it stands)."""
-    d = world.margin + 2.0 * world.emap.resolution + MARK_RADIUS
-    sign = -1.0 if control[0] + control[1] < 0.0 else 1.0      # (the wheels may roll back at the stall)
-    yaw = float(X[K.S_YAW])
-    return (round(float(X[K.S_X]) + sign * d * math.cos(yaw), 3), round(float(X[K.S_Y]) + sign * d * math.sin(yaw), 3),
-            MARK_RADIUS)
-
-
-@functools.lru_cache(maxsize=16)
-def _marked(world: WO.World, marks: tuple) -> WO.World:
-    """``world`` with each mark (x, y, radius) a wall (100 m above the highest cell, as a
-    map's ``nodata: wall``): no plan crosses it. Cached per world and marks."""
-    e = world.emap
-    H = e.heights.copy()
-    Xg, Yg = TT.centres(e)
-    top = float(H.max()) + 100.0
-    for x, y, r in marks:
-        H[(Xg - x) ** 2 + (Yg - y) ** 2 <= r * r] = top
-    return replace(world, emap=replace(e, heights=H))
 
 
 def _true_tilt(truth: TT.Truth, Xt: np.ndarray) -> tuple | None:
@@ -477,9 +414,9 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     t_limit = math.inf
     limit_for = (world, False)         # the planning model (base, as_twin) the time limit was set for
     stalls = []
-    marks: list = []                   # slopes a second stall marked impassable for the re-plans (_marked)
+    marks: list = []                   # slopes a second stall marked impassable for the re-plans (execution.marked)
     driven: list = []                  # the periods driven, in order
-    retraced = 0                       # retraces made (RETRACE_PERIODS)
+    retraced = 0                       # retraces made (EX.RETRACE_PERIODS)
     backing: list = []                 # periods of a retrace still to drive
 
     def finish(status, reason, end=None):
@@ -528,10 +465,10 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         nonlocal retraced, backing, why, guarded
         if len(out.plans) > rs.max_replans:
             return False
-        while retraced < len(RETRACE_PERIODS):
-            n = RETRACE_PERIODS[retraced]
+        while retraced < len(EX.RETRACE_PERIODS):
+            n = EX.RETRACE_PERIODS[retraced]
             retraced += 1
-            back = _retrace(guards, X, driven, n, tilt)
+            back = EX.retrace(guards, X, driven, n, tilt)
             if back is not None:
                 backing = back
                 guarded = False                # a fresh place: its first hold gets a re-plan
@@ -571,11 +508,11 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
             budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
                       else rs.replan_time_budget_s)
-            model_world = _twin_planner(base, tip=True) if held and as_twin else planner
+            model_world = EX.twin_planner(base, tip=True) if held and as_twin else planner
             clear = world.margin + world.emap.resolution      # (a mark at the start leaves no plan)
             near = tuple(m for m in marks if math.hypot(m[0] - X[K.S_X], m[1] - X[K.S_Y]) > m[2] + clear)
             if near:
-                model_world = _marked(model_world, near)
+                model_world = EX.marked(model_world, near)
             # re-plans aim inside the goal disc, in half the re-plan budget; where nothing
             # reaches the inner disc, at the disc itself in what is left of it
             target = model_world if first else _aim(model_world)
@@ -694,11 +631,11 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if fitted is not None:
                     base_key = _factors(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-            if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1]):
+            if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < EX.MARK_NEAR for a, b in stalls[:-1]):
                 # stalled again where it stalled before, with the plans of the vehicle as
                 # measured: the slope ahead is steeper than the map says (or the vehicle weaker
                 # there than measured); the re-plans keep off it
-                marks.append(_ahead(world, X, control))
+                marks.append(EX.ahead(world, X, control))
                 why += f", again: the slope ahead at ({marks[-1][0]:.2f}, {marks[-1][1]:.2f}) is kept off"
         elif X[K.S_T] - out.plans[0].t > t_limit:
             behind = [r for r in out.plans[1:] if "off by" in r.why or r.why.startswith("stalled")]
@@ -735,7 +672,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     key = _factors(f)
                     if max(abs(a - b) for a, b in zip(key, base_key)) > 0.03:     # another vehicle than planned for
                         base, base_key = _as_measured(world, key), key
-                        planner = _twin_planner(base) if as_twin else base
+                        planner = EX.twin_planner(base) if as_twin else base
                         model = _Executor(planner, cost)
                         out.planned_as = base.vehicle.name
                         out.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
@@ -774,6 +711,8 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
         ctrl.ended_at(float(X[K.S_T]))
         ctrl.close()
         out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
+        if ctrl.planned_as is not None:
+            out.planned_as, out.weaker_from = ctrl.planned_as, ctrl.weaker_from
         out.periods, out.driven, out.dropped = ctrl.periods, ctrl.driven, drop.count
         if end is None and status != "reached":
             end = ("stopped" if (reason or "").startswith("stopped at") else

@@ -154,20 +154,13 @@ def _placed(world: WO.World, spec: dict, rng) -> dict:
     return spec
 
 
-def centres(emap) -> tuple:
-    """(X, Y) [m], each (ny, nx): the world coordinates of every cell centre of a map."""
-    ny, nx = emap.heights.shape
-    return np.meshgrid(emap.origin[0] + emap.resolution * np.arange(nx),
-                       emap.origin[1] + emap.resolution * np.arange(ny))
-
-
 def _true_map(tw: WO.World, m: dict) -> WO.World:
     """``tw`` with its map changed by the map faults ``m`` (module doc)."""
     from dynamics.params import load_terrain
     from scipy.ndimage import gaussian_filter
     e = tw.emap
     H = e.heights.copy()
-    Xg, Yg = centres(e)
+    Xg, Yg = WO.centres(e)
     xs, ys = Xg[0], Yg[:, 0]
     rng = np.random.default_rng(int(m.get("seed", 0)))
     sd = float(m.get("noise_sd_m", 0.0) or 0.0)

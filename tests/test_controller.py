@@ -270,3 +270,19 @@ def test_the_estimate_keeps_a_command_delay_in_its_prediction(flat):
         assert E[K.S_WL] == pytest.approx(X[K.S_WL], abs=1e-6) and E[K.S_WR] == pytest.approx(X[K.S_WR], abs=1e-6)
         _, _, X = real.step(X, (*c, 0.1), record=False)
         issued = [(*c, 0.1)]
+
+
+@pytest.mark.slow
+def test_after_a_stall_the_controller_plans_as_the_margins_twin_and_reaches():
+    """steep_hill with a P3-AT whose drive gives 17 % less current (3.0 A for 3.62): the
+    horizon plans made for the file's vehicle drove it into the flank, where it stalled four
+    times and the run failed. From the first stall on, the controller plans for the
+    margin's pessimistic twin (as whole-route runs do), and the run reaches the goal with
+    at most two stalls; the run says from when and as what it planned."""
+    world = _world("steep_hill", horizon_s=10.0)
+    weak = world.vehicle.replace(name="p3at_weak", current_limit=3.0)
+    out = R.run(world, "time", truth=weak)
+    assert out.status == "reached", out.reason
+    assert 1 <= out.stalls <= 2
+    assert out.planned_as == "p3at" and out.weaker_from is not None and out.weaker_from > 0.0
+    assert any("planning as the margin's twin of p3at" in p.why for p in out.plans)

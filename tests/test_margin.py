@@ -12,6 +12,7 @@ from hypothesis import given, strategies as st
 from dynamics import kernels as K
 from dynamics.drive import current_window, window_share
 from sbmpc import api
+from sbmpc import execution as EX
 from sbmpc.planning import check as CK
 from sbmpc.planning import plan as PL
 from sbmpc.planning import problem as PB
@@ -221,10 +222,10 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
                    w.terrains[0].replace(mu_sa=w.terrains[0].mu_sa / 1.1, mu_op=w.terrains[0].mu_op / 1.1))
     o = int(guards[2].Q[SS.Q_OFFT])
     assert np.allclose(guards[2].data[o:o + K.NP], light, rtol=1e-12)
-    ps = R._twin_planner(w).scenario.planner
+    ps = EX.twin_planner(w).scenario.planner
     assert (ps.margin, ps.margin_turn, ps.margin_tip_deg) == (0.0, 0.0, 0.0)
-    assert R._twin_planner(w, tip=True).scenario.planner.margin_tip_deg == 5.0
-    assert R._twin_planner(w).vehicle.mass == tw.vehicle.mass
+    assert EX.twin_planner(w, tip=True).scenario.planner.margin_tip_deg == 5.0
+    assert EX.twin_planner(w).vehicle.mass == tw.vehicle.mass
     assert len(R._guards(_plane(5.0, margin=0.0, margin_tip_deg=5.0), "time")) == 1
     assert R._guards(_plane(5.0, margin=0.1, margin_tip_deg=0.0), "time") == []
 

@@ -335,3 +335,10 @@ def capability(world: World) -> tuple:
         note = (f"the {v.name} cannot hold a steady turn of {held} on {tname} (its drives saturate in a skid "
                 f"turn) on this {x1 - x0:g} x {y1 - y0:g} m map: expect few ways to the goal")
     return fatal, note
+
+
+def centres(emap) -> tuple:
+    """(X, Y) [m], each (ny, nx): the world coordinates of every cell centre of a map."""
+    ny, nx = emap.heights.shape
+    return np.meshgrid(emap.origin[0] + emap.resolution * np.arange(nx),
+                       emap.origin[1] + emap.resolution * np.arange(ny))

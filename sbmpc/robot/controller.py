@@ -24,7 +24,10 @@ default, and gets the same wheel speeds until the period ends):
    leaves it;
 5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
    then whole-route); where that too is held back, the controller stops for good and
-   says why.
+   says why;
+6. after a **stall**, the plans are made for the margin's pessimistic twin of the
+   planning vehicle (it proved weaker there), and a second stall near an earlier one
+   makes the slope ahead a wall in their map (:meth:`Controller._as_weaker`).
 
 :meth:`Controller.step` never waits on a plan (``lockstep=False``, a robot): where the
 plan it needs is not ready, the command holds the wheels at rest (``status``
@@ -110,6 +113,11 @@ class Controller:
         self.estimator = Estimator(world, self.cost)
         self.model = EX.Executor(world, self.cost)
         self.guards = EX.guards(world, self.cost)
+        self.plan_world = world       # what the plans are made for (the margin's twin after a stall)
+        self.planned_as = None        # the vehicle whose twin plans, once a stall showed it weaker
+        self.weaker_from = None       # when [s]
+        self._marks = ()              # slopes a second stall near the first marked impassable
+        self._retraced = 0            # times it backed off (execution.RETRACE_PERIODS)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
         # the record
@@ -304,11 +312,19 @@ class Controller:
         the planner's own budget, an energy plan checked against the time plan (as
         ``sbmpc plan``'s; from narrow_pass's start the energy search alone found nothing
         in 60 s where the time search found a plan in 17 s)."""
-        fut = self._route_pool.submit(PL.plan, self.world, self.cost, start=X.copy())
-        p = yield _Await(fut, "waiting")
-        self.horizon.fallbacks += 1
-        self.horizon.fallback_s.append(p.planning_time_s)
-        self._record(p, X, why, False, X)
+        worlds = [self.plan_world] + ([self.world] if self.plan_world is not self.world else [])
+        for w in worlds:
+            # planning as the margin's twin (after a stall), where the twin has no way on the
+            # planning vehicle's own plan is tried before the run stops: the twin is the
+            # pessimistic bound, and the vehicle that stalled may still get out
+            fut = self._route_pool.submit(PL.plan, w, self.cost, start=X.copy())
+            p = yield _Await(fut, "waiting")
+            self.horizon.fallbacks += 1
+            self.horizon.fallback_s.append(p.planning_time_s)
+            self._record(p, X, why if w is self.plan_world else f"{why}, as {self.world.vehicle.name} (its twin has "
+                         "no way on)", False, X)
+            if p.found:
+                break
         return p
 
     def _on_ticks(self, control) -> tuple:
@@ -326,6 +342,50 @@ class Controller:
         self.periods += 1
         self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
         return X, stalled
+
+    def _as_weaker(self, X: np.ndarray, control):
+        """After a stall where the plans drove the vehicle (the margin on), the plans are
+        made from here on for the margin's pessimistic twin of the planning vehicle
+        (:func:`sbmpc.execution.twin_planner`, as ``sbmpc run``'s whole-route runs do);
+        stalled again within ``MARK_NEAR`` of an earlier stall, the slope ahead is a wall
+        in their map too (:func:`sbmpc.execution.marked`). The horizon planner for that
+        world is built in the worker (its value and motion tables); returns whether it was
+        rebuilt."""
+        if self.world.scenario.planner.margin <= 0.0:
+            return False
+        marks = self._marks
+        if self.planned_as is not None and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < EX.MARK_NEAR
+                                               for a, b in self.stall_at[:-1]):
+            marks = marks + (EX.ahead(self.world, X, control),)
+        if self.planned_as is not None and marks == self._marks:
+            return False
+        self._marks = marks
+        w = EX.twin_planner(EX.marked(self.world, marks) if marks else self.world)
+        ps = w.scenario.planner
+        fut = self._horizon_pool.submit(HorizonPlanner, w, self.cost, ps.horizon_s, ps.horizon_budget_s,
+                                        ps.horizon_expansions)
+        self.planner = yield _Await(fut, "planning")
+        self.plan_world, self.model = w, EX.Executor(w, self.cost)
+        if self.planned_as is None:
+            self.planned_as, self.weaker_from = self.world.vehicle.name, float(X[K.S_T])
+        return True
+
+    def _back_off(self, X: np.ndarray):
+        """Where no plan finds a way on after a stall: back along the way it came (the last
+        of ``execution.RETRACE_PERIODS`` periods driven, reversed, each predicted by the
+        guards first: :func:`sbmpc.execution.retrace`), as whole-route runs do; a vehicle
+        stalled on a flank has no plan from there, and has one from lower down. The
+        estimate at the end, or None (no stall yet, every retrace used, or held back)."""
+        while self.stall_at and self._retraced < len(EX.RETRACE_PERIODS):
+            n = EX.RETRACE_PERIODS[self._retraced]
+            self._retraced += 1
+            back = EX.retrace(self.guards, X, self.driven, n, self._tilt)
+            if back is None:
+                continue
+            for c in back:
+                X, _ = yield from self._drive(self._on_ticks(c), "backing")
+            return X
+        return None
 
     def _stalled_here(self, X: np.ndarray):
         """A stall counted and placed; the reason to stop once there are more than
@@ -369,6 +429,12 @@ class Controller:
                        f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
                 p, guide, kept = yield from route(X, f"{why}: whole-route plan")
                 if not p.found:
+                    Xb = yield from self._back_off(X)
+                    if Xb is not None:
+                        h = self._made((yield from self._await_horizon(Xb)), "backed off: no way on from "
+                                       f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", Xb)
+                        togo.clear()
+                        continue
                     weaker = f"; {EX.weaker(self.stall_at, world.vehicle.name)}" if self.stall_at else ""
                     return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                        f"({why}): {p.reason}{weaker}")
@@ -412,25 +478,39 @@ class Controller:
             X, stalled = yield from self._drive(control, status)
             dxy, dyaw, dv = EX.deviation(X, P)
             off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
+            rebuilt = False
             if stalled:
                 failed = self._stalled_here(X)
                 if failed:
                     return "stopped", failed
                 off = True
+                rebuilt = yield from self._as_weaker(X, control)
+                if rebuilt:
+                    togo.clear()            # the terminal cost of another model
             if guide is not None:
                 if off or not guide:
                     p, guide, kept = yield from route(X, "off the whole-route plan" if off else
                                                       "the whole-route plan ended short of the goal")
                     if not p.found:
-                        return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
-                                           f"t = {X[K.S_T]:.1f} s: {p.reason}")
+                        Xb = yield from self._back_off(X)
+                        if Xb is None:
+                            return "stopped", (f"no way on from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at "
+                                               f"t = {X[K.S_T]:.1f} s: {p.reason}")
+                        p, guide, kept = yield from route(Xb, f"backed off: no way on from ({X[K.S_X]:.2f}, "
+                                                          f"{X[K.S_Y]:.2f})")
+                        if not p.found:
+                            return "stopped", (f"no way on from ({Xb[K.S_X]:.2f}, {Xb[K.S_Y]:.2f}) at "
+                                               f"t = {Xb[K.S_T]:.1f} s, after backing off: {p.reason}")
                 continue
             togo.append(self.planner.to_go(X))
             if off:
                 st.from_measured += 1
                 why = ("stalled" if stalled else
                        f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s")
-                h = self._made((yield from self._await_horizon(X, h)), why, X)
+                if rebuilt:
+                    why += f"; planning as the margin's twin of {self.planned_as}" + (
+                        f", {len(self._marks)} slope(s) kept off" if self._marks else "")
+                h = self._made((yield from self._await_horizon(X, None if rebuilt else h)), why, X)
             else:
                 h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
 
