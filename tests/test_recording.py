@@ -77,3 +77,153 @@ def test_the_default_view_tells_the_story(tmp_path):
     # on its path: within a few centimetres of a trajectory sample, 0.3 m above it
     gap = np.hypot(np.asarray(tr["x"]) - xyz[0], np.asarray(tr["y"]) - xyz[1])
     assert gap.min() < 1e-4
+
+
+# --- the second pass (issue 63 item 5): what a user saw in rerun's web viewer -------------
+
+@pytest.fixture(scope="module")
+def tradeoff(tmp_path_factory):
+    """hill_tradeoff's world, its time- and energy-optimal plans, and their recording."""
+    from pathlib import Path
+    from sbmpc import scenario as SC
+    from sbmpc.planning import plan as PL, world as WO
+    w = WO.resolve(SC.load(Path(__file__).resolve().parents[1] / "scenarios" / "hill_tradeoff.yaml"))
+    plans = {c: PL.plan(w, c) for c in ("time", "energy")}
+    path = recording.write(tmp_path_factory.mktemp("rec") / "c.rrd", w.emap, plans, scenario=w.scenario,
+                           vehicle=w.vehicle)
+    return w, plans, path
+
+
+def _read(path) -> dict:
+    """{entity path: {component: first row's value}} of an .rrd's static entities."""
+    from rerun.chunk import RrdReader
+    out: dict = {}
+    for c in RrdReader(str(path)).stream().to_chunks():
+        rb = c.to_record_batch()
+        for name in rb.schema.names:
+            if ":" in name:
+                out.setdefault(str(c.entity_path), {})[name] = rb.column(rb.schema.names.index(name)).to_pylist()[0]
+    return out
+
+
+def _shown_labels(path) -> list:
+    """[(entity, anchor [m], text)] of every label the viewer shows without being asked: a
+    point's under the point, a strip's (the goal) under its centre."""
+    out = []
+    for e, comps in _read(path).items():
+        for arch, anchor in (("Points3D", lambda v: v[0]), ("LineStrips3D", lambda v: np.mean(v[0], axis=0))):
+            if comps.get(f"{arch}:labels") and comps.get(f"{arch}:show_labels", [True]) != [False]:
+                key = f"{arch}:positions" if arch == "Points3D" else f"{arch}:strips"
+                out.append((e, np.asarray(anchor(comps[key]), float), comps[f"{arch}:labels"][0]))
+    return out
+
+
+def test_no_two_labels_overlap_at_the_default_eye(tradeoff):
+    """Before: both plans' 'least drive headroom 0 %' labels at one point by the start, and
+    the time-optimal plan's label under its tip-over margin's. Now every label shown
+    always, boxed as the viewer draws it (centred under its point, 6.5 px a character,
+    24 px high, seen from the default eye in a 600 px high view: the eye's 55 deg field
+    of view put start and goal within 2 px of where a 1600x900 screenshot shows them),
+    overlaps none of the others nor the vehicles' arrows at the start; and no two are
+    within 0.5 m of each other."""
+    w, plans, path = tradeoff
+    shown = _shown_labels(path)
+    names = {e for e, _, _ in shown}
+    assert {"/markers/start", "/markers/goal", "/paths/time/label", "/paths/energy/label",
+            "/margins/time/drive", "/margins/energy/drive", "/margins/time/tip", "/margins/energy/tip"} <= names
+    boxes = {e: recording.label_box(w.emap, p, text) for e, p, text in shown}
+    arrows = [recording.arrow_box(w.emap, plans[c].trajectory, 0, w.vehicle) for c in plans]
+
+    def apart(a, b):
+        return a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1]
+    for i, (e, p, _) in enumerate(shown):
+        for f, q, _ in shown[i + 1:]:
+            assert apart(boxes[e], boxes[f]) and np.linalg.norm(p - q) > 0.5, (e, f)
+        if e not in ("/markers/start", "/markers/goal"):            # (those are where they are)
+            assert all(apart(boxes[e], a) for a in arrows), e
+    # each margin's marker stands on a stem from where it is
+    for c, plan in plans.items():
+        for what, key in (("drive", "drive_headroom"), ("tip", "tip")):
+            comps = _read(path)[f"/margins/{c}/{what}"]
+            (ground, top), = [np.asarray(s) for s in comps["LineStrips3D:strips"]]
+            assert ground[:2] == pytest.approx([plan.margin[key]["x"], plan.margin[key]["y"]], abs=1e-3)
+            assert top == pytest.approx(comps["Points3D:positions"][0]) and top[2] > ground[2] + 0.5
+
+
+def test_the_vehicles_show_at_a_glance(tradeoff):
+    """Before: each vehicle only its own box, some 10 px long at the default eye and under
+    the start marker. Now its box (still its own size) carries an arrow along its heading
+    at least 1 m and 6 % of the map's diagonal long, at least 50 px at the default eye
+    (600 px high view), a tenth as thick as long, above the box and the start marker's top."""
+    w, plans, path = tradeoff
+    comps = _read(path)
+    ny, nx = w.emap.shape
+    diag = np.hypot(nx - 1, ny - 1) * w.emap.resolution
+    hx, hy, hz = recording.body_half_sizes(w.vehicle)
+    for c, plan in plans.items():
+        assert comps[f"/vehicle/{c}/body"]["Boxes3D:half_sizes"][0] == pytest.approx([hx, hy, hz])
+        shaft = np.asarray(comps[f"/vehicle/{c}/arrow"]["LineStrips3D:strips"][0])
+        length = np.linalg.norm(shaft[1] - shaft[0])
+        assert length >= max(1.0, 0.06 * diag) and shaft[1][0] > shaft[0][0]          # along the heading, +x
+        assert 2 * comps[f"/vehicle/{c}/arrow"]["LineStrips3D:radii"][0] >= 0.1 * length
+        assert shaft[0][2] >= 2 * hz + 0.3                                           # above the box
+        tr = plan.trajectory
+        c0 = np.array([tr["x"][0], tr["y"][0], tr["z"][0]])
+        start_top = comps["/markers/start"]["Points3D:positions"][0][2] + comps["/markers/start"]["Points3D:radii"][0]
+        assert c0[2] + shaft[0][2] > start_top
+        uv = recording.project(w.emap, [c0 + shaft[0], c0 + shaft[1]])
+        assert np.linalg.norm(uv[1] - uv[0]) >= 50.0
+
+
+def _labelled_y_ticks(lo: float, hi: float, height_px: float) -> int:
+    """How many y-axis labels a time-series view of ``height_px`` shows for data from lo to
+    hi: its ticks are at powers of ten, labelled where at least 20 px apart; the range
+    shows 5 % beyond the data at either end."""
+    span = 1.1 * max(hi - lo, 1e-9)
+    step = 10.0 ** (np.floor(np.log10(span)) - 3)
+    while step * height_px / span < 20.0:
+        step *= 10.0
+    return int(np.floor((hi + 0.05 * span) / step) - np.ceil((lo - 0.05 * span) / step) + 1)
+
+
+def test_every_plot_labels_its_y_axis(tradeoff):
+    """Before: 'battery power' and 'energy used' (and the torques) showed only '0' on their
+    y axes: seven views in a two-column grid (four rows) over an expanded time panel were
+    some 110 px high in a 900 px window, too little for ticks 20 px apart over 0..80 W or
+    0..950 J. Now each view, in the heights the blueprint gives it in a 900 px window (the
+    time panel collapsed to its 30 px bar, 32 px of menu, 55 px of title and time axis),
+    labels at least two values of every series it shows; power and energy are logged in
+    W and J, numbers between 0.1 and 10000."""
+    import rerun.blueprint as rrb
+    w, plans, path = tradeoff
+    bp = recording.blueprint(w.emap)
+    panel = {"collapsed": 30.0, "expanded": 250.0, "hidden": 0.0}[str(bp.time_panel.state).lower()]
+    heights = {}
+
+    def walk(node, h):
+        if isinstance(node, rrb.TimeSeriesView):
+            heights[node.origin] = h - 55.0
+        elif isinstance(node, rrb.Vertical):
+            for child in node.contents:
+                walk(child, h / len(node.contents))
+        elif isinstance(node, rrb.Grid):
+            rows = -(-len(node.contents) // (node.grid_columns or 1))
+            for child in node.contents:
+                walk(child, h / rows)
+        elif isinstance(node, (rrb.Horizontal, rrb.Tabs)):
+            for child in node.contents:
+                walk(child, h)
+    walk(bp.root_container, 900.0 - 32.0 - panel)
+    assert {f"plots/{name}" for name, _, _ in recording.SERIES} == {str(o) for o in heights}
+    from rerun.chunk import RrdReader
+    values: dict = {}
+    for ch in RrdReader(str(path)).stream().to_chunks():
+        rb = ch.to_record_batch()
+        if "Scalars:scalars" in rb.schema.names:
+            v = np.asarray(rb.column(rb.schema.names.index("Scalars:scalars")).to_pylist(), float).ravel()
+            values[str(ch.entity_path)] = np.r_[values.get(str(ch.entity_path), []), v]
+    for origin, h in heights.items():
+        v = np.concatenate([values[f"/{origin}/{c}"] for c in plans])
+        assert _labelled_y_ticks(v.min(), v.max(), h) >= 2, (origin, h)
+        if origin in ("plots/power", "plots/energy"):
+            assert 0.1 <= np.abs(v).max() <= 1e4
