@@ -15,7 +15,7 @@ from dynamics.params import load_terrain, load_vehicle
 from dynamics.runs import read_run
 from sbmpc.calibration import PARAMS
 from sbmpc.commands.cli import main
-from sbmpc.protocol import TOP_OVER, ProtocolError, design, read_commands, sized
+from sbmpc.protocol import TOP_OVER, ProtocolError, read_commands, sized
 
 
 @pytest.mark.parametrize("vehicle, terrain, area", [("p3at", "vinyl", (6.0, 4.0)), ("husky", "asphalt", (10.0, 6.0)),
