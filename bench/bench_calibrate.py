@@ -113,9 +113,10 @@ def main() -> int:
     ap.add_argument("--real", action="store_true")
     ap.add_argument("--closed-loop", action="store_true", help="only the closed-loop runs (module doc)")
     args = ap.parse_args()
+    started = commit()          # the code this run loaded
     if args.closed_loop:
         doc = {"what": "closed-loop runs planned with the shipped and the calibrated model (bench_calibrate.py "
-                       "--closed-loop)", "date": time.strftime("%Y-%m-%d"), "commit": commit(), **closed_loop()}
+                       "--closed-loop)", "date": time.strftime("%Y-%m-%d"), "commit": started, **closed_loop()}
         path = OUT.with_name("calibration_closed_loop.json")
         path.write_text(json.dumps(doc, indent=1, default=float))
         print(f"wrote {path}")
@@ -146,7 +147,7 @@ def main() -> int:
             real.append(r)
             print(f"warthog {terr}: {r['cause']} held out {r['heldout']['nominal']:.2f} -> "
                   f"{r['heldout']['calibrated']:.2f} -> {r['heldout']['with_effect']:.2f} ({r['seconds']} s)", flush=True)
-    doc = {"what": __doc__.split("\n\n")[0], "date": time.strftime("%Y-%m-%d"), "commit": commit(), "generated": rows, "real": real}
+    doc = {"what": __doc__.split("\n\n")[0], "date": time.strftime("%Y-%m-%d"), "commit": started, "generated": rows, "real": real}
     OUT.write_text(json.dumps(doc, indent=1, default=float))
     print(f"wrote {OUT}")
     return 0

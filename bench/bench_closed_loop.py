@@ -110,6 +110,7 @@ def main() -> int:
     ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
     ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
+    started = commit()          # the code this run loaded (a resumed sweep: the code it resumed with)
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
     spec = a.out / "spec.yaml"
@@ -131,7 +132,7 @@ def main() -> int:
     if a.figure:
         shutil.copy(a.out / "summary.png", ROOT / "docs" / a.figure)
     doc = {"what": "closed-loop runs on drawn truths (bench/bench_closed_loop.py)", "label": a.label,
-           "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"), "commit": commit(),
+           "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"), "commit": started,
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
            "scenarios": a.scenarios, "adapt_periods": a.adapt,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),
