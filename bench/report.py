@@ -386,7 +386,6 @@ def status_defaults() -> str:
 
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
-          "closed-loop-previous": lambda: closed_loop_totals("closed_loop_cfda229.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "readme-caption": readme_caption, "readme-table": readme_table,
