@@ -161,10 +161,12 @@ def guards(world: WO.World, cost: str) -> list:
     """The tip-over guard of a run's periods (``planner.margin_tip_deg`` > 0; else none):
     controller-rate executors of the planning vehicle and, with a margin
     (``planner.margin`` = m), of its pessimistic twin (:func:`sbmpc.planning.world.pessimistic`)
-    and of an optimistic one (mass, inertia, mu_sa and mu_op divided by 1 + m: a vehicle
-    lighter than planned drives further into a period, and a 14 % lighter one rolled
-    over on `narrow_pass`'s flank where both other predictions stopped short of the
-    margin, 2026-12-06), each with half the tip-over margin (:class:`Executor`)."""
+    and of an optimistic one (mass, inertia, mu_sa and mu_op divided by 1 + m and the
+    battery voltage times 1 + m: a vehicle lighter or faster than planned drives further
+    into a period; a 14 % lighter one rolled over on `narrow_pass`'s flank where both
+    other predictions stopped short of the margin, and one 13 % lighter with 14 % more
+    voltage drove a whole-route plan's periods off `flat`'s map, 2026-12-06), each with
+    half the tip-over margin (:class:`Executor`)."""
     ps = world.scenario.planner
     if ps.margin_tip_deg <= 0.0:
         return []
@@ -172,7 +174,9 @@ def guards(world: WO.World, cost: str) -> list:
     if ps.margin > 0.0:
         out.append(Executor(WO.pessimistic(world), cost, tip_guard=True))
         f = 1.0 / (1.0 + ps.margin)
-        light = replace(world, vehicle=WO.heavier(world.vehicle, f), terrains=WO.gripped(world.terrains, f))
+        fast = WO.heavier(world.vehicle, f)
+        fast = fast.replace(v_max=fast.v_max * (1.0 + ps.margin))
+        light = replace(world, vehicle=fast, terrains=WO.gripped(world.terrains, f))
         out.append(Executor(light, cost, tip_guard=True))
     return out
 
@@ -194,8 +198,9 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     plan did not allow for; so does the optimistic twin's (a lighter vehicle drives
     further into the period). Once the twin plans (the vehicle proved weaker), the run
     passes ``kept`` False. The world's vehicle's prediction also holds a period back
-    where it leaves the map: a run never drives off its map (a horizon run with 10 %
-    less grip left `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
+    where it leaves the map, and so does the optimistic twin's (a faster vehicle drives
+    further): a run never drives off its map (a horizon run with 10 % less grip left
+    `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
     `narrow_pass`'s flank 1.6 deg steeper than it says). Returns which guard holds the
@@ -203,7 +208,7 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     optimistic one), 0: none."""
     for j, g in enumerate(guards):
         _, end, _ = g.step(X, control, record=False, tilt_error=tilt_error)
-        if end == -SS.TIP or (end == -SS.OFF_MAP and j == 0) or (end == -SS.MARGIN and (kept or j > 0)):
+        if end == -SS.TIP or (end == -SS.OFF_MAP and j in (0, 2)) or (end == -SS.MARGIN and (kept or j > 0)):
             return j + 1
     return 0
 

@@ -216,9 +216,10 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
     assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 3)
     o = int(guards[1].Q[SS.Q_OFFT])           # the guard's twin drives as the vehicle of its own world
     assert np.array_equal(guards[1].data[o:o + block.size], block)
-    # ... and an optimistic one, mass, inertia and grip divided by 1 + margin (a lighter
-    # vehicle drives further into a period)
-    light = K.pack(w.vehicle.replace(mass=w.vehicle.mass / 1.1, inertia=w.vehicle.inertia / 1.1),
+    # ... and an optimistic one, mass, inertia and grip divided by 1 + margin and the battery
+    # voltage times it (a lighter or faster vehicle drives further into a period)
+    light = K.pack(w.vehicle.replace(mass=w.vehicle.mass / 1.1, inertia=w.vehicle.inertia / 1.1,
+                                     v_max=w.vehicle.v_max * 1.1),
                    w.terrains[0].replace(mu_sa=w.terrains[0].mu_sa / 1.1, mu_op=w.terrains[0].mu_op / 1.1))
     o = int(guards[2].Q[SS.Q_OFFT])
     assert np.allclose(guards[2].data[o:o + K.NP], light, rtol=1e-12)
