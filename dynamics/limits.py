@@ -70,6 +70,16 @@ def top_speed(vehicle: Vehicle, terrain: Terrain, grade: float = 0.0) -> float:
     return brentq(f, 0.0, w_hi) * vehicle.wheel_radius
 
 
+def holds_turn(vehicle: Vehicle, terrain: Terrain, wl: float, wr: float, margin: float = 1.0) -> bool:
+    """Whether the drive holds wheel speeds (wl, wr) [rad/s] in a steady turn on level
+    ground: eq. 22's steady resistance of each side, times ``margin``, within what the
+    drive delivers at that side's speed (eqs. 26, 27 and the current limit)."""
+    from .resistance import steady_resistance
+    tl, tr = steady_resistance(wl, wr, vehicle, terrain)
+    return (margin * abs(tl) <= available_torque(vehicle, abs(wl))
+            and margin * abs(tr) <= available_torque(vehicle, abs(wr)))
+
+
 TURN_RADII = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0, 50.0, 75.0, 100.0, 150.0, 200.0)
 
 
@@ -80,7 +90,6 @@ def tightest_turn(vehicle: Vehicle, terrain: Terrain, speeds=(0.3, 0.6, 1.0)) ->
     (eqs. 26, 27 and the current limit). ``inf`` when no radius up to 200 m can be held:
     the drive saturates in any steady turn (a heavy vehicle on a grippy surface)."""
     from .kinematics import wheel_speeds
-    from .resistance import steady_resistance
     r = vehicle.wheel_radius
     for R in TURN_RADII:
         for v in speeds:
@@ -91,7 +100,6 @@ def tightest_turn(vehicle: Vehicle, terrain: Terrain, speeds=(0.3, 0.6, 1.0)) ->
                 wl, wr = wheel_speeds(v, 1.0 / R, r, vehicle.width, terrain.alpha)
             if max(abs(wl), abs(wr)) > vehicle.no_load_speed:
                 continue
-            tl, tr = steady_resistance(wl, wr, vehicle, terrain)
-            if abs(tl) <= available_torque(vehicle, abs(wl)) and abs(tr) <= available_torque(vehicle, abs(wr)):
+            if holds_turn(vehicle, terrain, wl, wr):
                 return R
     return math.inf

@@ -107,16 +107,6 @@ class Protocol:
                 "omega_cmd": rep([p.omega for p in self.parts]), "segment": rep(range(len(self.parts)))}
 
 
-def halton(i: int, base: int) -> float:
-    """The i-th (i >= 1) element of the van der Corput sequence in ``base``, in (0, 1)."""
-    f, x = 1.0, 0.0
-    while i > 0:
-        f /= base
-        x += f * (i % base)
-        i //= base
-    return x
-
-
 def reach(vehicle: Vehicle, area: tuple) -> tuple:
     """(a, b) [m]: how far the robot's centre may go from the start along and across its
     heading: half the area less the footprint's half diagonal and SAFETY_M."""
@@ -199,23 +189,15 @@ def _past_and_back(kind: str, v: float, omega: float, seconds: float, label: str
     return [p for leg in legs for p in (leg, _at_rest(leg, vehicle, decel))]
 
 
-def _holds(vehicle: Vehicle, terrain: Terrain, wl: float, wr: float, margin: float = 1.0) -> bool:
-    """Whether the drive holds wheel speeds (wl, wr) [rad/s] in a steady turn on level
-    ground with ``margin`` times eq. 22's resistance within eqs. 26, 27."""
-    from dynamics.limits import available_torque
-    from dynamics.resistance import steady_resistance
-    tl, tr = steady_resistance(wl, wr, vehicle, terrain)
-    return (margin * abs(tl) <= available_torque(vehicle, abs(wl))
-            and margin * abs(tr) <= available_torque(vehicle, abs(wr)))
-
-
 def design(vehicle: Vehicle, terrain: Terrain, area: tuple, seconds: float = 240.0, scale: float = 1.0) -> Protocol:
     """A protocol for ``vehicle`` on ``terrain`` in a free area (W, H) [m] lasting about
     ``seconds`` (the turns fill what the fixed parts leave; at least those are kept), its
     parts sized to ``scale`` times the reach (:func:`reach`).
     Raises :class:`ProtocolError` where the area holds no straight part of MIN_HOLD_S at
     the slowest speed."""
-    from dynamics.limits import top_speed
+    from scipy.stats import qmc
+
+    from dynamics.limits import holds_turn, top_speed
     W, H = (float(x) for x in area)
     if not (math.isfinite(W) and math.isfinite(H) and W > 0 and H > 0):
         raise ProtocolError(f"area: expected a width and height in metres, found {W:g} x {H:g}")
@@ -259,7 +241,7 @@ def design(vehicle: Vehicle, terrain: Terrain, area: tuple, seconds: float = 240
                      f"(needs {MIN_HOLD_S:g} s); the torque constant then needs efforts or currents logged")
     for share in PIVOT:
         w = share * w_top
-        while w > 0.1 * w_top and not _holds(vehicle, terrain, -w, w, HELD_MARGIN):
+        while w > 0.1 * w_top and not holds_turn(vehicle, terrain, -w, w, HELD_MARGIN):
             w *= 0.8
         omega = 2 * w * r / S
         first = 1.0 if len(pivots) % 2 == 0 else -1.0      # left then right, then right then left
@@ -267,10 +249,10 @@ def design(vehicle: Vehicle, terrain: Terrain, area: tuple, seconds: float = 240
                                       f"pivot {'left' if first > 0 else 'right'} {math.degrees(omega):.0f} deg/s",
                                       vehicle, decel))
     fixed = sum(p.seconds for blk in straights + tops + pivots for p in blk) + PAUSE_S
-    left, tried = seconds - fixed, 0
-    while left > 0 and tried < 400:
-        tried += 1
-        u, q = halton(tried, 2), halton(tried, 3)
+    left = seconds - fixed
+    for u, q in qmc.Halton(d=2, scramble=False).random(401)[1:]:     # (its first point is the origin)
+        if left <= 0:
+            break
         v = (TURN_V[0] + (TURN_V[1] - TURN_V[0]) * u) * v_top
         t = 0.0
         while v >= 0.1 * v_top:        # a turn too wide for the area is driven slower
@@ -286,7 +268,7 @@ def design(vehicle: Vehicle, terrain: Terrain, area: tuple, seconds: float = 240
         held = False
         for k in range(7):
             wider = omega * 0.7 ** k
-            if _holds(vehicle, terrain, *Part("turn", v, wider, t).wheels(vehicle), HELD_MARGIN):
+            if holds_turn(vehicle, terrain, *Part("turn", v, wider, t).wheels(vehicle), HELD_MARGIN):
                 t_wider = _longest_hold(v, yaw_of(wider), a, b, TURN_HOLD_S)
                 if t_wider >= MIN_HOLD_S:
                     omega, t, held = wider, t_wider, True
