@@ -281,10 +281,6 @@ def protected(X: np.ndarray, real: "Executor") -> None:
     real.pipe = None
 
 
-__all__ = ["Executor", "HELD", "holder", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
-           "held", "keeps_margin", "protected", "settles", "stopped", "weaker"]
-
-
 # ---- planning as a weaker vehicle after a stall (whole-route runs and the controller) ----
 MARK_NEAR = 1.5      # m: a stall this close to an earlier one marks the slope ahead impassable
 MARK_RADIUS = 0.6    # m: the radius of such a mark
@@ -312,7 +308,6 @@ def marked(world: WO.World, marks: tuple) -> WO.World:
     for x, y, r in marks:
         H[(Xg - x) ** 2 + (Yg - y) ** 2 <= r * r] = top
     return replace(world, emap=replace(e, heights=H))
-
 
 
 @functools.lru_cache(maxsize=16)
@@ -348,3 +343,30 @@ def retrace(guards: list, X: np.ndarray, driven: list, n: int, tilt: float = 0.0
             return None
         _, _, S = guards[0].step(S, c, record=False)
     return back
+
+
+def back_along(guards: list, X: np.ndarray, way: list, tried: int, tilt: float = 0.0) -> tuple:
+    """The next of RETRACE_PERIODS[tried:] that the guards let the vehicle drive back
+    (:func:`retrace`): (its periods, the retraces tried since), the periods it retraces
+    taken off ``way`` (the periods driven along the way it came, not the ones driven
+    back: a second retrace goes further back along it, never forward again); (None,
+    len(RETRACE_PERIODS)) where none is let through."""
+    while tried < len(RETRACE_PERIODS):
+        n = RETRACE_PERIODS[tried]
+        tried += 1
+        back = retrace(guards, X, way, n, tilt)
+        if back is not None:
+            del way[-n:]
+            return back, tried
+    return None, tried
+
+
+def stalled_again(stalls: list, X: np.ndarray) -> bool:
+    """Whether the vehicle at X, stalled, is within MARK_NEAR of an earlier stall of
+    ``stalls`` [(x, y)] (the last of them is this one): the slope ahead is to be marked."""
+    return any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
+
+
+__all__ = ["Executor", "HELD", "holder", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
+           "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
+           "marked", "twin_planner", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again"]

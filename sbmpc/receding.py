@@ -465,17 +465,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         nonlocal retraced, backing, why, guarded
         if len(out.plans) > rs.max_replans:
             return False
-        while retraced < len(EX.RETRACE_PERIODS):
-            n = EX.RETRACE_PERIODS[retraced]
-            retraced += 1
-            back = EX.retrace(guards, X, driven, n, tilt)
-            if back is not None:
-                backing = back
-                guarded = False                # a fresh place: its first hold gets a re-plan
-                del driven[-n:]
-                why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), and no way on from there: {n} periods driven back"
-                return True
-        return False
+        back, retraced = EX.back_along(guards, X, driven, retraced, tilt)
+        if back is None:
+            return False
+        backing = back
+        guarded = False                        # a fresh place: its first hold gets a re-plan
+        why = (f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), and no way on from there: {len(back) - 1} periods "
+               "driven back")
+        return True
 
     while True:
         if time.perf_counter() > deadline:
@@ -631,7 +628,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if fitted is not None:
                     base_key = _factors(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-            if ps.margin > 0.0 and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < EX.MARK_NEAR for a, b in stalls[:-1]):
+            if ps.margin > 0.0 and EX.stalled_again(stalls, X):
                 # stalled again where it stalled before, with the plans of the vehicle as
                 # measured: the slope ahead is steeper than the map says (or the vehicle weaker
                 # there than measured); the re-plans keep off it

@@ -14,6 +14,7 @@ from hypothesis import given, settings, strategies as st
 
 from dynamics import kernels as K
 from dynamics.params import load_vehicle
+from sbmpc import execution as EX
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc.errors import InputError
@@ -286,3 +287,30 @@ def test_after_a_stall_the_controller_plans_as_the_margins_twin_and_reaches():
     assert 1 <= out.stalls <= 2
     assert out.planned_as == "p3at" and out.weaker_from is not None and out.weaker_from > 0.0
     assert any("planning as the margin's twin of p3at" in p.why for p in out.plans)
+
+
+def test_a_second_back_off_goes_further_back_along_the_way_never_forward_again(flat):
+    """execution.back_along: the first back-off retraces the way's last 2 periods (a stop,
+    then each negated, latest first) and takes them off the way; the second the 4 before
+    them, not the periods just driven back; with fewer periods left than a retrace needs,
+    none. The controller keeps the periods it drives back out of its way (they are in its
+    record, ``driven``)."""
+    way = [(float(k), float(k), 1.0) for k in range(1, 8)]
+    back, tried = EX.back_along([], None, way, 0)
+    assert tried == 1 and back == [(0.0, 0.0, 1.0), (-7.0, -7.0, 1.0), (-6.0, -6.0, 1.0)] and len(way) == 5
+    back, tried = EX.back_along([], None, way, tried)
+    assert tried == 2 and back[1:] == [(-k, -k, 1.0) for k in (5.0, 4.0, 3.0, 2.0)] and way == [(1.0, 1.0, 1.0)]
+    assert EX.back_along([], None, way, 0) == (None, 2)
+    ctrl = Controller(flat, "time", lockstep=True)
+    try:
+        X = WO.start_state(flat)
+        for status in ("horizon", "backing"):
+            ctrl._last_t = 0.0
+            g = ctrl._drive((1.0, 1.0, 1.0), status)
+            next(g)
+            ctrl._last_t = 1.0
+            with pytest.raises(StopIteration):
+                g.send((X, False))
+        assert len(ctrl.driven) == 2 and ctrl._way == ctrl.driven[:1]
+    finally:
+        ctrl.close()

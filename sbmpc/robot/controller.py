@@ -117,7 +117,8 @@ class Controller:
         self.planned_as = None        # the vehicle whose twin plans, once a stall showed it weaker
         self.weaker_from = None       # when [s]
         self._marks = ()              # slopes a second stall near the first marked impassable
-        self._retraced = 0            # times it backed off (execution.RETRACE_PERIODS)
+        self._retraced = 0            # retraces tried (execution.RETRACE_PERIODS)
+        self._way: list = []          # the periods driven along the way it came (not those driven back)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
         # the record
@@ -341,6 +342,8 @@ class Controller:
         X, stalled = yield _Drive(control, status)
         self.periods += 1
         self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
+        if status != "backing":
+            self._way.append(self.driven[-1])
         return X, stalled
 
     def _as_weaker(self, X: np.ndarray, control):
@@ -354,8 +357,7 @@ class Controller:
         if self.world.scenario.planner.margin <= 0.0:
             return False
         marks = self._marks
-        if self.planned_as is not None and any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < EX.MARK_NEAR
-                                               for a, b in self.stall_at[:-1]):
+        if self.planned_as is not None and EX.stalled_again(self.stall_at, X):
             marks = marks + (EX.ahead(self.world, X, control),)
         if self.planned_as is not None and marks == self._marks:
             return False
@@ -375,17 +377,20 @@ class Controller:
         of ``execution.RETRACE_PERIODS`` periods driven, reversed, each predicted by the
         guards first: :func:`sbmpc.execution.retrace`), as whole-route runs do; a vehicle
         stalled on a flank has no plan from there, and has one from lower down. The
-        estimate at the end, or None (no stall yet, every retrace used, or held back)."""
-        while self.stall_at and self._retraced < len(EX.RETRACE_PERIODS):
-            n = EX.RETRACE_PERIODS[self._retraced]
-            self._retraced += 1
-            back = EX.retrace(self.guards, X, self.driven, n, self._tilt)
-            if back is None:
-                continue
-            for c in back:
-                X, _ = yield from self._drive(self._on_ticks(c), "backing")
-            return X
-        return None
+        estimate at the end, or None (no stall yet, every retrace used, or held back). Each
+        period is guarded again from the measured state before it is driven; one held back
+        ends the backing there. A second back-off goes further back along the way, never
+        forward again over the periods driven back (:func:`sbmpc.execution.back_along`)."""
+        if not self.stall_at:
+            return None
+        back, self._retraced = EX.back_along(self.guards, X, self._way, self._retraced, self._tilt)
+        if back is None:
+            return None
+        for c in back:
+            if self.guards and EX.held(self.guards, X, c, True, self._tilt):
+                break
+            X, _ = yield from self._drive(self._on_ticks(c), "backing")
+        return X
 
     def _stalled_here(self, X: np.ndarray):
         """A stall counted and placed; the reason to stop once there are more than
