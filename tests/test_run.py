@@ -544,3 +544,15 @@ def test_re_plans_are_not_polished(flat, monkeypatch):
     unpolished = [polished for setting, polished in seen if not setting]
     assert len(unpolished) >= res.replans and not any(unpolished)
     assert all(r.plan.polish is None for r in res.plans[1:])
+
+
+def test_a_period_that_only_the_optimistic_twin_drives_off_the_map_is_held_back():
+    """The guard's third prediction is of a lighter and faster vehicle (battery voltage
+    times 1 + margin): where only it leaves the map, the period is held back (holder 3);
+    the pessimistic twin leaving it holds nothing (it falls short of where the vehicle
+    goes); the planning vehicle's does (holder 1)."""
+    from sbmpc import execution as EX
+    off = -SS.OFF_MAP
+    assert EX.holder([_Predicts(0), _Predicts(0), _Predicts(off)], None, (1.0, 1.0, 1.0), True) == 3
+    assert EX.holder([_Predicts(0), _Predicts(off), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 0
+    assert EX.holder([_Predicts(off), _Predicts(0), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 1
