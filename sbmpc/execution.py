@@ -61,6 +61,7 @@ class HorizonStats:
     fallbacks: int = 0
     fallback_s: list = field(default_factory=list)
     settled: int = 0
+    rejoined: int = 0        # hand-overs onto the whole-route plan made beside (planning.rejoin)
 
     def to_json(self) -> dict:
         s = np.array(self.seconds) if self.seconds else np.zeros(1)
@@ -71,7 +72,7 @@ class HorizonStats:
                 "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
                 "kept_previous": self.kept_previous, "from_measured": self.from_measured,
                 "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s],
-                "settled": self.settled}
+                "settled": self.settled, "rejoined": self.rejoined}
 
 
 

@@ -187,7 +187,10 @@ class RunSettings:
     is called (:class:`sbmpc.robot.Controller`, the robot's loop: 0.05-1 s);
     adapt_periods: a whole-route run refits the vehicle (:func:`sbmpc.estimate.fit`) every
     this many periods driven and, where the fit is confident and differs, re-plans with
-    the vehicle as measured (0: only at stalls).
+    the vehicle as measured (0: only at stalls); beside: a horizon run's controller makes
+    a whole-route plan beside its horizon plans from the start and hands over to it
+    without planning the whole route again (:mod:`sbmpc.planning.rejoin`; off by
+    default: docs/planner.md says what it measured).
     """
 
     trigger: str = "tolerance"
@@ -202,6 +205,7 @@ class RunSettings:
     max_time_factor: float = 3.0
     control_period_s: float = 0.1
     adapt_periods: int = 0
+    beside: bool = False
 
 
 _RUN_RANGES = {
@@ -496,6 +500,11 @@ def _run(spec, probs: _Problems) -> RunSettings:
             probs.add("run.trigger", "'tolerance' or 'every'", spec["trigger"])
         else:
             kw["trigger"] = spec["trigger"]
+    if "beside" in spec:
+        if not isinstance(spec["beside"], bool):
+            probs.add("run.beside", "true or false", spec["beside"])
+        else:
+            kw["beside"] = spec["beside"]
     return RunSettings(**kw)
 
 
@@ -728,6 +737,7 @@ def json_schema() -> dict:
     planner.update({key: {"enum": list(choices)} for key, choices in _SETTING_CHOICES.items()})
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}
+    run["beside"] = {"type": "boolean"}
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -289,6 +290,75 @@ def _cached_but_corridors(fn):
     return call
 
 
+@dataclass(frozen=True)
+class StepGraph:
+    """The cost-to-go grid's graph over a window (j0, j1, i0, i1) of the map
+    (:func:`ctg_window`): its heights ``H`` (ny, nx) [m] with origin (``ox``, ``oy``)
+    [m] and spacing ``res`` [m], the ``blocked`` cells (flat), the per-cell lower bound
+    of the rolling force ``froll_cell`` [N], the energy bound's copper coefficient and
+    kinetic-energy factor (``kegrid``), and the 8-neighbour steps reversed (``src`` the
+    cell a step reaches, ``dst`` the one it leaves: Dijkstra runs from where the way
+    ends), each weighing its lower bound of time [s] or energy [J] over OCTILE."""
+
+    window: tuple
+    H: np.ndarray
+    res: float
+    ox: float
+    oy: float
+    blocked: np.ndarray
+    froll_cell: np.ndarray
+    copper: float
+    kegrid: float
+    src: np.ndarray
+    dst: np.ndarray
+    w: np.ndarray
+
+
+def step_graph(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> StepGraph:
+    """The graph the cost-to-go grid is solved over (:class:`StepGraph`): a time step
+    takes its length over :func:`step_speed_bounds`, an energy step
+    :func:`least_step_energy`."""
+    e, scn = world.emap, world.scenario
+    j0, j1, i0, i1 = ctg_window(world, max_cells)
+    Hfull = e.heights
+    H = Hfull[j0:j1, i0:i1]
+    ny, nx = H.shape
+    res = e.resolution
+    vb, _, mg = _bounds(world)
+    ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
+    blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
+    if e.terrain_layer is not None and len(world.terrains) > 1:
+        terrain = e.terrain_layer[j0:j1, i0:i1].ravel()
+    else:
+        terrain = np.zeros(nx * ny, np.int64)
+    mu = np.array([t.mu_roll for t in world.terrains])[terrain]
+    gy, gx = np.gradient(H, res)
+    # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
+    froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
+    copper = copper_coefficient(world)
+    src, dst, w = [], [], []
+    kegrid = 1.0
+    for p, q, up, d in grid_steps(H, blocked, res, math.tan(climb_limit(world))):
+        if cost == "time":
+            # the faster of the two cells' terrains: either may be under the vehicle
+            grade = np.arctan(up)
+            wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
+                                step_speed_bounds(world, terrain[q], grade, vb))
+        else:
+            f = np.minimum(froll_cell[p], froll_cell[q])
+            rise = mg * (H.ravel()[q] - H.ravel()[p])
+            wt = least_step_energy(f, rise, d, copper)
+            if p.size:
+                kegrid = max(kegrid, ke_factor(f, rise, d, copper))
+        # reversed edges: Dijkstra runs from where the way ends
+        src.append(q)
+        dst.append(p)
+        w.append(wt / OCTILE + 1e-12)
+    cat = (lambda parts, dt: np.concatenate(parts) if parts else np.zeros(0, dt))
+    return StepGraph((j0, j1, i0, i1), H, res, ox, oy, blocked, froll_cell, copper, kegrid,
+                     cat(src, np.int64), cat(dst, np.int64), cat(w, float))
+
+
 @_cached_but_corridors
 def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple:
     """Lower bound of the cost [s or J] from every map node to the goal disc (Dijkstra
@@ -316,41 +386,13 @@ def cost_to_go(world: World, cost: str, max_cells: int = CTG_MAX_CELLS) -> tuple
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import dijkstra
     e, scn = world.emap, world.scenario
-    j0, j1, i0, i1 = ctg_window(world, max_cells)
-    Hfull = e.heights
-    H = Hfull[j0:j1, i0:i1]
+    graph = step_graph(world, cost, max_cells)
+    j0, j1, i0, i1 = graph.window
+    Hfull, H, res, ox, oy = e.heights, graph.H, graph.res, graph.ox, graph.oy
     ny, nx = H.shape
-    res = e.resolution
     vb, froll, mg = _bounds(world)
-    ox, oy = e.origin[0] + i0 * res, e.origin[1] + j0 * res
-    blocked = blocked_cells(world)[j0:j1, i0:i1].ravel()
-    if e.terrain_layer is not None and len(world.terrains) > 1:
-        terrain = e.terrain_layer[j0:j1, i0:i1].ravel()
-    else:
-        terrain = np.zeros(nx * ny, np.int64)
-    mu = np.array([t.mu_roll for t in world.terrains])[terrain]
-    gy, gx = np.gradient(H, res)
-    # per cell: mu m g cos(steepest slope of the cell), a lower bound of the rolling force
-    froll_cell = mu * mg * np.cos(np.minimum(np.arctan(np.hypot(gx, gy)), math.radians(scn.planner.tip_over_deg))).ravel()
-    copper = copper_coefficient(world)
-    src, dst, w = [], [], []
-    kegrid = 1.0
-    for p, q, up, d in grid_steps(H, blocked, res, math.tan(climb_limit(world))):
-        if cost == "time":
-            # the faster of the two cells' terrains: either may be under the vehicle
-            grade = np.arctan(up)
-            wt = d / np.maximum(step_speed_bounds(world, terrain[p], grade, vb),
-                                step_speed_bounds(world, terrain[q], grade, vb))
-        else:
-            f = np.minimum(froll_cell[p], froll_cell[q])
-            rise = mg * (H.ravel()[q] - H.ravel()[p])
-            wt = least_step_energy(f, rise, d, copper)
-            if p.size:
-                kegrid = max(kegrid, ke_factor(f, rise, d, copper))
-        # reversed edges: Dijkstra runs from the goal
-        src.append(q)
-        dst.append(p)
-        w.append(wt / OCTILE + 1e-12)
+    blocked, froll_cell, copper, kegrid = graph.blocked, graph.froll_cell, graph.copper, graph.kegrid
+    src, dst, w = [graph.src], [graph.dst], [graph.w]
     X, Y = np.meshgrid(ox + res * np.arange(nx), oy + res * np.arange(ny))
     g = scn.goal
     goal_nodes = np.flatnonzero((((X - g["x"]) ** 2 + (Y - g["y"]) ** 2) <= g["radius"] ** 2).ravel() & ~blocked)

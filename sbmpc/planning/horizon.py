@@ -75,14 +75,29 @@ def periods(controls, period_s: float) -> list:
     return out
 
 
+def _with_to_go(prob, grid: np.ndarray):
+    """``prob`` with ``grid`` (the map's shape) as its cost-to-go grid and no value over
+    position and heading: the terminal cost is the grid's (with the turn cost)."""
+    params, data = prob.params.copy(), prob.data.copy()
+    offd, n = int(params[SS.Q_OFFD]), int(params[SS.Q_NX]) * int(params[SS.Q_NY])
+    if offd < 0 or n != grid.size:
+        raise ValueError(f"to_go: expected a grid of the map's {n} nodes, found {grid.size}")
+    data[offd:offd + n] = np.asarray(grid, float).ravel()
+    params[SS.Q_OFFV] = -1
+    return replace(prob, params=params, data=data)
+
+
 class HorizonPlanner:
     """Plans of one world and cost over a horizon (module doc). What stays between plans
     (the packed problem with its cost-to-go grid, the control set) is made once.
 
     ``horizon_s``: look-ahead [s]; ``budget_s``: wall-clock budget of a plan [s];
-    ``max_expansions``: node budget of a plan."""
+    ``max_expansions``: node budget of a plan; ``to_go``: a cost-to-go grid over the map
+    [s or J] (the map's shape) that replaces the world's and its value as the terminal
+    cost (a tracker's: :mod:`sbmpc.planning.rejoin`)."""
 
-    def __init__(self, world: World, cost: str, horizon_s: float, budget_s: float, max_expansions: int):
+    def __init__(self, world: World, cost: str, horizon_s: float, budget_s: float, max_expansions: int,
+                 to_go: np.ndarray | None = None):
         self.world = world
         self.cost = cost
         self.horizon_s = float(horizon_s)
@@ -92,6 +107,9 @@ class HorizonPlanner:
         self.period_s = ps.period_s
         self.prob = replace(problem(world, cost),
                             weight=ps.horizon_weight if cost == "time" else ps.horizon_energy_weight)
+        self.tracks = None         # a tracker's (plan, kappa): the whole-route plan it leads along
+        if to_go is not None:
+            self.prob = _with_to_go(self.prob, to_go)
         self.col = K.S_T if cost == "time" else K.S_E
         # the value over position and heading knows the turns; the turn cost serves where
         # there is none (planner.value false, or a pose off its lattice)

@@ -21,7 +21,11 @@ default, and gets the same wheel speeds until the period ends):
    cost has not fallen for ``STUCK_HORIZONS`` horizons, the controller **hands over** to a
    whole-route plan (:func:`sbmpc.planning.plan.plan`, in a second worker thread) from
    the vehicle at rest and follows it, re-planning the whole route where the vehicle
-   leaves it;
+   leaves it; with ``beside`` (``run.beside``), the hand-over waits for no new plan: the
+   whole-route plan made in a third worker from the start (:mod:`sbmpc.planning.rejoin`)
+   is followed from where the vehicle joins it within the run's tolerances, or horizon
+   plans whose terminal cost leads onto its path and along it (status 'tracking') take
+   the vehicle there; off it or at its end short of the goal, they take over again;
 5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
    then whole-route); where that too is held back, the controller stops for good and
    says why;
@@ -38,6 +42,7 @@ works, and every plan's wall-clock time is kept (``horizon.seconds``).
 from __future__ import annotations
 
 import math
+import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
@@ -48,6 +53,7 @@ from dynamics import kernels as K
 
 from ..errors import InputError
 from ..planning import plan as PL
+from ..planning import rejoin as RJ
 from ..planning import world as WO
 from ..planning.horizon import HorizonPlanner, periods
 from ..problems import skidsteer as SS
@@ -80,7 +86,9 @@ class Controller:
     how often the robot calls :meth:`step`); ``horizon_s``: the look-ahead [s] (default
     the scenario's ``planner.horizon_s``, else 10); ``lockstep``: wait for plans (a
     simulated clock) instead of holding at rest; ``settings``: the run's tolerances
-    (:class:`sbmpc.scenario.RunSettings`, default the scenario's ``run``).
+    (:class:`sbmpc.scenario.RunSettings`, default the scenario's ``run``); ``beside``:
+    make a whole-route plan beside the horizon from the start and hand over to it
+    (module doc, 4; default the settings' ``beside``).
 
     What it did is kept for the record: ``plans`` (:class:`sbmpc.execution.Replan` per
     plan), ``horizon`` (:class:`sbmpc.execution.HorizonStats`), ``guarded``, ``stalls``,
@@ -90,7 +98,8 @@ class Controller:
     as its plan)."""
 
     def __init__(self, world: WO.World, cost: str | None = None, period_s: float = 0.1,
-                 horizon_s: float | None = None, lockstep: bool = False, settings=None, keep_paths: bool = False):
+                 horizon_s: float | None = None, lockstep: bool = False, settings=None, keep_paths: bool = False,
+                 beside: bool | None = None):
         lo, hi = PERIOD_RANGE
         if not (isinstance(period_s, (int, float)) and lo <= period_s <= hi):
             raise InputError(f"period_s: expected a control period in [{lo:g}, {hi:g}] s, found {period_s!r:.30}")
@@ -121,6 +130,9 @@ class Controller:
         self._way: list = []          # the periods driven along the way it came (not those driven back)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
+        self._beside_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-beside")
+        self.beside = self.settings.beside if beside is None else bool(beside)
+        self._beside = None           # (world, future of rejoin.beside): the whole-route plan made beside
         # the record
         self.plans: list = []
         self.horizon = EX.HorizonStats(ps.horizon_s)
@@ -204,8 +216,11 @@ class Controller:
         """Stop the worker threads (a plan being made is finished first). A later
         :meth:`step` holds the wheels at rest ('stopped')."""
         self.closed = True
+        if self._beside is not None:
+            self._beside[2].set()           # a plan made beside is called off
         self._horizon_pool.shutdown(wait=True, cancel_futures=True)
         self._route_pool.shutdown(wait=True, cancel_futures=True)
+        self._beside_pool.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self):
         return self
@@ -328,6 +343,42 @@ class Controller:
                 break
         return p
 
+    def _start_beside(self, X: np.ndarray) -> None:
+        """The whole-route plan made beside the horizon (:func:`sbmpc.planning.rejoin.beside`)
+        from X for the world planned, in the third worker; an earlier one is called off."""
+        if not self.beside:
+            return
+        if self._beside is not None:
+            self._beside[2].set()
+        cancel = threading.Event()
+        fut = self._beside_pool.submit(_beside, self.plan_world, self.cost, X.copy(), cancel)
+        self._beside = (self.plan_world, fut, cancel, X.copy())
+
+    def _rejoin(self, X: np.ndarray, why: str):
+        """At a hand-over: (plan, tracker) of the whole-route plan made beside
+        (:mod:`sbmpc.planning.rejoin`), waited for where it is not ready yet (it was
+        started with the run: as a rule it is); None where there is none for the world
+        planned (none made, one for a model since replaced, or it found no plan). Used
+        once: a later hand-over plans the whole route from where the vehicle stands."""
+        if self._beside is None or self._beside[0] is not self.plan_world:
+            return None
+        _, fut, _, X0 = self._beside
+        self._beside = None
+        p, tr = yield _Await(fut, "waiting")
+        if tr is None:
+            return None
+        self.horizon.rejoined += 1
+        self._record(p, X0, f"{why}: the whole-route plan made beside from t = {X0[K.S_T]:.1f} s", False, X0)
+        return p, tr
+
+    def _join(self, p, X: np.ndarray):
+        """The rest of the whole-route plan ``p`` from where the estimate X joins it, in
+        periods (:func:`sbmpc.planning.rejoin.join`, within the run's re-plan
+        tolerances), or None."""
+        rs = self.settings
+        return RJ.join(p, X, self.world.scenario.planner.period_s, self.period_s, rs.tol_xy,
+                       math.radians(rs.tol_yaw_deg), rs.tol_v)
+
     def _on_ticks(self, control) -> tuple:
         """``control`` (wl, wr, duration_s) with its duration a whole number of control
         periods (at least one): how long the robot's loop commands it."""
@@ -417,6 +468,8 @@ class Controller:
         kept = True                # the plan followed keeps the margin
         held = False               # the last period was held back by the guard, nothing driven since
         settled = False            # the last period driven held the wheels at rest
+        tracking = None            # the whole-route plan made beside that the horizon plans lead onto
+        self._start_beside(X)
         # the first plan has its own budget: the set-up (the value, the turn cost) came with
         # the controller, before the robot's first call (it is recorded with the first plan)
         h = yield from self._await_horizon(X, None, ps.horizon_first_budget_s, "planning")
@@ -432,6 +485,17 @@ class Controller:
             if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
                 why = ("the horizon plan found no way on" if not h.found else
                        f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
+                got = None if tracking is not None else (yield from self._rejoin(X, why))
+                if got is not None:
+                    # the hand-over without waiting: the plan made beside, from where the
+                    # vehicle is on it, else horizon plans that lead onto it
+                    self.planner, tracking = got[1], got[0]
+                    togo.clear()
+                    guide, kept = self._join(tracking, X), EX.keeps_margin(tracking)
+                    if guide is None:
+                        h = self._made((yield from self._await_horizon(X)), f"{why}: onto the whole-route plan "
+                                       "made beside", X)
+                    continue
                 p, guide, kept = yield from route(X, f"{why}: whole-route plan")
                 if not p.found:
                     Xb = yield from self._back_off(X)
@@ -452,7 +516,7 @@ class Controller:
                     control = (control[0], control[1], max(control[2], ps.period_s))
             else:
                 step = periods(h.controls, ps.period_s)
-                control, status = step[0], "horizon"
+                control, status = step[0], "horizon" if tracking is None else "tracking"
                 if h.goal and len(step) == 1:
                     control = (control[0], control[1], max(control[2], ps.period_s))
             if self.guards and EX.held(self.guards, X, control, kept, self._tilt):
@@ -492,6 +556,15 @@ class Controller:
                 rebuilt = yield from self._as_weaker(X, control)
                 if rebuilt:
                     togo.clear()            # the terminal cost of another model
+                    tracking = None         # (the tracker was of the model replaced)
+                    self._start_beside(X)
+            if guide is not None and tracking is not None and (off or not guide):
+                # off the plan made beside, or at its end short of the goal: the tracker's
+                # horizon plans take over again (nothing waited for)
+                why = "off the whole-route plan made beside" if off else "its end short of the goal"
+                guide = None
+                h = self._made((yield from self._await_horizon(X)), why, X)
+                continue
             if guide is not None:
                 if off or not guide:
                     p, guide, kept = yield from route(X, "off the whole-route plan" if off else
@@ -507,6 +580,11 @@ class Controller:
                             return "stopped", (f"no way on from ({Xb[K.S_X]:.2f}, {Xb[K.S_Y]:.2f}) at "
                                                f"t = {Xb[K.S_T]:.1f} s, after backing off: {p.reason}")
                 continue
+            if tracking is not None and not stalled:
+                guide = self._join(tracking, X)       # on the plan made beside: it is followed
+                if guide is not None:
+                    kept = EX.keeps_margin(tracking)
+                    continue
             togo.append(self.planner.to_go(X))
             if off:
                 st.from_measured += 1
@@ -518,6 +596,15 @@ class Controller:
                 h = self._made((yield from self._await_horizon(X, None if rebuilt else h)), why, X)
             else:
                 h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
+
+
+def _beside(world: WO.World, cost: str, X: np.ndarray, cancel) -> tuple:
+    """:func:`sbmpc.planning.rejoin.beside`, (None, None) where it failed or was called
+    off: a plan made beside is an offer, never the reason a run stops."""
+    try:
+        return RJ.beside(world, cost, X, cancel)
+    except Exception:       # noqa: BLE001 - called off, or no plan from there: the hand-over plans as before
+        return None, None
 
 
 __all__ = ["Controller", "PERIOD_RANGE", "STATUSES"]

@@ -101,6 +101,8 @@ STATUSES = {
     "horizon": "driving a horizon plan (the next one is made while this period is driven)",
     "settling": "the wheels held at rest for a period: the horizon plan found no way on from a saturated drive",
     "waiting": "at rest, waiting for a plan from the measured state (off the prediction, stalled or held back)",
+    "tracking": "driving a horizon plan that leads onto and along the whole-route plan made beside from the start "
+                "(the horizon saw no way on or made no progress)",
     "whole-route": "following a whole-route plan (the horizon saw no way on or made no progress)",
     "held": "at rest: the guard held the period back (it would come within half the tip-over margin or leave the map)",
     "backing": "driving back along the way it came before it re-plans (the guard held back every way on)",

@@ -1,0 +1,154 @@
+"""The hand-over without waiting (:mod:`sbmpc.planning.rejoin`): the cost-to-go that
+leads onto a whole-route plan's path and along it, the join onto that plan within the
+run's tolerances, and the controller that hands over to the plan made beside it."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dynamics import kernels as K
+from sbmpc import receding as R
+from sbmpc import scenario as SC
+from sbmpc.planning import heuristics as HE
+from sbmpc.planning import horizon as HZ
+from sbmpc.planning import plan as PL
+from sbmpc.planning import rejoin as RJ
+from sbmpc.planning import world as WO
+from sbmpc.problems import skidsteer as SS
+
+SCN = Path(__file__).resolve().parents[1] / "scenarios"
+SPEED = 0.8      # m/s along the path drawn by hand
+
+
+@pytest.fixture(scope="module")
+def flat():
+    scn = SC.load(SCN / "flat.yaml")
+    return WO.resolve(replace(scn, planner=replace(scn.planner, horizon_s=10.0)))
+
+
+def _l_path(dt=0.05):
+    """A path around two sides of flat's map: east along y = 2 from the start (2, 2) to
+    (16, 2), then north to the goal (16, 9), at SPEED; its trajectory channels."""
+    a = np.arange(0.0, 14.0, SPEED * dt)
+    b = np.arange(0.0, 7.0 + 1e-9, SPEED * dt)
+    x = np.r_[2.0 + a, np.full(b.size, 16.0)]
+    y = np.r_[np.full(a.size, 2.0), 2.0 + b]
+    yaw = np.r_[np.zeros(a.size), np.full(b.size, math.pi / 2)]
+    t = np.arange(x.size) * dt
+    return {"t": t, "x": x, "y": y, "yaw": yaw, "v": np.full(x.size, SPEED), "energy_J": 20.0 * SPEED * t}
+
+
+def _node(world, x, y):
+    e = world.emap
+    return int(round((y - e.origin[1]) / e.resolution)), int(round((x - e.origin[0]) / e.resolution))
+
+
+def test_the_tube_values_the_path_at_its_remaining_cost_and_leads_along_it_not_to_the_goal(flat):
+    """On every node the path crosses the value is the path's remaining time (within a
+    cell's travel: the node keeps the last sample in it): no shortcut undercuts the path
+    from its own nodes, which with steps priced at their lower bound (kappa 1) the way
+    straight to the goal would (the grid's lower bound there is a third less). Off the
+    path the value is higher, and it falls along the path (east on the first leg), not
+    towards the goal (north-east)."""
+    tr = _l_path()
+    grid, kappa = RJ.tube_to_go(flat, "time", tr)
+    assert RJ.KAPPA_MIN <= kappa <= RJ.KAPPA_MAX
+    lower = HE.cost_to_go(flat, "time")[0]
+    rest = tr["t"][-1] - tr["t"]
+    cell_s = flat.emap.resolution / SPEED
+    for k in range(0, tr["t"].size - 1, 25):
+        j, i = _node(flat, tr["x"][k], tr["y"][k])
+        assert grid[j, i] == pytest.approx(rest[k], abs=cell_s + 1e-9)
+    j, i = _node(flat, 4.0, 2.0)
+    assert lower[j, i] < 0.75 * grid[j, i]          # the lower bound would cut the corner
+    # off the first leg, 1 m north of it: dearer than the path beside it, and downhill east
+    j, i = _node(flat, 8.0, 3.0)
+    jp, ip = _node(flat, 8.0, 2.0)
+    assert grid[j, i] > grid[jp, ip]
+    gy, gx = np.gradient(grid[j - 2:j + 3, i - 2:i + 3])
+    sx, sy = -gx[2, 2], -gy[2, 2]
+    assert abs(math.degrees(math.atan2(sy, sx))) < 30.0, (sx, sy)
+
+
+def test_a_tracker_plan_from_beside_the_path_ends_on_it_where_the_plain_horizon_heads_for_the_goal(flat):
+    """From 1.5 m north of the L path's first leg, facing east: the tracker's horizon plan
+    ends within 0.5 m of the path; the plain horizon's (terminal cost: the map's own) ends
+    metres off it, on the way straight to the goal."""
+    tr = _l_path()
+    tracker = RJ.tracker(flat, "time", SimpleNamespace(trajectory=tr))
+    ps = flat.scenario.planner
+    plain = HZ.HorizonPlanner(flat, "time", ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+    X = WO.start_state(flat)
+    X[K.S_X], X[K.S_Y] = 5.0, 3.5
+    ends = {}
+    for name, planner in (("tracker", tracker), ("plain", plain)):
+        h = planner.plan(X, None, 2.0)
+        assert h.found, (name, h.reason)
+        ex = R._Executor(flat, "time")
+        S = X
+        for c in h.controls:
+            _, _, S = ex.step(S, c, record=False)
+        ends[name] = float(np.min(np.hypot(tr["x"] - S[K.S_X], tr["y"] - S[K.S_Y])))
+    assert ends["tracker"] < 0.5 and ends["plain"] > 1.5, ends
+
+
+@pytest.fixture(scope="module")
+def route(flat):
+    return PL.plan(flat, "time")
+
+
+def _at(world, tr, k):
+    X = WO.start_state(world)
+    X[K.S_T], X[K.S_X], X[K.S_Y], X[K.S_YAW] = tr["t"][k], tr["x"][k], tr["y"][k], tr["yaw"][k]
+    X[SS.X_V] = tr["v"][k]
+    return X
+
+
+def test_a_vehicle_on_the_plan_joins_it_where_it_is_and_one_off_it_does_not(flat, route):
+    """A state on the plan's trajectory at t = 5 s joins it there: the rest of its
+    controls, in periods, driving the 1 kHz replay's remaining time; 1 m off it, turned
+    about, or 0.3 m/s slower than the plan there (the run's tolerances: 0.5 m, 15 deg,
+    0.2 m/s), it does not."""
+    assert route.found
+    tr = route.trajectory
+    ps, rs = flat.scenario.planner, flat.scenario.run
+    k = int(np.flatnonzero(np.isclose(tr["t"] - tr["t"][0], 5.0))[0])
+    args = (ps.period_s, 0.1, rs.tol_xy, math.radians(rs.tol_yaw_deg), rs.tol_v)
+    rest = RJ.join(route, _at(flat, tr, k), *args)
+    assert rest is not None
+    assert sum(d for _, _, d in rest) == pytest.approx(tr["t"][-1] - tr["t"][k], abs=0.06)
+    whole = HZ.periods(route.controls, ps.period_s)
+    assert rest[-3:] == whole[-3:]
+    X = _at(flat, tr, k)
+    X[K.S_Y] += 1.0
+    assert RJ.join(route, X, *args) is None
+    X = _at(flat, tr, k)
+    X[K.S_YAW] += math.pi
+    assert RJ.join(route, X, *args) is None
+    X = _at(flat, tr, k)
+    X[SS.X_V] -= 0.3
+    assert RJ.join(route, X, *args) is None
+
+
+def test_the_controller_hands_over_to_the_plan_made_beside_without_waiting_for_a_new_one(flat, monkeypatch):
+    """Horizon plans stubbed to find no way on after t = 3 s: the controller hands over
+    to the whole-route plan it made beside from the start (joined where the vehicle is,
+    or led onto by a tracker's horizon plans), plans no whole-route plan from where the
+    vehicle stands, and reaches the goal (``run.beside``)."""
+    real = HZ.HorizonPlanner.plan
+
+    def blind(self, start, previous=None, budget_s=None):
+        if self.tracks is None and start[K.S_T] > 3.0:
+            return HZ.HorizonPlan(start, [], np.inf, np.inf, False, "", 0, 0.0, reason="stubbed: no way on")
+        return real(self, start, previous, budget_s)
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
+    world = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, beside=True)))
+    out = R.run(world, "time")
+    assert out.status == "reached", out.reason
+    assert out.horizon.rejoined == 1 and out.horizon.fallbacks == 0
+    assert any("made beside" in p.why for p in out.plans)
