@@ -6,13 +6,14 @@ window of the run).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
 
 from dynamics import kernels as K
 
-from .execution import Executor
+from .execution import Executor, weaker
 from .planning import world as WO
 
 
@@ -39,8 +40,28 @@ class Evidence:
         if k < 2:
             return
         if X0 is not None and control is not None:
-            self.periods.append((X0.copy(), tuple(control), measured[::FIT_EVERY].copy()))
-        m, p = measured[:k], predicted[:k]
+            idx = np.arange(0, len(measured), FIT_EVERY)
+            self.periods.append((X0.copy(), tuple(control), measured[idx].copy(), idx))
+        self._compare(measured[:k], predicted[:k])
+
+    def add_samples(self, measured: np.ndarray, predicted: np.ndarray, X0: np.ndarray, control: tuple,
+                    idx: np.ndarray) -> None:
+        """A period as a robot's loop measures it: rows of K.CHANNELS at the controller
+        steps ``idx`` from the period's start (the robot's calls; what it did not measure
+        NaN), the prediction's rows at the same steps, the state X0 (the estimate) it
+        began from and its ``control`` (:class:`sbmpc.robot.Controller`)."""
+        k = min(len(measured), len(predicted), len(idx))
+        if k < 2:
+            return
+        self.periods.append((X0.copy(), tuple(control), measured[:k].copy(), np.asarray(idx[:k], np.int64)))
+        self._compare(measured[:k], predicted[:k])
+
+    def _compare(self, m: np.ndarray, p: np.ndarray) -> None:
+        """A period's mean |current| and |speed|, measured and predicted (where measured)."""
+        ok = ~np.isnan(m[:, K.R_IL]) & ~np.isnan(m[:, K.R_IR]) & ~np.isnan(m[:, K.R_V])
+        if ok.sum() < 2:
+            return
+        m, p = m[ok], p[ok]
         self.rows.append((float(np.abs(m[:, K.R_IL]).mean() + np.abs(m[:, K.R_IR]).mean()),
                           float(np.abs(p[:, K.R_IL]).mean() + np.abs(p[:, K.R_IR]).mean()),
                           float(np.abs(m[:, K.R_V]).mean()), float(np.abs(p[:, K.R_V]).mean())))
@@ -76,6 +97,17 @@ def inference_note(inf: dict) -> str:
         return "no period driven before it to compare with the planning model"
     return (f"over the {inf['periods']} periods before it the vehicle drew {inf['current_ratio']:.2f} x the "
             f"predicted current at {inf['speed_ratio']:.2f} x the predicted speed: {inf['inferred']}")
+
+
+def stall_failure(stalls: list, name: str, inferred: dict | None) -> str:
+    """Why a run failed after its stalls: weaker than the planning model, unless what was
+    measured before the last stall says otherwise (:meth:`Evidence.infer`)."""
+    if inferred is None or inferred["inferred"] in ("weaker", "unknown"):
+        return weaker(stalls, name) + (f" ({inference_note(inferred)})" if inferred else "")
+    where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
+    return (f"the vehicle stalled {len(stalls)} time{'s' if len(stalls) > 1 else ''}, at {where}, where the plans of "
+            f"{name} predicted it would get through; {inference_note(inferred)}: the ways the plans took there do "
+            f"not hold for it at the controller rate, though it is not weaker than the planning model")
 
 
 FIT = ("mass", "v_max", "current_limit", "grip", "mu_roll")   # what the online fit scales (fit)
@@ -118,16 +150,16 @@ def fit(evidence: "Evidence", world: WO.World, cost: str) -> dict | None:
         f = dict(zip(FIT, np.exp(u)))
         ex = Executor(scaled(world, f), cost)
         out = [u / FIT_PRIOR]
-        for X0, control, meas in periods:
+        for X0, control, meas, idx in periods:
             rec, _, _ = ex.step(X0, control)
-            sim = rec[::FIT_EVERY]
+            sim = rec[idx[idx < len(rec)]]
             if len(sim) < len(meas):        # the model stalled or tipped before the period's end: it stays there
                 sim = np.vstack([sim, np.repeat(sim[-1:], len(meas) - len(sim), axis=0)])
             n = len(meas)
             w = 1.0 / np.sqrt(n)        # a period weighs as one sample per channel (its rows are correlated)
             out += [w * (sim[:n, K.R_WL] - meas[:n, K.R_WL]) / sw, w * (sim[:n, K.R_WR] - meas[:n, K.R_WR]) / sw,
                     w * (sim[:n, K.R_IL] - meas[:n, K.R_IL]) / si, w * (sim[:n, K.R_IR] - meas[:n, K.R_IR]) / si]
-        return np.concatenate(out)
+        return np.nan_to_num(np.concatenate(out))       # (a channel a robot did not measure: no residual)
     lo, hi = np.log(FIT_BOUNDS[0]), np.log(FIT_BOUNDS[1])
     res = least_squares(residuals, np.zeros(len(FIT)), bounds=(np.full(len(FIT), lo), np.full(len(FIT), hi)),
                         diff_step=1e-3, max_nfev=40)
@@ -144,6 +176,23 @@ def fit(evidence: "Evidence", world: WO.World, cost: str) -> dict | None:
     out.update(se={k: round(float(e), 4) for k, e in zip(FIT, se)}, cost=round(float(res.cost), 3),
                periods=len(periods))
     return out
+
+
+def key(fitted: dict) -> tuple:
+    """A fit's factors (:data:`FIT`) rounded to 0.01: the key of :func:`as_measured`
+    (re-plans share its grids and value)."""
+    return tuple(round(fitted[k], 2) for k in FIT)
+
+
+@functools.lru_cache(maxsize=16)
+def as_measured(world: WO.World, factors: tuple) -> WO.World:
+    """The planning world scaled by the online fit's factors (:data:`FIT`, :func:`scaled`),
+    named by those beyond 2 %. Cached per world and factors (rounded to 0.01: re-plans
+    share its grids and value)."""
+    f = dict(zip(FIT, factors))
+    w = scaled(world, f)
+    said = ", ".join(f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02)
+    return replace(w, vehicle=w.vehicle.replace(name=f"{world.vehicle.name} as measured" + (f" ({said})" if said else "")))
 
 
 def confident(f: dict, tol: float = 0.05) -> bool:

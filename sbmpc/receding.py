@@ -51,7 +51,8 @@ from .problems import skidsteer as SS
 from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
-from .estimate import FIT, Evidence, confident, fit as fit_vehicle, inference_note, scaled
+from . import estimate as ES
+from .estimate import FIT, Evidence, confident, fit as fit_vehicle
 from . import execution as EX
 from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
@@ -193,34 +194,17 @@ def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, f
     if out.weaker_from is None:
         out.weaker_from = float(X[K.S_T])
     if fitted is not None:
-        base = _as_measured(world, _factors(fitted))
+        base = ES.as_measured(world, ES.key(fitted))
     base = base or world
     tw = EX.twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
 
 
-def _factors(fitted: dict) -> tuple:
-    """A fit's factors (:data:`sbmpc.estimate.FIT`) rounded to 0.01: the key of
-    :func:`_as_measured` (re-plans share its grids and value)."""
-    return tuple(round(fitted[k], 2) for k in FIT)
-
-
-@functools.lru_cache(maxsize=16)
-def _as_measured(world: WO.World, factors: tuple) -> WO.World:
-    """The planning world scaled by the online fit's factors (:data:`sbmpc.estimate.FIT`,
-    :func:`sbmpc.estimate.scaled`), named by those beyond 2 %. Cached per world and
-    factors (rounded to 0.01: re-plans share its grids and value)."""
-    f = dict(zip(FIT, factors))
-    w = scaled(world, f)
-    said = ", ".join(f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02)
-    return replace(w, vehicle=w.vehicle.replace(name=f"{world.vehicle.name} as measured" + (f" ({said})" if said else "")))
-
-
 def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World | None = None) -> str:
     """The planning model in a run's messages: the world's vehicle, and from
     ``out.weaker_from`` on the margin's twin (``planner``) of it or of ``base`` (the
-    vehicle as measured, :func:`_as_measured`)."""
+    vehicle as measured, :func:`sbmpc.estimate.as_measured`)."""
     if planner is world:
         return world.vehicle.name
     if out.weaker_from is None:          # adapted (run.adapt_periods), no stall yet: the vehicle as measured
@@ -260,7 +244,7 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, Xt: np.ndarray, real: 
     out.stalls += 1
     stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
     if out.stalls > out.settings.max_stalls:
-        return _stall_failure(stalls, name, inferred)
+        return ES.stall_failure(stalls, name, inferred)
     _protected(Xt, real)
     return None
 
@@ -297,17 +281,6 @@ def _ground(truth: TT.Truth, Xt: np.ndarray) -> str:
                                   f"the true ground, ")
     return (f"{tilt}currents {Xt[K.S_IL]:.2f}/{Xt[K.S_IR]:.2f} A of {w.vehicle.current_limit:g}; the true "
             f"vehicle: {truth.name}")
-
-
-def _stall_failure(stalls: list, name: str, inferred: dict | None) -> str:
-    """Why a run failed after its stalls: weaker than the planning model, unless what was
-    measured before the last stall says otherwise (:meth:`Evidence.infer`)."""
-    if inferred is None or inferred["inferred"] in ("weaker", "unknown"):
-        return _weaker(stalls, name) + (f" ({inference_note(inferred)})" if inferred else "")
-    where = ", ".join(f"({a:.1f}, {b:.1f})" for a, b in stalls)
-    return (f"the vehicle stalled {len(stalls)} time{'s' if len(stalls) > 1 else ''}, at {where}, where the plans of "
-            f"{name} predicted it would get through; {inference_note(inferred)}: the ways the plans took there do "
-            f"not hold for it at the controller rate, though it is not weaker than the planning model")
 
 
 REPLAY_SCHEMA = "sbmpc.run-source/1"
@@ -569,7 +542,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     why = why.replace(HELD, "stalled with no way on", 1)   # (not the guard's: no stop on its failure)
                     continue
                 # after stalls where the plans drove it, and from where none is seen now
-                weaker = (f"; {_stall_failure(stalls, _named(world, planner, out, base), out.inferred[-1])}"
+                weaker = (f"; {ES.stall_failure(stalls, _named(world, planner, out, base), out.inferred[-1])}"
                           if stalls else "")
                 return finish("failed", f"no path from ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}) at t = {X[K.S_T]:.1f} s "
                                         f"({why}): {p.reason}{weaker}", "no_path")
@@ -626,7 +599,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 planner, model, base = _weaker_model(world, cost, out, X, fitted, base)
                 as_twin = True
                 if fitted is not None:
-                    base_key = _factors(fitted)
+                    base_key = ES.key(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
             if ps.margin > 0.0 and EX.stalled_again(stalls, X):
                 # stalled again where it stalled before, with the plans of the vehicle as
@@ -666,9 +639,9 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 since_fit = 0
                 f = fit_vehicle(evidence, world, cost)
                 if f is not None and confident(f):
-                    key = _factors(f)
+                    key = ES.key(f)
                     if max(abs(a - b) for a, b in zip(key, base_key)) > 0.03:     # another vehicle than planned for
-                        base, base_key = _as_measured(world, key), key
+                        base, base_key = ES.as_measured(world, key), key
                         planner = EX.twin_planner(base) if as_twin else base
                         model = _Executor(planner, cost)
                         out.planned_as = base.vehicle.name
@@ -708,6 +681,7 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
         ctrl.ended_at(float(X[K.S_T]))
         ctrl.close()
         out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
+        out.inferred, out.adapted = ctrl.inferred, ctrl.adapted
         if ctrl.planned_as is not None:
             out.planned_as, out.weaker_from = ctrl.planned_as, ctrl.weaker_from
         out.periods, out.driven, out.dropped = ctrl.periods, ctrl.driven, drop.count

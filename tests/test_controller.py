@@ -278,15 +278,21 @@ def test_after_a_stall_the_controller_plans_as_the_margins_twin_and_reaches():
     """steep_hill with a P3-AT whose drive gives 17 % less current (3.0 A for 3.62): the
     horizon plans made for the file's vehicle drove it into the flank, where it stalled four
     times and the run failed. From the first stall on, the controller plans for the
-    margin's pessimistic twin (as whole-route runs do), and the run reaches the goal with
-    at most two stalls; the run says from when and as what it planned."""
+    margin's pessimistic twin (as whole-route runs do) of the vehicle as the periods before
+    the stall measured it: the fit from the robot's 0.1 s measurements (wheel speeds,
+    currents) finds the current limit 0.83 times the file's within 3 %, and says the
+    stall was a weaker drive's. The run reaches the goal with at most two stalls, and says
+    from when and as what it planned."""
     world = _world("steep_hill", horizon_s=10.0)
     weak = world.vehicle.replace(name="p3at_weak", current_limit=3.0)
     out = R.run(world, "time", truth=weak)
     assert out.status == "reached", out.reason
     assert 1 <= out.stalls <= 2
-    assert out.planned_as == "p3at" and out.weaker_from is not None and out.weaker_from > 0.0
-    assert any("planning as the margin's twin of p3at" in p.why for p in out.plans)
+    first = out.inferred[0]
+    assert first["inferred"] == "weaker" and first["fit"]["current_limit"] == pytest.approx(3.0 / 3.62, rel=0.03)
+    assert out.planned_as.startswith("p3at as measured (") and "current_limit x0.8" in out.planned_as
+    assert out.weaker_from is not None and out.weaker_from > 0.0
+    assert any("planning as the margin's twin of p3at as measured" in p.why for p in out.plans)
 
 
 def test_a_second_back_off_goes_further_back_along_the_way_never_forward_again(flat):
@@ -314,3 +320,25 @@ def test_a_second_back_off_goes_further_back_along_the_way_never_forward_again(f
         assert len(ctrl.driven) == 2 and ctrl._way == ctrl.driven[:1]
     finally:
         ctrl.close()
+
+
+def test_the_controller_adapts_to_the_vehicle_its_measurements_show(flat):
+    """A P3-AT with 20 % less battery voltage on the floor, driven by the controller at
+    0.1 s with run.adapt_periods 3: the fit from the robot's own measurements (wheel
+    speeds and currents every 0.1 s, made in the worker while it drives) pins v_max at
+    0.80 of the file's and the others within 3 %, and the horizon plans are made for that
+    vehicle from then on: a plan then still holds one period later (the warm start kept)
+    far more often than without adaptation (14 of 24 plans against 4 of 25 measured), where the
+    plans of the file's vehicle, too fast by a fifth, were replaced by the search every
+    period; the run reaches the goal."""
+    slow = flat.vehicle.replace(v_max=0.8 * flat.vehicle.v_max)
+    plain = R.run(flat, "time", slow)
+    res = R.run(flat, "time", slow, replace(flat.scenario.run, adapt_periods=3))
+    assert plain.end == res.end == "reached"
+    assert len(res.adapted) >= 1 and not plain.adapted
+    f = res.adapted[0]["fit"]
+    assert f["v_max"] == pytest.approx(0.8, abs=0.02)
+    assert all(abs(f[k] - 1.0) < 0.03 for k in ("mass", "current_limit", "grip", "mu_roll")), f
+    assert res.planned_as.startswith("p3at as measured (v_max x0.8")
+    assert res.horizon.kept_previous > plain.horizon.kept_previous + 3, (res.horizon.kept_previous,
+                                                                         plain.horizon.kept_previous)

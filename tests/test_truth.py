@@ -204,10 +204,11 @@ def test_a_stall_is_read_from_the_currents_and_speeds_before_it(i, v, said):
 
 
 def test_a_stronger_vehicles_stalls_are_not_called_weaker():
-    why = R._stall_failure([(1.0, 2.0), (1.5, 2.0)], "p3at", {"inferred": "stronger", "periods": 8,
+    from sbmpc import estimate as E2
+    why = E2.stall_failure([(1.0, 2.0), (1.5, 2.0)], "p3at", {"inferred": "stronger", "periods": 8,
                                                               "current_ratio": 0.84, "speed_ratio": 1.0})
     assert "not weaker" in why and "0.84 x the predicted current" in why
-    assert "weaker there than the planning model" in R._stall_failure([(1.0, 2.0)], "p3at", None)
+    assert "weaker there than the planning model" in E2.stall_failure([(1.0, 2.0)], "p3at", None)
 
 
 def test_a_stall_plans_as_the_vehicle_the_periods_before_it_measured(flat):
@@ -294,6 +295,7 @@ def test_a_run_that_adapts_plans_for_the_vehicle_it_measures(flat):
 
 def test_a_run_that_adapted_names_its_planning_vehicle_before_any_stall(flat):
     """(Adapted, no stall yet: no 'from t = None s'.)"""
+    from sbmpc import estimate as E
     out = R.RunResult("flat", "time", "p3at", "p3at", flat.scenario.run)
-    measured = R._as_measured(flat, (1.0, 0.8, 1.0, 1.0, 1.0))
+    measured = E.as_measured(flat, (1.0, 0.8, 1.0, 1.0, 1.0))
     assert R._named(flat, measured, out, measured) == "p3at, then p3at as measured (v_max x0.80)"

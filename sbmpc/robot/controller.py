@@ -57,6 +57,7 @@ from ..planning import rejoin as RJ
 from ..planning import world as WO
 from ..planning.horizon import HorizonPlanner, periods
 from ..problems import skidsteer as SS
+from .. import estimate as ES
 from .. import execution as EX
 from .estimator import Estimator
 from .messages import STATUSES, Command, Measurement, to_twist
@@ -125,6 +126,16 @@ class Controller:
         self.plan_world = world       # what the plans are made for (the margin's twin after a stall)
         self.planned_as = None        # the vehicle whose twin plans, once a stall showed it weaker
         self.weaker_from = None       # when [s]
+        self.evidence = ES.Evidence()  # what the periods driven say of the vehicle (estimate: a stall's sign, the fit)
+        self.nominal = EX.Executor(world, self.cost)   # the planning vehicle's one-period predictions
+        self.inferred: list = []      # per stall: what the periods before it said (estimate.Evidence.infer, fit)
+        self.adapted: list = []       # the fits the plans took up without a stall (run.adapt_periods)
+        self._base = world            # the vehicle planned for (or whose twin): the file's, or as measured
+        self._as_twin = False         # the margin's twin of _base plans (a stall showed the vehicle weaker)
+        self._base_key = (1.0,) * len(ES.FIT)   # _base's factors on the file's vehicle (estimate.key)
+        self._samples: list = []      # (t, row of K.CHANNELS) measured at each step of the period driven
+        self._fitting = None          # the adaptation's fit being made in the route worker (run.adapt_periods)
+        self._since_fit = 0           # periods driven since the last adaptation's fit
         self._marks = ()              # slopes a second stall near the first marked impassable
         self._retraced = 0            # retraces tried (execution.RETRACE_PERIODS)
         self._way: list = []          # the periods driven along the way it came (not those driven back)
@@ -193,6 +204,7 @@ class Controller:
         issued = [] if self._last_t is None else [(float(done[0]), float(done[1]), t - self._last_t)]
         X = self.estimator.update(t, m, issued)
         stalled = self.estimator.stalled_now
+        self._samples.append((float(t), self._sample(m)))
         # the map's tilt error where the vehicle stands, from the IMU (the guard's)
         self._tilt = 0.0 if m.pitch is None else EX.tilt_error(self.world, X, m.pitch, m.roll)
         self._X = X
@@ -200,6 +212,40 @@ class Controller:
         cmd = self._advance(t, X, stalled)
         self.latencies.append(time.perf_counter() - t0)
         return cmd
+
+    def _sample(self, m: Measurement) -> np.ndarray:
+        """What a measurement says of the drive as a row of K.CHANNELS (NaN where it says
+        nothing): the wheel speeds, the currents (or the efforts over the torque
+        constants) and the forward speed (odometry's, else the wheels' mean)."""
+        v = self.world.vehicle
+        row = np.full(K.NR, np.nan)
+        il, ir = m.il, m.ir
+        if il is None and m.tau_l is not None:
+            il, ir = m.tau_l / (v.torque_constant * v.torque_scale_left), m.tau_r / (v.torque_constant * v.torque_scale_right)
+        if il is not None:
+            row[K.R_IL], row[K.R_IR] = il, ir
+        if m.wl is not None:
+            row[K.R_WL], row[K.R_WR] = m.wl, m.wr
+        if m.v is not None:
+            row[K.R_V] = m.v
+        elif m.wl is not None:
+            row[K.R_V] = 0.5 * v.wheel_radius * (m.wl + m.wr)
+        return row
+
+    def _witness(self, X0: np.ndarray, control, t0: float, t1: float) -> None:
+        """A period driven from the estimate X0 (robot times t0 to t1) kept as evidence of
+        the vehicle (:meth:`sbmpc.estimate.Evidence.add_samples`): the measurements of the
+        steps in it against the planning vehicle's prediction from X0 at the same
+        controller steps."""
+        rows = [(t, r) for t, r in self._samples if t0 <= t < t1]
+        self._samples = [(t, r) for t, r in self._samples if t >= t1]
+        if len(rows) < 2 or all(np.isnan(r[K.R_WL]) and np.isnan(r[K.R_IL]) for _, r in rows):
+            return
+        rate = self.world.vehicle.controller_rate
+        idx = np.array([int(round((t - t0) * rate)) for t, _ in rows], np.int64)
+        rec, _, _ = self.nominal.step(X0, (control[0], control[1], round(t1 - t0, 9)))
+        self.evidence.add_samples(np.array([r for _, r in rows]), rec[np.minimum(idx, len(rec) - 1)], X0,
+                                  (control[0], control[1], round(t1 - t0, 9)), idx)
 
     def ended_at(self, t: float) -> None:
         """The run ended at robot time ``t`` [s] (the goal reached, or the robot stopped
@@ -389,38 +435,91 @@ class Controller:
         """Drives one period (``control`` on ticks, :meth:`_on_ticks`); returns (estimate,
         stalled) at its end, the period counted."""
         wl, wr, _ = control
-        t_start = self._last_t
+        t_start, X0 = self._last_t, self._X
         X, stalled = yield _Drive(control, status)
         self.periods += 1
         self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
         if status != "backing":
             self._way.append(self.driven[-1])
+        if not stalled:
+            self._witness(X0, control, t_start, self._last_t)
         return X, stalled
 
     def _as_weaker(self, X: np.ndarray, control):
-        """After a stall where the plans drove the vehicle (the margin on), the plans are
-        made from here on for the margin's pessimistic twin of the planning vehicle
-        (:func:`sbmpc.execution.twin_planner`, as ``sbmpc run``'s whole-route runs do);
-        stalled again within ``MARK_NEAR`` of an earlier stall, the slope ahead is a wall
-        in their map too (:func:`sbmpc.execution.marked`). The horizon planner for that
-        world is built in the worker (its value and motion tables); returns whether it was
-        rebuilt."""
+        """After a stall where the plans drove the vehicle (the margin on), what the
+        periods before it say (:class:`sbmpc.estimate.Evidence`, as whole-route runs do):
+        the vehicle fitted to them (:func:`sbmpc.estimate.fit`, made in the worker) where
+        there are enough, and the sign of the stall. From here on the plans are made for the
+        margin's pessimistic twin of the vehicle as fitted (without a fit, of the vehicle
+        planned for, unless the periods said it is stronger than that: the stall then came
+        from where the plans drove it, not from a weaker drive); stalled again within
+        ``MARK_NEAR`` of an earlier stall, the slope ahead is a wall in their map too
+        (:func:`sbmpc.execution.marked`). Returns whether the planner was rebuilt (its value
+        and motion tables, in the worker)."""
         if self.world.scenario.planner.margin <= 0.0:
             return False
+        inf = self.evidence.infer(X)
+        fitted = yield _Await(self._horizon_pool.submit(ES.fit, self.evidence, self.world, self.cost), "planning")
+        inf["fit"] = fitted
+        self.inferred.append(inf)
         marks = self._marks
-        if self.planned_as is not None and EX.stalled_again(self.stall_at, X):
+        if EX.stalled_again(self.stall_at, X):
             marks = marks + (EX.ahead(self.world, X, control),)
-        if self.planned_as is not None and marks == self._marks:
+        base, twin = self._base, self._as_twin
+        if fitted is not None:
+            base, twin = ES.as_measured(self.world, ES.key(fitted)), True
+            self._base_key = ES.key(fitted)
+        elif not twin and inf["inferred"] != "stronger":
+            twin = True
+        rebuilt = yield from self._replan_as(base, twin, marks)
+        if twin and self.weaker_from is None:
+            self.weaker_from = float(X[K.S_T])
+        return rebuilt
+
+    def _adapt(self, X: np.ndarray) -> bool:
+        """``run.adapt_periods``: every that many periods driven, the vehicle refitted to
+        the periods before (:func:`sbmpc.estimate.fit`) in the route worker, with the
+        horizon planner for it where the fit is confident and says another vehicle than
+        the one planned for (a factor 3 % off); taken up at the first period's end where
+        it is ready (a robot never waits on it; a lockstep run does). Returns whether the
+        plans are now made for the vehicle as measured."""
+        if self._fitting is None:
+            self._since_fit += 1
+            if self._since_fit >= self.settings.adapt_periods and len(self.evidence.periods) >= ES.FIT_MIN_PERIODS:
+                self._since_fit = 0
+                snap = ES.Evidence()
+                snap.periods.extend(self.evidence.periods)
+                self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, self._base_key,
+                                                        self._as_twin, self._marks)
             return False
-        self._marks = marks
-        w = EX.twin_planner(EX.marked(self.world, marks) if marks else self.world)
+        if not (self.lockstep or self._fitting.done()):
+            return False
+        fut, self._fitting = self._fitting, None
+        f, base, w, planner = fut.result()
+        if planner is None:
+            return False
+        self.planner, self.plan_world, self.model, self._base = planner, w, EX.Executor(w, self.cost), base
+        self._base_key = ES.key(f)
+        self.planned_as = base.vehicle.name
+        self.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
+        return True
+
+    def _replan_as(self, base: WO.World, twin: bool, marks: tuple):
+        """The plans made from here on for ``base`` (or the margin's twin of it), with the
+        slopes ``marks`` kept off: the horizon planner for that world built in the worker
+        (holding the wheels meanwhile). Returns whether anything changed."""
+        if (base, twin, marks) == (self._base, self._as_twin, self._marks):
+            return False
+        w = EX.marked(base, marks) if marks else base
+        w = EX.twin_planner(w) if twin else w
         ps = w.scenario.planner
         fut = self._horizon_pool.submit(HorizonPlanner, w, self.cost, ps.horizon_s, ps.horizon_budget_s,
                                         ps.horizon_expansions)
         self.planner = yield _Await(fut, "planning")
         self.plan_world, self.model = w, EX.Executor(w, self.cost)
-        if self.planned_as is None:
-            self.planned_as, self.weaker_from = self.world.vehicle.name, float(X[K.S_T])
+        self._base, self._as_twin, self._marks = base, twin, marks
+        if twin or base is not self.world:
+            self.planned_as = base.vehicle.name
         return True
 
     def _back_off(self, X: np.ndarray):
@@ -449,7 +548,9 @@ class Controller:
         self.stalls += 1
         self.stall_at.append((float(X[K.S_X]), float(X[K.S_Y])))
         if self.stalls > self.settings.max_stalls:
-            return EX.weaker(self.stall_at, self.world.vehicle.name)
+            inf = self.evidence.infer(X)
+            self.inferred.append(inf)
+            return ES.stall_failure(self.stall_at, self._base.vehicle.name, inf)
         return None
 
     # ---- the policy ----------------------------------------------------------------
@@ -547,17 +648,20 @@ class Controller:
             X, stalled = yield from self._drive(control, status)
             dxy, dyaw, dv = EX.deviation(X, P)
             off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
-            rebuilt = False
+            rebuilt = adapted = False
             if stalled:
                 failed = self._stalled_here(X)
                 if failed:
                     return "stopped", failed
                 off = True
                 rebuilt = yield from self._as_weaker(X, control)
-                if rebuilt:
-                    togo.clear()            # the terminal cost of another model
-                    tracking = None         # (the tracker was of the model replaced)
-                    self._start_beside(X)
+            elif rs.adapt_periods:
+                adapted = rebuilt = self._adapt(X)
+                off = off or adapted        # the next plan from the measured state, for the vehicle as measured
+            if rebuilt:
+                togo.clear()            # the terminal cost of another model
+                tracking = None         # (the tracker was of the model replaced)
+                self._start_beside(X)
             if guide is not None and tracking is not None and (off or not guide):
                 # off the plan made beside, or at its end short of the goal: the tracker's
                 # horizon plans take over again (nothing waited for)
@@ -591,11 +695,33 @@ class Controller:
                 why = ("stalled" if stalled else
                        f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s")
                 if rebuilt:
-                    why += f"; planning as the margin's twin of {self.planned_as}" + (
+                    why += ("; adapted" if adapted else "") + (
+                        f"; planning as the margin's twin of {self.planned_as}" if self._as_twin else
+                        f"; planning as {self._base.vehicle.name}") + (
                         f", {len(self._marks)} slope(s) kept off" if self._marks else "")
                 h = self._made((yield from self._await_horizon(X, None if rebuilt else h)), why, X)
             else:
                 h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
+
+
+def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, marks: tuple) -> tuple:
+    """(fit, vehicle as measured, planning world, horizon planner) of the controller's
+    adaptation (:meth:`Controller._adapt`); the last three None where the fit failed, is
+    not confident or says the vehicle planned for (its factors ``planned``, each within
+    3 %)."""
+    try:
+        f = ES.fit(evidence, world, cost)
+    except Exception:       # noqa: BLE001 - no fit: the plans stay as they are
+        return None, None, None, None
+    if f is None or not ES.confident(f):
+        return f, None, None, None
+    if max(abs(a - b) for a, b in zip(ES.key(f), planned)) <= 0.03:
+        return f, None, None, None
+    now = ES.as_measured(world, ES.key(f))
+    w = EX.marked(now, marks) if marks else now
+    w = EX.twin_planner(w) if twin else w
+    ps = w.scenario.planner
+    return f, now, w, HorizonPlanner(w, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
 
 
 def _beside(world: WO.World, cost: str, X: np.ndarray, cancel) -> tuple:
