@@ -213,7 +213,7 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
     off = int(Q[SS.Q_OFFTW])
     assert np.array_equal(data[off:off + block.size], block)
     guards = R._guards(w, "time")
-    assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 3)
+    assert [g.Q[SS.Q_TIPM] for g in guards] == pytest.approx([math.radians(27.5)] * 4)
     o = int(guards[1].Q[SS.Q_OFFT])           # the guard's twin drives as the vehicle of its own world
     assert np.array_equal(guards[1].data[o:o + block.size], block)
     # ... and an optimistic one, mass, inertia and grip divided by 1 + margin and the battery
@@ -223,6 +223,11 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
                    w.terrains[0].replace(mu_sa=w.terrains[0].mu_sa / 1.1, mu_op=w.terrains[0].mu_op / 1.1))
     o = int(guards[2].Q[SS.Q_OFFT])
     assert np.allclose(guards[2].data[o:o + K.NP], light, rtol=1e-12)
+    # ... and the fastest, for the map's edge alone: that one with the voltage times 1 + 3 margin
+    fastest = K.pack(w.vehicle.replace(mass=w.vehicle.mass / 1.1, inertia=w.vehicle.inertia / 1.1,
+                                       v_max=w.vehicle.v_max * 1.3),
+                     w.terrains[0].replace(mu_sa=w.terrains[0].mu_sa / 1.1, mu_op=w.terrains[0].mu_op / 1.1))
+    assert np.allclose(guards[3].data[o:o + K.NP], fastest, rtol=1e-12)
     ps = EX.twin_planner(w).scenario.planner
     assert (ps.margin, ps.margin_turn, ps.margin_tip_deg) == (0.0, 0.0, 0.0)
     assert EX.twin_planner(w, tip=True).scenario.planner.margin_tip_deg == 5.0

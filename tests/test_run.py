@@ -556,3 +556,37 @@ def test_a_period_that_only_the_optimistic_twin_drives_off_the_map_is_held_back(
     assert EX.holder([_Predicts(0), _Predicts(0), _Predicts(off)], None, (1.0, 1.0, 1.0), True) == 3
     assert EX.holder([_Predicts(0), _Predicts(off), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 0
     assert EX.holder([_Predicts(off), _Predicts(0), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 1
+
+
+def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
+    """On `flat`, driving east at the top speed towards the map's edge and commanded a
+    fifth beyond it (a plan's sampled speeds reach past what the drive holds): a period
+    the planning vehicle and both twins predict to end on the map, which a truth 22 %
+    faster (battery voltage, so it holds the command) drives off it, is held back by the
+    guard's fastest twin (holder 4: voltage x1.3); a period that ends farther inside, and
+    one along the edge, are let through."""
+    from dynamics import kernels as K
+    from sbmpc import execution as EX
+    world = WO.resolve(SC.load(SCN / "flat.yaml"))
+    v = world.vehicle
+    top = v.v_max / v.torque_constant
+    x_hi = world.emap.extent[1] - world.margin
+    control = (1.2 * top, 1.2 * top, 1.0)
+    fast = replace(world, vehicle=v.replace(v_max=1.22 * v.v_max))
+    guards = EX.guards(world, "time")
+    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+
+    def at(x, y=6.0, yaw=0.0):
+        X = moving.copy()
+        X[K.S_X], X[K.S_Y], X[K.S_YAW] = x, y, yaw
+        return X
+    runs = [g.step(at(10.0), control, record=False)[2][K.S_X] - 10.0 for g in guards[:3]]
+    truth = EX.Executor(fast, "time").step(at(10.0), control, record=False)[2][K.S_X] - 10.0
+    assert truth > max(runs) + 0.02                       # the faster truth drives further than all three
+    X = at(x_hi - 0.5 * (truth + max(runs)))              # the three end inside the edge, the truth beyond
+    assert [g.step(X, control, record=False)[1] for g in guards[:3]] == [0, 0, 0]
+    assert EX.Executor(fast, "time").step(X, control, record=False)[1] == -SS.OFF_MAP
+    assert EX.holder(guards, X, control, True) == 4
+    assert EX.holder(guards, at(x_hi - truth - 0.3), control, True) == 0
+    # along the east edge, northwards, close to it: let through
+    assert EX.holder(guards, at(x_hi - 0.05, 3.0, 0.5 * math.pi), control, True) == 0
