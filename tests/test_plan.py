@@ -20,17 +20,28 @@ SHIPPED = sorted(p.stem for p in SCEN.glob("*.yaml"))
 SOLVABLE = [s for s in SHIPPED if s != "unreachable"]
 
 
+class _Plans(dict):
+    """Both plans of a shipped scenario as ``sbmpc compare`` reports them, computed when a
+    test first asks (each scenario's tests share an xdist group: with ``-n 2 --dist
+    loadgroup`` one worker plans each scenario once)."""
+
+    def __missing__(self, name):
+        world = WO.resolve(SC.load(SCEN / f"{name}.yaml"))
+        self[name] = (world, PL.plan_both(world))
+        return self[name]
+
+
 @pytest.fixture(scope="module")
 def plans():
-    """Both plans of every shipped scenario as ``sbmpc compare`` reports them, computed once."""
-    out = {}
-    for name in SHIPPED:
-        world = WO.resolve(SC.load(SCEN / f"{name}.yaml"))
-        out[name] = (world, PL.plan_both(world))
-    return out
+    return _Plans()
 
 
-@pytest.mark.parametrize("name", SOLVABLE)
+def _each(names):
+    """``names`` as parameters, each in its scenario's xdist group."""
+    return [pytest.param(n, marks=pytest.mark.xdist_group(n)) for n in names]
+
+
+@pytest.mark.parametrize("name", _each(SOLVABLE))
 def test_plans_replay_at_the_controller_rate_and_end_in_the_goal(plans, name):
     """Every plan is the 1 kHz replay of its controls (the paper's controller rate, not
     the search's 20 ms step): replayed again it is reproduced exactly and ends in the goal
@@ -59,7 +70,7 @@ def test_plans_replay_at_the_controller_rate_and_end_in_the_goal(plans, name):
         assert np.all(np.abs(plan.trajectory["pitch"]) <= math.radians(world.scenario.planner.tip_over_deg))
 
 
-@pytest.mark.parametrize("name", SOLVABLE)
+@pytest.mark.parametrize("name", _each(SOLVABLE))
 def test_time_optimal_is_never_slower_and_energy_optimal_never_costs_more(plans, name):
     """At the controller rate, as reported: the energy plan uses no more energy than the
     time plan and the time plan takes no longer than the energy plan."""
@@ -133,6 +144,7 @@ def test_a_repair_from_a_dead_end_steps_back(monkeypatch):
     assert p.repairs == 2
 
 
+@pytest.mark.xdist_group("hills_field")
 def test_a_drive_replayed_from_where_it_parted_is_the_whole_drive(plans):
     """A repaired plan keeps its controls up to where it parted and is replayed at 1 kHz
     from there only (check.controller_rate's ``known``): that drive, its check and its
@@ -211,6 +223,7 @@ def test_the_repairs_of_a_searched_plan_are_reused_by_its_polish(monkeypatch):
     assert len(runs) == 2 * made and third[0] == first[0]
 
 
+@pytest.mark.xdist_group("steep_hill")
 def test_steep_hill_every_plan_goes_around(plans):
     world, ps = plans["steep_hill"]
     top = world.emap.heights.max()
@@ -219,6 +232,7 @@ def test_steep_hill_every_plan_goes_around(plans):
     assert ps["time"].invalid_edges.get(SS.CODES[SS.STALL - 1], 0) > 0     # the flanks were tried
 
 
+@pytest.mark.xdist_group("narrow_pass")
 def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
     """Outside the 1.5 m pass (y 9.25-10.75 m) the ridge's flanks are steeper, straight
     up, than the vehicle can climb even with a run-up (``heuristics.climb_limit``), so
@@ -240,6 +254,7 @@ def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
         assert max(z) < 0.3
 
 
+@pytest.mark.xdist_group("hill_tradeoff")
 def test_hill_tradeoff_time_crosses_energy_goes_around(plans):
     world, ps = plans["hill_tradeoff"]
     top = world.emap.heights.max()
@@ -247,6 +262,7 @@ def test_hill_tradeoff_time_crosses_energy_goes_around(plans):
     assert max(ps["energy"].trajectory["z"]) < max(ps["time"].trajectory["z"]) - 0.3
 
 
+@pytest.mark.xdist_group("runup_ramp")
 def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
     world, ps = plans["runup_ramp"]
     for plan in ps.values():
@@ -266,6 +282,7 @@ def test_runup_ramp_is_crossed_fast_and_stalls_slowly(plans):
     assert end == SS.IN_GOAL
 
 
+@pytest.mark.xdist_group("mixed_terrain")
 def test_mixed_terrain_energy_keeps_to_the_road(plans):
     world, ps = plans["mixed_terrain"]
     road = world.emap.terrain_names.index("packed_dirt")
@@ -276,18 +293,21 @@ def test_mixed_terrain_energy_keeps_to_the_road(plans):
     assert on_road(ps["energy"]) > on_road(ps["time"]) + 0.2
 
 
+@pytest.mark.xdist_group("hills_field")
 def test_hills_field_is_at_least_50_m_square(plans):
     world, _ = plans["hills_field"]
     x0, x1, y0, y1 = world.emap.extent
     assert x1 - x0 >= 50 and y1 - y0 >= 50
 
 
+@pytest.mark.xdist_group("unreachable")
 def test_unreachable_says_why(plans):
     _, ps = plans["unreachable"]
     for plan in ps.values():
         assert plan.status == "no_path" and "tip-over" in plan.reason and plan.failure == "unreachable"
 
 
+@pytest.mark.xdist_group("flat")
 def test_same_seed_same_plan(plans):
     world, _ = plans["flat"]
     assert PL.plan(world, "time").controls == PL.plan(world, "time").controls
