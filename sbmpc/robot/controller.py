@@ -459,7 +459,7 @@ class Controller:
         if self.world.scenario.planner.margin <= 0.0:
             return False
         inf = self.evidence.infer(X)
-        fitted = yield _Await(self._horizon_pool.submit(ES.fit, self.evidence, self.world, self.cost), "planning")
+        fitted = yield _Await(self._horizon_pool.submit(_fit, self.evidence, self.world, self.cost), "planning")
         inf["fit"] = fitted
         self.inferred.append(inf)
         marks = self._marks
@@ -704,15 +704,21 @@ class Controller:
                 h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
 
 
+def _fit(evidence, world: WO.World, cost: str) -> dict | None:
+    """:func:`sbmpc.estimate.fit`, None where it failed: a fit is evidence, never the
+    reason a run stops."""
+    try:
+        return ES.fit(evidence, world, cost)
+    except Exception:       # noqa: BLE001 - no fit: the stall is read by its sign alone
+        return None
+
+
 def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, marks: tuple) -> tuple:
     """(fit, vehicle as measured, planning world, horizon planner) of the controller's
     adaptation (:meth:`Controller._adapt`); the last three None where the fit failed, is
     not confident or says the vehicle planned for (its factors ``planned``, each within
     3 %)."""
-    try:
-        f = ES.fit(evidence, world, cost)
-    except Exception:       # noqa: BLE001 - no fit: the plans stay as they are
-        return None, None, None, None
+    f = _fit(evidence, world, cost)
     if f is None or not ES.confident(f):
         return f, None, None, None
     if max(abs(a - b) for a, b in zip(ES.key(f), planned)) <= 0.03:
