@@ -210,9 +210,12 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     half the margin: the one prediction of a fallback plan's periods on a vehicle the
     plan did not allow for; so does the optimistic twin's (a lighter vehicle drives
     further into the period). Once the twin plans (the vehicle proved weaker), the run
-    passes ``kept`` False. The world's vehicle's prediction also holds a period back
-    where it leaves the map, and so does the optimistic twin's (a faster vehicle drives
-    further): a run never drives off its map (a horizon run with 10 % less grip left
+    passes ``kept`` False. Every prediction also holds a period back where it leaves the
+    map: the optimistic twin's (a faster vehicle drives further) and the pessimistic
+    one's (a heavier vehicle braking or reversing towards the edge runs further on: a
+    `hills_field` horizon run reversing 0.1 m from its east edge left the map exactly
+    where the heavier twin's prediction did, while the planning vehicle's stopped 6 mm
+    short, 2026-12-06): a run never drives off its map (a horizon run with 10 % less grip left
     `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
@@ -226,7 +229,7 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
                 return j + 1
             continue
         _, end, _ = g.step(X, control, record=False, tilt_error=tilt_error)
-        if end == -SS.TIP or (end == -SS.OFF_MAP and j in (0, 2)) or (end == -SS.MARGIN and (kept or j > 0)):
+        if end in (-SS.TIP, -SS.OFF_MAP) or (end == -SS.MARGIN and (kept or j > 0)):
             return j + 1
     return 0
 

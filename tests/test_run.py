@@ -549,12 +549,12 @@ def test_re_plans_are_not_polished(flat, monkeypatch):
 def test_a_period_that_only_the_optimistic_twin_drives_off_the_map_is_held_back():
     """The guard's third prediction is of a lighter and faster vehicle (battery voltage
     times 1 + margin): where only it leaves the map, the period is held back (holder 3);
-    the pessimistic twin leaving it holds nothing (it falls short of where the vehicle
-    goes); the planning vehicle's does (holder 1)."""
+    so is one only the pessimistic twin drives off it (holder 2: a heavier vehicle
+    braking towards the edge runs further on), and the planning vehicle's (holder 1)."""
     from sbmpc import execution as EX
     off = -SS.OFF_MAP
     assert EX.holder([_Predicts(0), _Predicts(0), _Predicts(off)], None, (1.0, 1.0, 1.0), True) == 3
-    assert EX.holder([_Predicts(0), _Predicts(off), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 0
+    assert EX.holder([_Predicts(0), _Predicts(off), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 2
     assert EX.holder([_Predicts(off), _Predicts(0), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 1
 
 
@@ -590,3 +590,32 @@ def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
     assert EX.holder(guards, at(x_hi - truth - 0.3), control, True) == 0
     # along the east edge, northwards, close to it: let through
     assert EX.holder(guards, at(x_hi - 0.05, 3.0, 0.5 * math.pi), control, True) == 0
+
+
+def test_a_heavier_vehicle_braking_towards_the_edge_is_kept_on_the_map():
+    """On `flat`, at the top speed towards the east edge and commanded to reverse: the
+    margin's heavier twin runs on further than the planning vehicle before it turns back.
+    Placed where the planning vehicle's prediction stays on the map and the twin's leaves
+    it (a `hills_field` horizon run left the map so, 2026-12-06), the period is held back
+    by the twin's prediction (holder 2)."""
+    from dynamics import kernels as K
+    from sbmpc import execution as EX
+    world = WO.resolve(SC.load(SCN / "flat.yaml"))
+    v = world.vehicle
+    top = v.v_max / v.torque_constant
+    x_hi = world.emap.extent[1] - world.margin
+    guards = EX.guards(world, "time")
+    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+    control = (-0.4 * top, -0.4 * top, 1.0)
+
+    def reach(g, X):
+        rec, _, _ = g.step(X, control)
+        return rec[:, K.R_X].max() - X[K.S_X]
+    X = moving.copy()
+    X[K.S_X], X[K.S_Y] = 10.0, 6.0
+    nominal, heavy = reach(guards[0], X), reach(guards[1], X)
+    assert heavy > nominal                                # the heavier twin runs on further
+    X[K.S_X] = x_hi - 0.5 * (nominal + heavy)
+    assert guards[0].step(X, control, record=False)[1] != -SS.OFF_MAP
+    assert guards[1].step(X, control, record=False)[1] == -SS.OFF_MAP
+    assert EX.holder(guards, X, control, True) == 2
