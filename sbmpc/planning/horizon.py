@@ -117,6 +117,13 @@ class HorizonPlanner:
         self.batch = batch_size(ps)
         self.threads = search_threads(ps)
 
+    @classmethod
+    def of(cls, world: World, cost: str, to_go: np.ndarray | None = None) -> "HorizonPlanner":
+        """The horizon planner of ``world`` and ``cost`` with its scenario's settings
+        (``planner.horizon_s``, ``horizon_budget_s``, ``horizon_expansions``)."""
+        ps = world.scenario.planner
+        return cls(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions, to_go)
+
     def turn_cost(self) -> float:
         """The least cost [s/rad or J/rad] of a turn from rest at the start, by the nominal
         vehicle (no margin) over two periods: on the spot and about one wheel, at a

@@ -85,8 +85,7 @@ def tracker(world: World, cost: str, plan: PL.Plan) -> HorizonPlanner:
     :func:`tube_to_go` of ``plan`` (a found whole-route plan): its plans lead onto the
     plan's path and along it (module doc)."""
     grid, kappa = tube_to_go(world, cost, plan.trajectory)
-    ps = world.scenario.planner
-    hp = HorizonPlanner(world, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions, to_go=grid)
+    hp = HorizonPlanner.of(world, cost, grid)
     hp.tracks = (plan, kappa)
     return hp
 

@@ -118,7 +118,7 @@ class Controller:
         self.settings = settings or world.scenario.run
         t0 = time.perf_counter()
         ps = world.scenario.planner
-        self.planner = HorizonPlanner(world, self.cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+        self.planner = HorizonPlanner.of(world, self.cost)
         self.setup_s = time.perf_counter() - t0     # the value and turn cost: the first plan's time
         self.estimator = Estimator(world, self.cost)
         self.model = EX.Executor(world, self.cost)
@@ -219,11 +219,9 @@ class Controller:
         constants) and the forward speed (odometry's, else the wheels' mean)."""
         v = self.world.vehicle
         row = np.full(K.NR, np.nan)
-        il, ir = m.il, m.ir
-        if il is None and m.tau_l is not None:
-            il, ir = m.tau_l / (v.torque_constant * v.torque_scale_left), m.tau_r / (v.torque_constant * v.torque_scale_right)
-        if il is not None:
-            row[K.R_IL], row[K.R_IR] = il, ir
+        currents = m.currents(v)
+        if currents is not None:
+            row[K.R_IL], row[K.R_IR] = currents
         if m.wl is not None:
             row[K.R_WL], row[K.R_WR] = m.wl, m.wr
         if m.v is not None:
@@ -243,9 +241,9 @@ class Controller:
             return
         rate = self.world.vehicle.controller_rate
         idx = np.array([int(round((t - t0) * rate)) for t, _ in rows], np.int64)
-        rec, _, _ = self.nominal.step(X0, (control[0], control[1], round(t1 - t0, 9)))
-        self.evidence.add_samples(np.array([r for _, r in rows]), rec[np.minimum(idx, len(rec) - 1)], X0,
-                                  (control[0], control[1], round(t1 - t0, 9)), idx)
+        driven = (control[0], control[1], round(t1 - t0, 9))
+        rec, _, _ = self.nominal.step(X0, driven)
+        self.evidence.add_samples(np.array([r for _, r in rows]), rec[np.minimum(idx, len(rec) - 1)], X0, driven, idx)
 
     def ended_at(self, t: float) -> None:
         """The run ended at robot time ``t`` [s] (the goal reached, or the robot stopped
@@ -504,18 +502,22 @@ class Controller:
         self.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
         return True
 
+    def _planning_as(self, adapted: bool) -> str:
+        """What a re-plan's reason adds once the planning model changed (a stall, an
+        adaptation): as what the plans are made from here on."""
+        return ("; adapted" if adapted else "") + (
+            f"; planning as the margin's twin of {self.planned_as}" if self._as_twin else
+            f"; planning as {self._base.vehicle.name}") + (
+            f", {len(self._marks)} slope(s) kept off" if self._marks else "")
+
     def _replan_as(self, base: WO.World, twin: bool, marks: tuple):
         """The plans made from here on for ``base`` (or the margin's twin of it), with the
         slopes ``marks`` kept off: the horizon planner for that world built in the worker
         (holding the wheels meanwhile). Returns whether anything changed."""
         if (base, twin, marks) == (self._base, self._as_twin, self._marks):
             return False
-        w = EX.marked(base, marks) if marks else base
-        w = EX.twin_planner(w) if twin else w
-        ps = w.scenario.planner
-        fut = self._horizon_pool.submit(HorizonPlanner, w, self.cost, ps.horizon_s, ps.horizon_budget_s,
-                                        ps.horizon_expansions)
-        self.planner = yield _Await(fut, "planning")
+        w = _planning_world(base, twin, marks)
+        self.planner = yield _Await(self._horizon_pool.submit(HorizonPlanner.of, w, self.cost), "planning")
         self.plan_world, self.model = w, EX.Executor(w, self.cost)
         self._base, self._as_twin, self._marks = base, twin, marks
         if twin or base is not self.world:
@@ -658,6 +660,7 @@ class Controller:
             elif rs.adapt_periods:
                 adapted = rebuilt = self._adapt(X)
                 off = off or adapted        # the next plan from the measured state, for the vehicle as measured
+            now_as = self._planning_as(adapted) if rebuilt else ""
             if rebuilt:
                 togo.clear()            # the terminal cost of another model
                 tracking = None         # (the tracker was of the model replaced)
@@ -671,8 +674,8 @@ class Controller:
                 continue
             if guide is not None:
                 if off or not guide:
-                    p, guide, kept = yield from route(X, "off the whole-route plan" if off else
-                                                      "the whole-route plan ended short of the goal")
+                    p, guide, kept = yield from route(X, ("off the whole-route plan" if off else
+                                                       "the whole-route plan ended short of the goal") + now_as)
                     if not p.found:
                         Xb = yield from self._back_off(X)
                         if Xb is None:
@@ -693,15 +696,18 @@ class Controller:
             if off:
                 st.from_measured += 1
                 why = ("stalled" if stalled else
-                       f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s")
-                if rebuilt:
-                    why += ("; adapted" if adapted else "") + (
-                        f"; planning as the margin's twin of {self.planned_as}" if self._as_twin else
-                        f"; planning as {self._base.vehicle.name}") + (
-                        f", {len(self._marks)} slope(s) kept off" if self._marks else "")
+                       f"off the prediction by {dxy:.2f} m, {math.degrees(dyaw):.1f} deg, {dv:.2f} m/s") + now_as
                 h = self._made((yield from self._await_horizon(X, None if rebuilt else h)), why, X)
             else:
                 h = self._made((yield _Await(nxt, "horizon")), EX.SETTLED if settle else "next period", P)
+
+
+def _planning_world(base: WO.World, twin: bool, marks: tuple) -> WO.World:
+    """What the controller's plans are made for: ``base`` (the file's vehicle, or as
+    measured) with the slopes ``marks`` kept off (:func:`sbmpc.execution.marked`), as the
+    margin's twin where ``twin`` (:func:`sbmpc.execution.twin_planner`)."""
+    w = EX.marked(base, marks) if marks else base
+    return EX.twin_planner(w) if twin else w
 
 
 def _fit(evidence, world: WO.World, cost: str) -> dict | None:
@@ -724,10 +730,8 @@ def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, mar
     if max(abs(a - b) for a, b in zip(ES.key(f), planned)) <= 0.03:
         return f, None, None, None
     now = ES.as_measured(world, ES.key(f))
-    w = EX.marked(now, marks) if marks else now
-    w = EX.twin_planner(w) if twin else w
-    ps = w.scenario.planner
-    return f, now, w, HorizonPlanner(w, cost, ps.horizon_s, ps.horizon_budget_s, ps.horizon_expansions)
+    w = _planning_world(now, twin, marks)
+    return f, now, w, HorizonPlanner.of(w, cost)
 
 
 def _beside(world: WO.World, cost: str, X: np.ndarray, cancel) -> tuple:

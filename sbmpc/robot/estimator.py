@@ -112,12 +112,9 @@ class Estimator:
         w_pred = (X[K.S_WL], X[K.S_WR])
         if m.wl is not None:
             X[K.S_WL], X[K.S_WR] = m.wl, m.wr
-        il, ir = m.il, m.ir
-        if il is None and m.tau_l is not None:
-            il, ir = (m.tau_l / (v.torque_constant * v.torque_scale_left),
-                      m.tau_r / (v.torque_constant * v.torque_scale_right))
-        if il is not None and v.ki > 0.0 and v.lag == 0.0:
-            for side, cur in ((0, il), (1, ir)):
+        currents = m.currents(v)
+        if currents is not None and v.ki > 0.0 and v.lag == 0.0:
+            for side, cur in enumerate(currents):
                 wk, rk, ik, ck = ((K.S_WL, K.S_REFL, K.S_INTL, K.S_IL), (K.S_WR, K.S_REFR, K.S_INTR, K.S_IR))[side]
                 # the delivered current is the PID's only inside the drive's window (eq. 27:
                 # the current limit and, at speed, the voltage limit): at either bound the

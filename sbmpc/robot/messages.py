@@ -55,6 +55,16 @@ class Measurement:
     roll: float | None = None
     stalled: bool = False
 
+    def currents(self, vehicle) -> tuple | None:
+        """Each side's motor current (il, ir) [A]: as measured, or the efforts over the
+        vehicle's torque constants; None where neither was measured."""
+        if self.il is not None:
+            return self.il, self.ir
+        if self.tau_l is not None:
+            return (self.tau_l / (vehicle.torque_constant * vehicle.torque_scale_left),
+                    self.tau_r / (vehicle.torque_constant * vehicle.torque_scale_right))
+        return None
+
     def checked(self, where: str = "measurement") -> "Measurement":
         """Itself; an InputError naming the field when the pose is missing or a value is
         not a finite number."""
