@@ -15,6 +15,7 @@ import functools
 import json
 import math
 import re
+import statistics
 import sys
 from pathlib import Path
 
@@ -40,8 +41,18 @@ def _planning_times() -> tuple:
     return tp, en, max(tp, key=tp.get)
 
 
-def _pct(x) -> str:
-    return "-" if x is None else f"{100 * x:.0f} %"
+def _pct(x, fmt: str = ".0f") -> str:
+    return "-" if x is None else f"{100 * x:{fmt}} %"
+
+
+def _met(ok: bool) -> str:
+    return "met" if ok else "not met"
+
+
+def _change(xs) -> str:
+    """Signed percentages: '+0.2 %', or '-3.4 to +4.1 %'."""
+    lo, hi = f"{min(xs):+.1f}", f"{max(xs):+.1f}"
+    return f"{lo} %" if lo == hi else f"{lo} to {hi} %"
 
 
 def _ratio(s) -> str:
@@ -109,7 +120,7 @@ def _when(*docs: dict) -> str:
     """Results files' dates and commits (the measured code's, or the commit that stored
     the file): '2026-12-06, f20e6bc, 9e03f87'."""
     dates = sorted({d.get("date", "undated") for d in docs})
-    commits = [c for c in (d.get("commit") or d.get("stored_in") for d in docs) if c]
+    commits = list(dict.fromkeys(c for c in (d.get("commit") or d.get("stored_in") for d in docs) if c))
     return ", ".join(dates + commits)
 
 
@@ -386,9 +397,333 @@ def status_defaults() -> str:
                  + "; never waiting on a whole-route plan: "
                  + ("met" if sum(r["fallbacks"] for r in runs.values()) == 0 else "not met"),
                  "`taskset -c 0 python bench/bench_controller.py`"))
+    return _table(rows)
+
+
+def _table(rows) -> str:
+    """status.md's tables: what, measured, goal, command."""
     lines = ["| what | measured | goal | command |", "|---|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
-    return "\n".join(lines)
+    return "\n".join(lines + [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows])
+
+
+def _edges() -> list:
+    """Converged edges and the cost of one (edges.json): two rows."""
+    d = _load("edges.json")
+    c, s, m = d["convergence"]["all"], d["convergence"]["all_seeds"], d["on_maps"]["all"]
+    seeds = len(s["seeds"])
+    ok = (min(c["stall_verdict_agrees"], s["stall_verdict_agrees"], m["stall_agrees"]) >= 0.995
+          and min(x["energy_within_2pct"] for x in (c, s, m)) >= 0.99
+          and min(x["pose_within_5cm_2deg"] for x in (c, s, m)) >= 0.99)
+    k = d["cost"]
+    r = k["ratio_current_to_baseline"]["median"]
+    cmd = f"`python bench/bench_edges.py --baseline {k['baseline_rev']}`"
+    return [(f"edges at the planner's {1000 * d['dt']:.0f} ms step against the 1 kHz controller rate ({c['edges']} "
+             f"random edges, {s['edges']} over {seeds} seeds; {m['edges']} on the shipped hilly maps)",
+             f"stall verdicts {_pct(c['stall_verdict_agrees'], '.2f')}, over {seeds} seeds "
+             f"{_pct(s['stall_verdict_agrees'], '.2f')} (maps {_pct(m['stall_agrees'], '.1f')}), energies within 2 % "
+             f"{_pct(c['energy_within_2pct'], '.1f')} (maps {_pct(m['energy_within_2pct'], '.1f')}), poses within 5 cm "
+             f"and 2° {_pct(c['pose_within_5cm_2deg'])} (maps {_pct(m['pose_within_5cm_2deg'])}) ({_when(d)})",
+             f"99.5 %, 99 %, 99 %: {_met(ok)}", cmd),
+            (f"cost of an edge against the old explicit edge ({k['baseline_rev']})",
+             f"{r:.2f}x as shipped ({d['cost_on_search_nodes']['ratio_current_to_baseline']['median']:.2f}x on search "
+             f"nodes; the edge {k['current']['us_per_edge_median']:.1f} µs against "
+             f"{k['baseline']['us_per_edge_median']:.1f} µs) ({_when(d)})", f"1.5x: {_met(r <= 1.5)}", cmd)]
+
+
+def _unweighted() -> tuple:
+    """The energy plans' median over seeds against a long unweighted search (energy_plans.json)."""
+    e = _load("energy_plans.json")
+    ref = {n: s for n, s in e["scenarios"].items() if (s.get("unweighted_10x") or {}).get("status") == "found"}
+    gap = sorted((100 * (s["seed_median_J"] / s["unweighted_10x"]["energy_J"] - 1), n) for n, s in ref.items())
+    same = {}
+    for x, n in gap:
+        same.setdefault(f"{x:+.1f} %", []).append(f"`{n}`")
+    over = [f"`{n}` {x:+.2f} %" for x, n in gap if x > 2.0]
+    kept = all(s["unweighted_10x"].get("kept_from_results_file") for s in ref.values())
+    return ("energy plans against a long unweighted search (w = 1, 10x the budget, guided by the grid alone)",
+            "the median over seeds " + ", ".join(f"{k} ({', '.join(v)})" for k, v in same.items()) + f" ({_when(e)}"
+            + ("; the reference searches kept from an earlier run: `--keep-reference`" if kept else "") + ")",
+            f"issue 59, 2 %: met on {len(gap) - len(over)} of {len(gap)}" + (f" (not on {', '.join(over)})" if over else ""),
+            "`taskset -c 0 python bench/bench_energy_plans.py --keep-reference`")
+
+
+def _route_value() -> tuple:
+    """Whole-route energy plans on long generated fields, with the margin (route_value.json)."""
+    d = _load("route_value.json")
+    rows, goal = d["rows"], {170: 3.0, 340: 6.0, 500: 10.0}
+    by = {}
+    for r in rows:
+        if r["status"] == "found":
+            by.setdefault(r["route_m"], []).append(r["planning_time_s"])
+    ok = {m: sum(x <= goal[m] for x in xs) for m, xs in by.items()}
+    seeds = sorted({r["seed"] for r in rows})
+    return (f"whole-route energy plans on generated hills fields (margin {rows[0]['margin']:g}, one core, map seeds "
+            f"{seeds[0]}-{seeds[-1]})",
+            f"{sum(map(len, by.values()))} of {len(rows)} found: "
+            + ", ".join(f"{m} m routes {_range(xs, '.1f')} s" for m, xs in by.items())
+            + f" ({_when(d)}, the other core busy)",
+            "issue 59: " + ", ".join(f"{goal[m]:g}" for m in by) + f" s: {_met(all(ok[m] == len(by[m]) for m in by))} ("
+            + ", ".join(f"{m} m on {ok[m]} of {len(by[m])}" for m in by) + ")",
+            "`taskset -c 0 python bench/bench_route.py --routes 170 340 500 --seeds 7 8 9 --margins 0.1 --costs energy "
+            "--out bench/results/route_value.json`")
+
+
+def _replans() -> tuple:
+    """Re-plans of whole-route runs on drawn truths (value_replans.json)."""
+    d = _load("value_replans.json")
+    runs = d["replans"]
+    scen = list(dict.fromkeys(r["scenario"] for r in runs))
+    slowest = {i: max(r["replan_s"]) for i, r in enumerate(runs) if r["replan_s"]}
+    slow = [i for i, x in slowest.items() if x > 1.0]
+    slow_in = " and ".join(dict.fromkeys(f"`{runs[i]['scenario']}`" for i in slow))
+    return (f"re-plans of `sbmpc run` (whole-route) from a vehicle drifted off its plan: truths with mass and grip drawn "
+            f"at 10 % sd, {len(runs) // len(scen)} each on {', '.join(f'`{s}`' for s in scen)}, "
+            + ", ".join(dict.fromkeys(r["cost"] for r in runs)),
+            f"re-plans unpolished: {sum(r['status'] == 'reached' for r in runs)} of {len(runs)} runs reach the goal, "
+            f"re-plans median {d['replan_median_s']:.2f} s, 95th percentile {d['replan_p95_s']:.1f} s "
+            f"({_range(slowest.values())} s on the slowest of each run) ({_when(d)})",
+            f"issue 59: 1 s at the 95th percentile: {_met(d['replan_p95_s'] <= 1.0)}"
+            + (f" (the re-plans of {slow_in} take {_range([slowest[i] for i in slow], '.1f')} s at their slowest)"
+               if slow else ""),
+            "`taskset -c 0 python bench/bench_value.py --replans 4 --scenarios steep_hill narrow_pass hills_field --costs "
+            "energy --out bench/results/value_replans.json`")
+
+
+def _unseen() -> tuple:
+    """Energy plan against time plan on unseen maps, before the margin and the value (unseen.json)."""
+    u = _load("unseen.json")
+    s = u["summary"]
+    sp = s["energy_saved_pct"]
+    return (f"energy plan against time plan, {s['maps']} random hilly maps no setting was tuned for",
+            f"both found on {s['both_found']} (the other {s['maps'] - s['both_found']} say why); the energy search's own "
+            f"plan no dearer on {s['energy_search_no_dearer']} of {s['both_found']} (median saving {sp['median']:.1f} %, "
+            f"{sp['min']:.1f}-{sp['max']:.1f} %) ({_when(u)})",
+            f"never dearer: {_met(s['energy_search_no_dearer'] == s['both_found'])}", "`python bench/bench_unseen.py`")
+
+
+def _value_builds() -> tuple:
+    """The value's build times on the large maps, grouped by lattice size (value.json)."""
+    v = _load("value.json")
+    size = {}
+    for b in v["builds"]:
+        if "field" in b["scenario"]:
+            size.setdefault(b["states"], []).append(b)
+
+    def maps(bs):
+        names = list(dict.fromkeys(b["scenario"] for b in bs))
+        routes = [n[6:-1] for n in names if n.startswith("field_")]
+        shown = [f"`{n}`" for n in names if not n.startswith("field_")]
+        if routes:
+            shown.append(f"the {' and '.join(routes)} m route field{'s' if len(routes) > 1 else ''}")
+        return " and ".join(shown)
+    parts = [f"{_range([b['build_s'] for b in bs])} s for {maps(bs)} "
+             f"({f'{n / 1e6:.2f} M' if n >= 1e6 else f'{n / 1e3:.0f} k'} lattice states, "
+             f"{_range([b['cell_m'] for b in bs], '.2g')} m cells)" for n, bs in sorted(size.items())]
+    small = size[min(size)]
+    return ("the value over position and heading: its build on one core (`taskset -c 0`)",
+            "; ".join(parts) + f"; the motion tables {_range([b['tables_s'] for b in v['builds']])} s once per vehicle "
+            f"and terrains; {_range([b['us_per_state'] for b in v['builds']], '.1f')} µs a state ({_when(v)})",
+            f"0.3 s for a 60 m map: {_met(max(b['build_s'] for b in small) <= 0.3)}; linear in the lattice",
+            f"`{v['command'].strip()}`")
+
+
+def _planner() -> list:
+    """Planning time on one core, and two cores against one, before the margin and the value (planner.json)."""
+    p = _load("planner.json")
+    one = {(n, c): r["serial"]["planning_time_s"] for n, sc in p["scenarios"].items() for c, r in sc.items()
+           if r["serial"]["status"] == "found"}
+    tp = {n: x for (n, c), x in one.items() if c == "time"}
+    slow = max(tp, key=tp.get)
+    en = [x for (n, c), x in one.items() if c == "energy"]
+    over = sum(x > 1.0 for x in one.values())
+    both = {k: x / p["scenarios"][k[0]][k[1]]["batch16"]["planning_time_s"] for k, x in one.items() if x > 2.0}
+    least = min(both, key=both.get)
+    return [("planning time on one core (before the margin and the value)",
+             f"time plans {_range([x for n, x in tp.items() if n != slow])} s, `{slow}` {tp[slow]:.1f} s; energy plans "
+             f"{_range(en)} s ({sum(x > 1.0 for x in en)} over 1 s) ({_when(p)})",
+             f"1 s: {_met(not over)} ({over} of {len(one)} plans over)", "`python bench/bench_planner.py`"),
+            (f"planning on {p['cores']} cores against one",
+             f"{_range(both.values())}x (median {statistics.median(both.values()):.2f}x) on the {len(both)} plans over "
+             f"2 s, the least `{least[0]}` {least[1]} {both[least]:.2f}x ({_when(p)}) ([why](performance.md#planner))",
+             f"1.7x: met on {sum(x >= 1.7 for x in both.values())} of {len(both)}", "`python bench/bench_planner.py`")]
+
+
+def _corridor() -> tuple:
+    """Coarse to fine against the search alone, over seeds (corridor.json: its two configurations)."""
+    d = _load("corridor.json")
+    off, on = d["configs"].values()
+    ratio = lambda k, f: off[k][f] / on[k][f]
+    name = lambda ks: ", ".join(f"`{k.split('/')[0]}`" for k in ks)
+    en = [k for k in off if k.endswith("/energy")]
+    dearer = {k: 100 * (on[k]["median"] / off[k]["median"] - 1) for k in en}
+    gain = [k for k in en if ratio(k, "median_expansions") >= 2.0]
+    worse = [k for k in en if k not in gain and dearer[k] > 1.0]
+    rest = [k for k in en if k not in gain + worse]
+    spread = ", ".join(f"{off[k]['spread_pct']:.1f} → {on[k]['spread_pct']:.1f} % ({name([k])})" for k in gain)
+    return ("coarse to fine, opt-in (`planner.corridor_energy: 1.5`: the search looks along a coarse route first)",
+            f"energy plans over seeds 0-{len(off[en[0]]['by_seed']) - 1}: {name(gain)} "
+            f"{_range([ratio(k, 'median_expansions') for k in gain], '.1f')}x fewer expansions, "
+            f"{_range([ratio(k, 'median_planning_s') for k in gain], '.1f')}x faster, median "
+            f"{_change([dearer[k] for k in gain])}, spread {spread}; "
+            + "".join(f"{name([k])} median {dearer[k]:+.1f} %; " for k in worse)
+            + f"no such gain on {name(rest)} (at most {max(ratio(k, 'median_expansions') for k in rest):.1f}x fewer "
+            f"expansions) or the time plans ({_range([ratio(k, 'median_planning_s') for k in off if k.endswith('/time')], '.1f')}x "
+            f"as fast) ({_when(d)}) ([why](performance.md#coarse-to-fine))",
+            "not the default: a plan must not get dearer",
+            '`python bench/bench_settings.py --config "corridor_energy=0,corridor_time=0" --config '
+            '"corridor_energy=1.5,corridor_time=1.5" --costs energy time --out bench/results/corridor.json`')
+
+
+def _gpu() -> tuple:
+    """The GPU backend's edges per second and plans (gpu.json)."""
+    g = _load("gpu.json")
+    e = max(g["edges"], key=lambda x: x["edges"])
+    rate = max(v for k, v in e.items() if k.startswith("cuda") and k.endswith("edges_per_s"))
+    plans = [r["planning_time_s"] for sc in g["plans"].values() for k, r in sc.items()
+             if "cuda" in k and r["status"] == "found"]
+    batches = " and ".join(str(c["batch"]) for c in g["configs"].values() if c["device"] == "cuda")
+    return (f"on a GPU ({g['device'].removeprefix('NVIDIA ')}, not re-measured since the batches changed)",
+            f"{rate / 1e6:.1f} M edges/s ({e['edges']} edges a call), {e['ratio_best_cuda_to_cpu']:.0f}x {g['cpu_cores']} CPU "
+            f"cores; plans {_range(plans, '.1f')} s ({len(plans)} at batch {batches}, {len(g['skipped'])} skipped at "
+            f"the deadline) ({_when(g)})",
+            f"0.1 s: {_met(max(plans) <= 0.1)} (a GPU call costs about "
+            f"{min(x['cuda_call_ms'] for x in g['edges']):.0f} ms)", "`python bench/bench_gpu.py`")
+
+
+def _independent() -> tuple:
+    """Diagnosis of runs from an independent implementation of the paper's model (independent.json)."""
+    d = _load("independent.json")
+    runs = d["runs"]
+    world = [r for r in runs if "toward_deg" in (r["truth"] or {})]
+    fits = " and ".join(f"{r['fitted']['grade_deg']:.2f}° towards {r['fitted']['toward_deg']:.1f}°" for r in world)
+    gains = [r["gain"] for r in runs if r["hidden"] != "none" and r["decided_on"] != "training"]
+    return ("diagnosis of runs from an independent implementation of the paper's model",
+            f"{d['right']} of {d['total']} causes right (`none` included"
+            + "".join(f"; a run without an effect, {r['baseline_heldout_error']:.1f} noise units left, is `unexplained`, "
+                      f"counted {'right' if r['right'] else 'wrong'}" for r in runs if r["cause"] == "unexplained")
+            + "".join(f"; a {r['truth']['grade_deg']:g}° grade towards {r['truth']['toward_deg']:g}° fixed in the world: "
+                      f"{fits}" for r in world[:1])
+            + f"), held-out gains {_range(gains)} where the held-out part can show the effect ({_when(d)})",
+            "", "`python bench/bench_independent.py`")
+
+
+TRUTHS = {"heavy": "heavier", "slippery": "with less grip"}
+
+
+def _horizon_truths() -> tuple:
+    """Receding-horizon and whole-route runs on a mismatched truth (horizon_truths.json)."""
+    h = _load("horizon_truths.json")
+    s, rows = h["summary"], h["rows"]
+    case = lambda r: f"`{r['scenario']}` {r['cost']} {TRUTHS.get(r['truth'], r['truth'])}"
+    lost = [r for r in rows if r["horizon"]["status"] != "reached"]
+    stopped = [r for r in rows if r["whole_route"]["status"] != "reached"]
+    tip = all("tip-over margin" in (r["whole_route"]["reason"] or "") for r in stopped)
+    ratios = [r for r in rows if r["cost_ratio"] is not None]
+    worst = max(ratios, key=lambda r: r["cost_ratio"])["scenario"]
+    w = [r for r in ratios if r["scenario"] == worst]
+    lo, hi = s["cost_ratio_range"]
+    within = "all" if s["replan_within_0.1s"] == 1 else f"{_pct(s['replan_within_0.1s'])} of the"
+    return (f"receding-horizon runs with a mismatched truth (10 % heavier or 10 % less grip; "
+            f"{len({r['scenario'] for r in rows})} scenarios, both costs, both cores)",
+            f"horizon runs reach the goal in {s['horizon_reached']} of {s['cases']}"
+            + "".join(f"; {case(r)}: {r['horizon']['reason']}" for r in lost)
+            + (" (since then the guard holds back a period whose prediction leaves the map)"
+               if any("left the map" in (r["horizon"]["reason"] or "") for r in lost) else "")
+            + f"; whole-route runs {s['whole_route_reached']} of {s['cases']}"
+            + (f", the others ({', '.join(map(case, stopped))}) "
+               + ("stop rather than come within the tip margin, and say why" if tip else "fail, and say why")
+               if stopped else "")
+            + f"; {within} {s['horizon_plans']} horizon plans within 0.1 s (p95 {1000 * s['replan_p95_s']:.0f} ms); "
+            f"cost median {s['cost_ratio_median']:.2f}x, within 5 % on {s['within_5pct']} of {len(ratios)} "
+            f"({lo:.2f}-{hi:.2f}; `{worst}` {_range([r['cost_ratio'] for r in w])}x with "
+            f"{_range([r['horizon']['horizon']['fallbacks'] for r in w], '.0f')} fallbacks); "
+            f"{s['cases_with_fallback']} with fallbacks ({_when(h)})",
+            "issue 44 item 2: every run reaches, within 5 %: "
+            + _met(s["horizon_reached"] == s["cases"] and s["within_5pct"] == s["cases"]),
+            "`python bench/bench_horizon.py --fields --truths heavy slippery --out bench/results/horizon_truths.json`")
+
+
+def _horizon_seeds() -> tuple:
+    """Receding-horizon runs over seeds beside the whole-route plans' spread (horizon_seeds.json)."""
+    d = _load("horizon_seeds.json")
+    s = d["summary"].values()
+    return (f"receding-horizon runs over Halton seeds 0-{d['seeds'] - 1} (energy, nominal truth, one core)",
+            f"executed energy spreads {_range([x['spread_pct'] for x in s], '.1f')} % (whole-route plans with the "
+            f"margin {_range([x['whole_route_plans_spread_pct'] for x in s], '.1f')} %); {sum(x['reached'] for x in s)} "
+            f"of {sum(x['runs'] for x in s)} reach the goal ({_when(d)}) ([why](planner.md#receding-horizon-plans))",
+            "issue 44 item 4: reported beside the plans' spread (5 % allowed for the plans)",
+            f"`taskset -c 0 python bench/bench_horizon.py --threads 1 --fields --costs energy --seeds {d['seeds']}`")
+
+
+def _horizon_340() -> tuple:
+    """Receding-horizon runs on the 340 m field (horizon_340.json)."""
+    d = _load("horizon_340.json")
+    s, rows = d["summary"], d["rows"]
+    hz = [r["horizon"]["horizon"] for r in rows]
+    whole = " and ".join(f"{r['whole_route']['first_plan_s']:.1f}" for r in rows)
+    falls = ", ".join(f"{r['cost']} {', '.join(f'{x:.1f} s' for x in z['fallback_s']) or 'none'}" for r, z in zip(rows, hz))
+    within = "all" if s["replan_within_0.1s"] == 1 else f"{_pct(s['replan_within_0.1s'])} of the"
+    return (f"receding-horizon runs on the {rows[0]['scenario'][6:-1]} m field (one core, both costs)",
+            f"{s['horizon_reached']} of {s['cases']} reach the goal; first plans "
+            f"{_range([1000 * z['first_s'] for z in hz], '.0f')} ms (the value built by the whole-route run before, whose "
+            f"first plans took {whole} s), {within} {s['horizon_plans']} horizon plans after the first within 0.1 s (p95 "
+            f"{1000 * s['replan_p95_s']:.0f} ms); whole-route fallbacks: {falls}; executed cost "
+            + " and ".join(f"{r['cost_ratio']:.2f}x ({r['cost']})" for r in rows)
+            + f" the whole-route run's ({_when(d)}) ([why](planner.md#receding-horizon-plans))",
+            f"issue 59, first plan 0.3 s: {_met(s['first_max_s'] <= 0.3)} where the value is built; no fallback, within "
+            f"5 %: {_met(s['cases_with_fallback'] == 0 and s['within_5pct'] == s['cases'])}",
+            "`taskset -c 0 python bench/bench_horizon.py --threads 1 --scenarios --fields 340 --out "
+            "bench/results/horizon_340.json`")
+
+
+def _route_length() -> tuple:
+    """Whole-route planning time against route length, margin 0 (route.json), against the polish at
+    every control (route_every.json) and the time plan always checked (route_ab.json)."""
+    r, ev, ab = _load("route.json"), _load("route_every.json"), _load("route_ab.json")
+    med = r["slopes"]["energy, margin 0"]["median_s"]
+    limit = {"170": 4.0, "340": 10.0}
+    energy = {(x["route_m"], x["seed"]): x for x in r["rows"] if x["cost"] == "energy"}
+    slow = [x for x in energy.values() if x["planning_time_s"] > limit.get(str(x["route_m"]), math.inf)]
+    every = [x for x in ev["rows"] if x["margin"] == 0]
+    gap = {(x["route_m"], x["seed"]): 100 * (energy[x["route_m"], x["seed"]]["energy_J"] / x["energy_J"] - 1)
+           for x in every if not x["found_by"]}
+    checked = {}
+    for key, x in ab["summary"].items():
+        checked.setdefault(key.split(" m")[0], []).append(x["ratio_median"])
+    return (f"whole-route plans against route length (fields of {', '.join(med)} m, "
+            f"{len({x['seed'] for x in r['rows']})} maps each, one core, margin {r['rows'][0]['margin']:g})",
+            f"energy plans median {', '.join(f'{x:.1f}' for x in med.values())} s; with the polish at every control, "
+            "as before: " + ", ".join(f"{x['route_m']} m {x['planning_time_s']:.0f} s" if not x["found_by"] else
+                                      f"{x['route_m']} m no energy plan in {x['planning_time_s']:.0f} s" for x in every)
+            + "".join(f"; the shipped plan's energy against it {g:+.2f} % ({m} m map {sd})" for (m, sd), g in gap.items())
+            + f"; the polish of plans over {r['exact_up_to']} controls at their head and tail after the check, re-plans "
+            "made once per plan, the time plan driven at 1 kHz only where it could be the energy plan ("
+            + ", ".join(f"{m} m {_range(x)}x" for m, x in checked.items())
+            + f" the planning time, `--ab {ab['pairs']}`) ({_when(r, ev, ab)}) ([why](performance.md#route-length))",
+            "340 m within 10 s, 170 m within 4 s, energy within 1 %: "
+            + _met(all(med[m] <= x for m, x in limit.items()) and all(abs(g) <= 1.0 for g in gap.values()))
+            + " at the median" + (" (not on " + ", ".join(f"{x['route_m']} m map {x['seed']}: {x['planning_time_s']:.1f} s"
+                                                        for x in slow) + ")" if slow else ""),
+            "`taskset -c 0 python bench/bench_route.py`, `--polish every`, `--ab 3`")
+
+
+def _sbmpo() -> tuple:
+    """The lab's C++ SBMPO benchmark run by this planner (sbmpo_unicycle.json)."""
+    d = _load("sbmpo_unicycle.json")
+    c = d["reference_cpp"]
+    t, tc = d["suite"]["total_time_s"], c["suite"]["total_time_s"]
+    m, mc = d["main"]["solve_time_s"], c["main"]["solve_time_s"]
+    return ("the lab's C++ SBMPO benchmark (its main map and 100-map suite), run exactly",
+            f"suite in {1000 * t:.0f} ms per pass against {1000 * tc:.0f} ms ({d['suite']['solved']} maps solved, the "
+            f"C++ {c['suite']['solved']}); main map {1000 * m:.2f} ms against {1000 * mc:.2f} ms ({_when(d)})",
+            f"faster: {_met(t < tc and m < mc)}", "`python bench/sbmpo_unicycle.py --json bench/results/sbmpo_unicycle.json`")
+
+
+def status_other() -> str:
+    """status.md: the other measurements (older, or not at the defaults), each row from its results file."""
+    return _table([*_edges(), _unweighted(), _route_value(), _replans(), _unseen(), _value_builds(), *_planner(),
+                   _corridor(), _gpu(), _independent(), _horizon_truths(), _horizon_seeds(), _horizon_340(),
+                   _route_length(), _sbmpo()])
 
 
 BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
@@ -398,7 +733,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
           "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop,
-          "husky": husky, "status-defaults": status_defaults}
+          "husky": husky, "status-defaults": status_defaults, "status-other": status_other}
 
 
 def updated(text: str) -> str:

@@ -86,6 +86,7 @@ def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
 
 
 FASTEST = 3.0        # the guard's fastest twin: battery voltage times 1 + FASTEST x planner.margin
+STANDING = math.radians(0.1)   # rad: how much steeper than where it stands a period from inside the guard's band may go (holder)
 
 
 class Executor:
@@ -106,6 +107,7 @@ class Executor:
             # its own fresh plans' periods 50 times)
             ps = world.scenario.planner
             self.Q[SS.Q_TIPM] = math.radians(ps.tip_over_deg - 0.5 * ps.margin_tip_deg)
+        self.world = world
         self.lag = int(round(delay_s / self.dt))
         self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
 
@@ -126,16 +128,19 @@ class Executor:
                 self.pipe.pop(0)
         return out
 
-    def step(self, X: np.ndarray, control, record: bool = True, tilt_error: float = 0.0) -> tuple:
+    def step(self, X: np.ndarray, control, record: bool = True, tilt_error: float = 0.0,
+             floor: float = 0.0) -> tuple:
         """Apply (wl, wr, duration_s) from state X. Returns (recorded rows (n, NR) from X
         on, end code, new state). ``tilt_error`` [rad]: the tip-over limit and margin
-        taken that much lower (a guard's prediction on a map whose tilt is off by it)."""
+        taken that much lower (a guard's prediction on a map whose tilt is off by it).
+        ``floor`` [rad]: the margin's limit taken no lower than this (a guard's prediction
+        from a state already inside the margin: :func:`holder`)."""
         wl, wr, d = control
         Q = self.Q
-        if tilt_error > 0.0:
+        if tilt_error > 0.0 or floor > Q[SS.Q_TIPM]:
             Q = Q.copy()
             Q[SS.Q_TIP] -= tilt_error
-            Q[SS.Q_TIPM] -= tilt_error
+            Q[SS.Q_TIPM] = max(Q[SS.Q_TIPM] - tilt_error, floor)
         n = max(1, int(round(d / self.dt)))
         segs = self._applied(X, wl, wr, n) if self.lag > 0 else [[wl, wr, n]]
         rec = np.zeros((n + 1 if record else 1, K.NR))
@@ -219,19 +224,49 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
-    `narrow_pass`'s flank 1.6 deg steeper than it says). Returns which guard holds the
+    `narrow_pass`'s flank 1.6 deg steeper than it says). A vehicle that already stands
+    inside the band (the period before drove it further up a flank than predicted) is let
+    drive a period that goes no steeper than where it stands (within STANDING, on the
+    map): standing still there is no safer, and the plans from there lead out of it
+    (:func:`sbmpc.planning.problem.from_inside`); with the band's limit alone every
+    period, holding the wheels at rest too, was held back and the run stopped on the
+    flank (`hills_field` energy, a 9 % heavier truth, at (34.45, 24.51) with 26.4 deg of
+    roll on the map and 1.3 deg more measured, 2026-12-06). Each prediction goes on
+    past the period with the wheels commanded to rest for as long again, and is held to
+    the same rules there: a period is driven only where the vehicle can still brake
+    safely after it, since a period held back is braked through (a moving vehicle cannot
+    wait for the plan from where it stands). Without that, four `narrow_pass` runs of 28
+    tipped over braking on the pass's flank after a hold, 2026-12-06 (before the brake
+    was driven, such runs "stopped" with the vehicle at speed). Returns which guard holds the
     period back, 1-based (1: the planning vehicle, 2: the pessimistic twin, 3: the
     optimistic one, 4: the fastest, which holds a period that leaves the map only), 0:
     none."""
+    where = getattr(guards[0], "world", None) if guards else None
+    floor = PB.standing_tilt(where, X) + STANDING if where is not None else 0.0
+    brake = (0.0, 0.0, control[2])
     for j, g in enumerate(guards):
         if j == 3:          # the fastest twin: the map's edge alone (guards)
-            if g.step(X, control, record=False)[1] == -SS.OFF_MAP:
+            _, end, S = g.step(X, control, record=False)
+            if end == -SS.OFF_MAP or (end == 0 and g.step(S, brake, record=False)[1] == -SS.OFF_MAP):
                 return j + 1
             continue
-        _, end, _ = g.step(X, control, record=False, tilt_error=tilt_error)
-        if end in (-SS.TIP, -SS.OFF_MAP) or (end == -SS.MARGIN and (kept or j > 0)):
-            return j + 1
+        for c in (control, brake):     # the period, then braking to rest after it
+            _, end, X1 = g.step(X if c is control else S, c, record=False, tilt_error=tilt_error, floor=floor)
+            if end in (-SS.TIP, -SS.OFF_MAP) or (end == -SS.MARGIN and (kept or j > 0)):
+                return j + 1
+            if end != 0:
+                break                  # (in the goal, or stalled: the stall test's)
+            S = X1
     return 0
+
+
+MOVING = 0.3   # rad/s: a wheel turning faster than this moves the vehicle (about 3 cm/s on a P3-AT)
+
+
+def moving(X: np.ndarray) -> bool:
+    """Whether the vehicle at planner state X is moving (a wheel turning faster than
+    MOVING): a period the guard holds back is then braked through, not waited out."""
+    return max(abs(X[K.S_WL]), abs(X[K.S_WR])) > MOVING
 
 
 def tilt_error(world: WO.World, X: np.ndarray, pitch: float, roll: float) -> float:
@@ -388,6 +423,6 @@ def stalled_again(stalls: list, X: np.ndarray) -> bool:
     return any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
 
 
-__all__ = ["FASTEST", "Executor", "HELD", "holder", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
+__all__ = ["FASTEST", "Executor", "HELD", "MOVING", "STANDING", "holder", "moving", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
            "marked", "twin_planner", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again"]

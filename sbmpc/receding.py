@@ -432,6 +432,13 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                           {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end, "failed"))
         return None
 
+    def brake(where: str):
+        """One period with the wheels commanded to rest, driven: the guard held back a
+        moving vehicle's period, and a robot that waits for a plan brakes (a run that
+        stopped the clock instead re-planned, and stopped, from a state the vehicle could
+        not hold). The run's result where the period ended it, else None."""
+        return ended(drive((0.0, 0.0, ps.period_s)), f", braking after the guard held its period back at {where}")
+
     def retrace() -> bool:
         """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
         drive back along the way it came (then it re-plans from there)."""
@@ -456,7 +463,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             # measured state before it is driven
             control = backing.pop(0)
             if _held(guards, X, control, True, tilt):
-                return finish("failed", _stopped(X, ps), "stopped")
+                if not EX.moving(X):
+                    return finish("failed", _stopped(X, ps), "stopped")
+                backing = []
+                why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                if result is not None:
+                    return result
+                continue
             end = drive(control)
             result = ended(end, ", driving back along the way it came")
             if result is not None:
@@ -532,8 +546,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # again after the next period (not a period the guard held back)
                 why = None
             elif held:
-                if not retrace():
+                if retrace():
+                    continue
+                if not EX.moving(X):
                     return finish("failed", _stopped(X, ps, ("re-plan", p.reason)), "stopped")
+                # (driven back, or braked short: the plan from where it comes to rest)
+                result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                if result is not None:
+                    return result
                 continue
             else:
                 # stalled, and no way on from here: drive back along the way it came and
@@ -566,13 +586,19 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     planner, model, base = _weaker_model(world, cost, out, X, None, base)
                     as_twin = True
                 elif guarded and since == 0:
-                    if not retrace():
+                    if retrace():
+                        out.guarded += 1
+                        continue
+                    if not EX.moving(X):
                         return finish("failed", _stopped(X, ps), "stopped")
-                    out.guarded += 1
-                    continue
                 guarded = True
                 out.guarded += 1
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                if EX.moving(X):
+                    # the plan from where it comes to rest (a moving vehicle cannot wait)
+                    result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                    if result is not None:
+                        return result
                 continue
         guarded = False
         _, _, P = model.step(P, control, record=False)

@@ -253,7 +253,7 @@ class _Predicts:
     def __init__(self, end):
         self.end = end
 
-    def step(self, X, control, record=False, tilt_error=0.0):
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
         return None, self.end, X
 
 

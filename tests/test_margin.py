@@ -142,6 +142,81 @@ def test_a_side_slope_inside_the_tip_margin_fails_on_the_margin_and_passes_witho
     assert c0 > 0.0
 
 
+def _flank(at_deg, yaw_deg=0.0, margin_tip_deg=5.0):
+    """A world on a flank that steepens uphill (heights c y^2: the side slope grows with
+    y), and the state at rest facing ``yaw_deg`` from +x (0: along the contour, positive:
+    up it) where its slope is ``at_deg``."""
+    res, c = 0.25, 0.0255
+    x, y = np.arange(0.0, 30.0 + res / 2, res), np.arange(0.0, 20.0 + res / 2, res)
+    H = np.repeat((c * y * y)[:, None], x.size, axis=1)
+    scn = {"name": "flank", "map": {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0},
+           "terrain": "grass", "vehicle": "p3at", "start": {"x": 5.0, "y": 2.0, "yaw_deg": 0.0, "v": 0.0},
+           "goal": {"x": 25.0, "y": 2.0, "radius": 1.0}, "cost": "time"}
+    w = api.load_world(scn, heights=H, resolution=res, margin=0.0, margin_turn=0.0, margin_tip_deg=margin_tip_deg)
+    y0 = math.tan(math.radians(at_deg)) / (2.0 * c)
+    return w, WO.start_state(replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, y=y0,
+                                                                                   yaw_deg=yaw_deg))))
+
+
+def test_a_search_from_inside_the_tip_margin_may_lead_out_of_it_and_none_steeper():
+    """A vehicle that drifted onto a 27 deg flank (inside the 5 deg margin of 30 deg): every
+    edge from there failed on the margin at its first step, so the fallback without the
+    margin rode the tip-over limit. From inside, the margin's limit is where it stands:
+    along the contour and down the flank pass, on up it (steeper) fails."""
+    w, X = _flank(27.0)
+    assert math.degrees(PB.standing_tilt(w, X)) == pytest.approx(27.0, abs=0.3)
+    Q, data = PB.pack_world(w, "time", margin=True)
+    assert math.degrees(Q[SS.Q_TIPM]) == pytest.approx(25.0)
+    inside = PB.from_inside(Q, w, X)
+    assert math.degrees(inside[SS.Q_TIPM]) == pytest.approx(math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
+    assert PB.from_inside(Q, w, _flank(20.0)[1]) is Q                 # flatter than the margin: as it was
+    X0 = WO._start(w, X)
+
+    def edge(Qx, control):
+        return SS.propagate(Qx, data, X0.copy(), np.array(control, float), np.zeros(SS.NX))
+    assert edge(Q, (3.0, 3.0, 1.0)) == -SS.MARGIN                    # before: the first step fails
+    assert edge(inside, (3.0, 3.0, 1.0)) > 0.0                       # along the contour
+    assert edge(inside, (4.0, 1.0, 1.0)) > 0.0                       # turning right: down the flank
+    w, X = _flank(27.0, yaw_deg=10.0)                                  # heading a little up the flank
+    X0 = WO._start(w, X)
+    inside = PB.from_inside(Q, w, X)
+    assert edge(inside, (3.0, 3.0, 1.0)) == -SS.MARGIN               # straight on: steeper
+    assert edge(inside, (-3.0, -3.0, 1.0)) > 0.0                     # backing down: out of it
+
+
+def test_the_guard_lets_a_vehicle_inside_its_band_drive_a_period_no_steeper_than_where_it_stands():
+    """At rest on a 28.5 deg flank heading a little up it, inside the guard's band (half the
+    5 deg margin: 27.5 deg): holding the wheels at rest or backing down the flank is
+    driven, driving on up it is
+    held back (before, every period was, and the run stopped on the flank)."""
+    w, X = _flank(28.5, yaw_deg=10.0)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    X = WO._start(w, X)
+    assert EX.holder(g, X, (0.0, 0.0, 1.0), True) == 0
+    assert EX.holder(g, X, (-3.0, -3.0, 1.0), True) == 0
+    assert EX.holder(g, X, (3.0, 3.0, 1.0), True) == 1
+    # the map's tilt off where it stands: the band's limit falls, where it stands does not
+    assert EX.holder(g, X, (0.0, 0.0, 1.0), True, tilt_error=math.radians(1.5)) == 0
+
+
+def test_the_guard_holds_back_a_period_after_which_braking_would_come_within_its_band():
+    """At the top speed, heading 25 deg up a flank that steepens uphill: a half-second
+    period at full speed ends 0.2 deg short of the guard's band (27.5 deg), but braking to
+    rest after it runs on into the band: held back (a period held back is braked through,
+    so the brake must stay safe after every period driven); braking now is driven."""
+    w, X = _flank(20.0)
+    v = w.vehicle
+    top = v.v_max / v.torque_constant
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    M = EX.Executor(w, "time").step(WO._start(w, X), (top, top, 3.0), record=False)[2]     # at speed
+    M[K.S_X], M[K.S_Y], M[K.S_YAW] = 5.0, 11.0, math.radians(25.0)
+    _, end, S = g[0].step(M, (top, top, 0.5), record=False)
+    assert end == 0 and math.degrees(PB.standing_tilt(w, S)) < 27.5     # the period alone: clear of it
+    assert EX.moving(S)
+    assert EX.holder(g, M, (top, top, 0.5), True) == 1
+    assert EX.holder(g, M, (0.0, 0.0, 0.5), True) == 0
+
+
 # ---- the plan: fallback and report ---------------------------------------------------------------
 def test_where_no_plan_keeps_the_margin_the_plan_rides_the_limit_and_says_so(ramp, tmp_path):
     """Up the 11.5 deg ramp no path keeps a 10 % margin (the twin stalls on the way):
@@ -242,7 +317,7 @@ class _Prediction:
     def __init__(self, end):
         self.end = end
 
-    def step(self, X, control, record=False, tilt_error=0.0):
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
         return None, self.end, X
 
 

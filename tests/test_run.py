@@ -17,6 +17,7 @@ from sbmpc.planning import plan as PL
 from sbmpc.problems import skidsteer as SS
 from sbmpc.planning import world as WO
 from sbmpc.planning import horizon as HZ
+from sbmpc import execution as EX
 from sbmpc import receding as R
 from sbmpc import scenario as SC
 from sbmpc.commands.cli import main
@@ -399,12 +400,14 @@ def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_ma
 
 class _Predicts:
     """A run's guard (receding._guards) whose 1 kHz predictions end with the codes of
-    ``ends`` in turn, the last repeated."""
+    ``ends`` in turn, the last repeated (braking to rest ends safely)."""
 
     def __init__(self, *ends):
         self.ends = list(ends)
 
-    def step(self, X, control, record=False, tilt_error=0.0):
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
+        if control[0] == 0.0 and control[1] == 0.0:
+            return None, 0, X                # braking to rest after a period: safe
         return None, (self.ends.pop(0) if len(self.ends) > 1 else self.ends[0]), X
 
 
@@ -473,14 +476,17 @@ def test_a_held_period_is_never_driven_when_the_re_plan_finds_nothing(flat, monk
     the way it came (the last two periods, wheel speeds negated, latest first: on level
     vinyl more than a metre back, within 5 cm of the path it drove), re-plans from
     there, and where that finds nothing either and too few periods are left to drive
-    back four, stops there and says why."""
+    back four, stops there (at rest) and says why."""
     monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, 0, -SS.MARGIN, 0), _Predicts(0)])
     _searches(monkeypatch, fail_after=0)
     # (the first plan guided by the grid alone, as measured: with the value's first plan
     # the two periods driven back ended 0.24 m off the way out, 2026-12-06)
     flat = replace(flat, scenario=replace(flat.scenario, planner=replace(flat.scenario.planner, value=False)))
     res = R.run(flat, "time")
-    assert res.status == "failed" and res.periods == 3 + 1 + 2 and res.guarded == 1
+    # 3 driven; the 4th held back, braked through (a moving vehicle cannot wait for the
+    # re-plan); a stop and 2 back; the vehicle, reversing, braked again before it stops
+    assert res.status == "failed" and res.periods == 3 + 1 + (1 + 2) + 1 and res.guarded == 1
+    assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING   # stopped at rest
     held = res.plans[1]
     assert res.plans[-1].why.endswith("and no way on from there: 2 periods driven back")
     tr = res.trajectory
@@ -494,11 +500,13 @@ def test_a_held_period_is_never_driven_when_the_re_plan_finds_nothing(flat, monk
 
 def test_a_retrace_the_guard_holds_back_is_not_driven(flat, monkeypatch):
     """Driving back is guarded like any period: where the guard holds a period of the
-    way back, the run does not drive it and stops where the held period left it."""
+    way back, the run does not drive it and stops where braking through the held period
+    left it (at rest: a moving vehicle cannot wait for a plan)."""
     monkeypatch.setattr(R, "_guards", lambda world, cost: [_Predicts(0, 0, 0, -SS.MARGIN, -SS.MARGIN), _Predicts(0)])
     _searches(monkeypatch, fail_after=0)
     res = R.run(flat, "time")
-    assert res.status == "failed" and res.periods == 3 and res.guarded == 1
+    assert res.status == "failed" and res.periods == 3 + 1 and res.guarded == 1
+    assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING
     assert "the run stops rather than tip over" in res.reason
 
 def test_a_run_whose_plan_ends_short_of_the_goal_re_plans_without_the_margin_where_none_keeps_it(flat, monkeypatch):
@@ -563,10 +571,10 @@ def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
     fifth beyond it (a plan's sampled speeds reach past what the drive holds): a period
     the planning vehicle and both twins predict to end on the map, which a truth 22 %
     faster (battery voltage, so it holds the command) drives off it, is held back by the
-    guard's fastest twin (holder 4: voltage x1.3); a period that ends farther inside, and
-    one along the edge, are let through."""
+    guard's fastest twin (holder 4: voltage x1.3; now the others' braking after the period
+    holds it back first); a period that ends farther inside, and one along the edge, are
+    let through."""
     from dynamics import kernels as K
-    from sbmpc import execution as EX
     world = WO.resolve(SC.load(SCN / "flat.yaml"))
     v = world.vehicle
     top = v.v_max / v.torque_constant
@@ -586,8 +594,12 @@ def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
     X = at(x_hi - 0.5 * (truth + max(runs)))              # the three end inside the edge, the truth beyond
     assert [g.step(X, control, record=False)[1] for g in guards[:3]] == [0, 0, 0]
     assert EX.Executor(fast, "time").step(X, control, record=False)[1] == -SS.OFF_MAP
-    assert EX.holder(guards, X, control, True) == 4
-    assert EX.holder(guards, at(x_hi - truth - 0.3), control, True) == 0
+    assert EX.holder(guards, X, control, True) > 0
+    assert EX.holder([_Predicts(0)] * 3 + guards[3:], X, control, True) == 4     # the fastest twin alone
+    # farther inside, by the truth's period and its braking after it
+    S = EX.Executor(fast, "time").step(at(10.0), control, record=False)[2]
+    stop = EX.Executor(fast, "time").step(S, (0.0, 0.0, 1.0), record=False)[2][K.S_X] - S[K.S_X]
+    assert EX.holder(guards, at(x_hi - truth - stop - 0.3), control, True) == 0
     # along the east edge, northwards, close to it: let through
     assert EX.holder(guards, at(x_hi - 0.05, 3.0, 0.5 * math.pi), control, True) == 0
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from dynamics import kernels as K
 
-from .problem import batch_size, problem, search_threads
+from .problem import batch_size, from_inside, problem, search_threads
 from ..problems import skidsteer as SS
 from ..search.astar import Search
 from .world import World, _start, start_state, wheel_speed_range
@@ -154,7 +154,7 @@ class HorizonPlanner:
         return float(SS.heuristic(self._params(X0), self.prob.data, X0))
 
     def _params(self, X0: np.ndarray) -> np.ndarray:
-        params = self.prob.params.copy()
+        params = from_inside(self.prob.params, self.world, X0).copy()
         params[SS.Q_HORIZON] = X0[K.S_T] + self.horizon_s - 1e-9
         return params
 

@@ -19,6 +19,32 @@ from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode, pessim
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
 
+def standing_tilt(world: World, X: np.ndarray) -> float:
+    """The larger of the pitch's and the roll's magnitudes [rad] of a vehicle at the
+    planner state X on the world's map, as the edges judge the tip-over limit and its
+    margin (:func:`maps.grid.pitch_roll_at`; 0 off the map)."""
+    e = world.emap
+    if not e.contains(float(X[K.S_X]), float(X[K.S_Y])):
+        return 0.0
+    p, r = e.pitch_roll(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]), world.half_length, world.half_width)
+    return max(abs(p), abs(r))
+
+
+def from_inside(Q: np.ndarray, world: World, X: np.ndarray) -> np.ndarray:
+    """The params Q for a search from X where X already stands inside the tip-over margin
+    (steeper than ``tip_over_deg - margin_tip_deg`` on the map, a vehicle that drifted
+    onto a flank): its margin's limit raised to where X stands, so that the search's
+    edges may lead out of it and none steeper (every edge from there failed on the margin
+    at its first step, and the fallback without the margin rode the tip-over limit
+    itself); Q itself elsewhere (a copy where changed)."""
+    tilt = standing_tilt(world, X)
+    if tilt <= Q[SS.Q_TIPM] or Q[SS.Q_TIPM] >= Q[SS.Q_TIP]:
+        return Q
+    Q = Q.copy()
+    Q[SS.Q_TIPM] = min(tilt + 1e-9, Q[SS.Q_TIP])
+    return Q
+
+
 def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False,
                grid: bool = True) -> tuple:
     """(params, data) flat arrays of :mod:`sbmpc.problems.skidsteer` for a world and cost, with
@@ -96,6 +122,7 @@ def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float 
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
+    Q = from_inside(Q, world, X0)
     if on_gpu(ps):
         from ..problems.skidsteer_cuda import CudaEdges
         batch = CudaEdges(Q, data)

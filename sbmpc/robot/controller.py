@@ -437,7 +437,7 @@ class Controller:
         X, stalled = yield _Drive(control, status)
         self.periods += 1
         self.driven.append((wl, wr, round(self._last_t - t_start, 9)))
-        if status != "backing":
+        if status not in ("backing", "held"):
             self._way.append(self.driven[-1])
         if not stalled:
             self._witness(X0, control, t_start, self._last_t)
@@ -540,6 +540,9 @@ class Controller:
             return None
         for c in back:
             if self.guards and EX.held(self.guards, X, c, True, self._tilt):
+                if EX.moving(X):        # (a moving vehicle brakes: it cannot wait for the plan)
+                    X, _ = yield from self._drive(self._on_ticks((0.0, 0.0, self.world.scenario.planner.period_s)),
+                                                  "held")
                 break
             X, _ = yield from self._drive(self._on_ticks(c), "backing")
         return X
@@ -627,6 +630,10 @@ class Controller:
                 # stands: a horizon plan, then a whole-route one, then it stops
                 self.guarded += 1
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                if EX.moving(X):
+                    # a moving vehicle cannot wait for the plan: it brakes through a period,
+                    # and the plan is made from where it comes to rest
+                    X, _ = yield from self._drive(self._on_ticks((0.0, 0.0, ps.period_s)), "held")
                 if held and guide is not None:
                     return "stopped", EX.stopped(X, ps)
                 if held or guide is not None:
