@@ -171,7 +171,8 @@ def readme_table() -> str:
     rows.append(("[a drawn vehicle, closed loop](docs/robustness.md#measured)",
                  f"{t['runs']} runs on the shipped maps, the vehicle drawn at 10 %, the map 5 cm off, commands "
                  f"50 ms late: {_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn "
-                 f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} leave the map; "
+                 f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} "
+                 f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map; "
                  "the others stop or fail and say why", _when(c)))
     k = _load("controller.json")
     runs = k["runs"].values()
