@@ -241,22 +241,19 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     period back, 1-based (1: the planning vehicle, 2: the pessimistic twin, 3: the
     optimistic one, 4: the fastest, which holds a period that leaves the map only), 0:
     none."""
-    where = getattr(guards[0], "world", None) if guards else None
+    where = guards[0].world if guards else None
     floor = PB.standing_tilt(where, X) + STANDING if where is not None else 0.0
     brake = (0.0, 0.0, control[2])
     for j, g in enumerate(guards):
-        if j == 3:          # the fastest twin: the map's edge alone (guards)
-            _, end, S = g.step(X, control, record=False)
-            if end == -SS.OFF_MAP or (end == 0 and g.step(S, brake, record=False)[1] == -SS.OFF_MAP):
-                return j + 1
-            continue
+        edge = j == 3           # the fastest twin: the map's edge alone (guards)
+        limits = {} if edge else {"tilt_error": tilt_error, "floor": floor}
+        S = X
         for c in (control, brake):     # the period, then braking to rest after it
-            _, end, X1 = g.step(X if c is control else S, c, record=False, tilt_error=tilt_error, floor=floor)
-            if end in (-SS.TIP, -SS.OFF_MAP) or (end == -SS.MARGIN and (kept or j > 0)):
+            _, end, S = g.step(S, c, record=False, **limits)
+            if end == -SS.OFF_MAP or (not edge and (end == -SS.TIP or (end == -SS.MARGIN and (kept or j > 0)))):
                 return j + 1
             if end != 0:
                 break                  # (in the goal, or stalled: the stall test's)
-            S = X1
     return 0
 
 

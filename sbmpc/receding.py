@@ -432,11 +432,12 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                           {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end, "failed"))
         return None
 
-    def brake(where: str):
-        """One period with the wheels commanded to rest, driven: the guard held back a
-        moving vehicle's period, and a robot that waits for a plan brakes (a run that
-        stopped the clock instead re-planned, and stopped, from a state the vehicle could
-        not hold). The run's result where the period ended it, else None."""
+    def brake():
+        """One period with the wheels commanded to rest, driven from X: the guard held
+        back a moving vehicle's period, and a robot that waits for a plan brakes (a run
+        that stopped the clock instead re-planned, and stopped, from a state the vehicle
+        could not hold). The run's result where the period ended it, else None."""
+        where = f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
         return ended(drive((0.0, 0.0, ps.period_s)), f", braking after the guard held its period back at {where}")
 
     def retrace() -> bool:
@@ -467,7 +468,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     return finish("failed", _stopped(X, ps), "stopped")
                 backing = []
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-                result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                result = brake()
                 if result is not None:
                     return result
                 continue
@@ -551,7 +552,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if not EX.moving(X):
                     return finish("failed", _stopped(X, ps, ("re-plan", p.reason)), "stopped")
                 # (driven back, or braked short: the plan from where it comes to rest)
-                result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                result = brake()
                 if result is not None:
                     return result
                 continue
@@ -596,7 +597,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 why = f"{HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 if EX.moving(X):
                     # the plan from where it comes to rest (a moving vehicle cannot wait)
-                    result = brake(f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                    result = brake()
                     if result is not None:
                         return result
                 continue

@@ -250,6 +250,8 @@ def test_plan_and_compare_with_a_horizon_report_the_drive(tmp_path, capsys):
 class _Predicts:
     """A run's guard (receding._guards) whose 1 kHz predictions all end with ``end``."""
 
+    world = None                     # (no map: the guard takes no floor)
+
     def __init__(self, end):
         self.end = end
 
@@ -274,6 +276,32 @@ def test_a_horizon_run_never_drives_a_period_the_guard_holds_back(flat, monkeypa
     monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _Predicts(0)])
     free = R.run(flat, "time")
     assert free.status == "reached" and free.guarded == 0 and free.horizon.fallbacks == 0
+
+
+class _HoldsAfter:
+    """A guard whose predictions pass ``n`` periods, then come within half the tip-over
+    margin; braking to rest after a period passes."""
+    world = None
+
+    def __init__(self, n):
+        self.n = n
+
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
+        if control[0] == 0.0 and control[1] == 0.0:
+            return None, 0, X
+        self.n -= 1
+        return None, (0 if self.n >= 0 else -SS.MARGIN), X
+
+
+def test_a_horizon_run_brakes_through_a_held_period_and_stops_only_at_rest(flat, monkeypatch):
+    """Three periods driven, then every period held back: the moving vehicle cannot wait
+    for the plans from where it stands, so it brakes through a period (driven, status
+    held) and the run stops from rest (before, it stopped with the wheels turning)."""
+    monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _HoldsAfter(3)])
+    res = R.run(flat, "time")
+    assert res.status == "failed" and "the run stops rather than tip over" in res.reason
+    assert res.periods == 3 + 1
+    assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING
 
 
 # A pivot braked on a slope of hills_field: the vehicle at 0.25 m/s, full speed for a

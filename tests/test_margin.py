@@ -184,6 +184,20 @@ def test_a_search_from_inside_the_tip_margin_may_lead_out_of_it_and_none_steeper
     assert edge(inside, (-3.0, -3.0, 1.0)) > 0.0                     # backing down: out of it
 
 
+def test_a_horizon_planner_whose_scenario_starts_inside_the_margin_raises_it_for_that_start_alone():
+    """The horizon planner's problem is a template for plans from other starts: a
+    scenario that starts on the 27 deg flank raises the margin's limit for a plan from
+    there, not for one from flatter ground later."""
+    from sbmpc.planning.horizon import HorizonPlanner
+    w, X = _flank(27.0)
+    w = replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, y=float(X[K.S_Y]))))
+    hp = HorizonPlanner.of(w, "time")
+    assert math.degrees(hp.prob.params[SS.Q_TIPM]) == pytest.approx(25.0)
+    assert math.degrees(hp._params(WO._start(w, X))[SS.Q_TIPM]) == pytest.approx(
+        math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
+    assert math.degrees(hp._params(WO._start(w, _flank(20.0)[1]))[SS.Q_TIPM]) == pytest.approx(25.0)
+
+
 def test_the_guard_lets_a_vehicle_inside_its_band_drive_a_period_no_steeper_than_where_it_stands():
     """At rest on a 28.5 deg flank heading a little up it, inside the guard's band (half the
     5 deg margin: 27.5 deg): holding the wheels at rest or backing down the flank is
@@ -313,6 +327,8 @@ def test_the_guards_twin_and_the_run_after_a_stall_are_the_planners_twin():
 
 class _Prediction:
     """A guard whose 1 kHz prediction of any period ends with ``end``."""
+
+    world = None                     # (no map: the guard takes no floor)
 
     def __init__(self, end):
         self.end = end

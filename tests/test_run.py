@@ -402,6 +402,8 @@ class _Predicts:
     """A run's guard (receding._guards) whose 1 kHz predictions end with the codes of
     ``ends`` in turn, the last repeated (braking to rest ends safely)."""
 
+    world = None                     # (no map: the guard takes no floor)
+
     def __init__(self, *ends):
         self.ends = list(ends)
 

@@ -105,7 +105,7 @@ class HorizonPlanner:
         self.max_expansions = int(max_expansions)
         ps = world.scenario.planner
         self.period_s = ps.period_s
-        self.prob = replace(problem(world, cost),
+        self.prob = replace(problem(world, cost, inside=False),
                             weight=ps.horizon_weight if cost == "time" else ps.horizon_energy_weight)
         self.tracks = None         # a tracker's (plan, kappa): the whole-route plan it leads along
         if to_go is not None:

@@ -113,16 +113,20 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     return Q, data
 
 
-def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float | None = None) -> Problem:
+def problem(world: World, cost: str, start: np.ndarray | None = None, dt: float | None = None,
+            inside: bool = True) -> Problem:
     """The search problem of a world and cost, from ``start`` (a planner state, default
     the scenario's start state), its edges integrated at ``dt`` [s] (default the
-    planner's step)."""
+    planner's step). ``inside``: a start inside the tip-over margin raises its limit
+    (:func:`from_inside`); False for a template whose searches start elsewhere (the
+    horizon planner's: each of its plans does so from its own start)."""
     ps = world.scenario.planner
     Q, data = pack_world(world, cost, dt, margin=True)
     dims = np.array([K.S_X, K.S_Y, SS.X_YAWW, SS.X_V], np.int64)
     res = np.array([ps.cell_xy, ps.cell_xy, math.radians(ps.cell_yaw_deg), ps.cell_v])
     X0 = _start(world, start)
-    Q = from_inside(Q, world, X0)
+    if inside:
+        Q = from_inside(Q, world, X0)
     if on_gpu(ps):
         from ..problems.skidsteer_cuda import CudaEdges
         batch = CudaEdges(Q, data)

@@ -540,11 +540,18 @@ class Controller:
             return None
         for c in back:
             if self.guards and EX.held(self.guards, X, c, True, self._tilt):
-                if EX.moving(X):        # (a moving vehicle brakes: it cannot wait for the plan)
-                    X, _ = yield from self._drive(self._on_ticks((0.0, 0.0, self.world.scenario.planner.period_s)),
-                                                  "held")
+                X = yield from self._brake(X)
                 break
             X, _ = yield from self._drive(self._on_ticks(c), "backing")
+        return X
+
+    def _brake(self, X: np.ndarray):
+        """After the guard held a period back: a moving vehicle cannot wait for the plan,
+        so it brakes through a period (status ``held``) and the plan is made from where it
+        comes to rest. The estimate then (X itself for a vehicle at rest)."""
+        if not EX.moving(X):
+            return X
+        X, _ = yield from self._drive(self._on_ticks((0.0, 0.0, self.world.scenario.planner.period_s)), "held")
         return X
 
     def _stalled_here(self, X: np.ndarray):
@@ -630,10 +637,7 @@ class Controller:
                 # stands: a horizon plan, then a whole-route one, then it stops
                 self.guarded += 1
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-                if EX.moving(X):
-                    # a moving vehicle cannot wait for the plan: it brakes through a period,
-                    # and the plan is made from where it comes to rest
-                    X, _ = yield from self._drive(self._on_ticks((0.0, 0.0, ps.period_s)), "held")
+                X = yield from self._brake(X)
                 if held and guide is not None:
                     return "stopped", EX.stopped(X, ps)
                 if held or guide is not None:
