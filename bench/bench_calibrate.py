@@ -27,7 +27,6 @@ Writes bench/results/calibration.json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
@@ -36,7 +35,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from stamp import commit  # noqa: E402  (bench/, beside this script)
+import stamp  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "calibration.json"
 REAL = ROOT.parent / "shared" / "data" / "real"
 EFFECTS = ("none", "viscous_friction", "wheel_radius", "command_delay")
@@ -113,12 +112,12 @@ def main() -> int:
     ap.add_argument("--real", action="store_true")
     ap.add_argument("--closed-loop", action="store_true", help="only the closed-loop runs (module doc)")
     args = ap.parse_args()
-    started = commit()          # the code this run loaded
+    started = stamp.commit()    # the code this run loaded
     if args.closed_loop:
         doc = {"what": "closed-loop runs planned with the shipped and the calibrated model (bench_calibrate.py "
-                       "--closed-loop)", "date": time.strftime("%Y-%m-%d"), "commit": started, **closed_loop()}
+                       "--closed-loop)", **closed_loop()}
         path = OUT.with_name("calibration_closed_loop.json")
-        path.write_text(json.dumps(doc, indent=1, default=float))
+        stamp.write(path, doc, started=started, default=float)
         print(f"wrote {path}")
         return 0
     from dynamics.params import load_terrain, load_vehicle
@@ -147,8 +146,8 @@ def main() -> int:
             real.append(r)
             print(f"warthog {terr}: {r['cause']} held out {r['heldout']['nominal']:.2f} -> "
                   f"{r['heldout']['calibrated']:.2f} -> {r['heldout']['with_effect']:.2f} ({r['seconds']} s)", flush=True)
-    doc = {"what": __doc__.split("\n\n")[0], "date": time.strftime("%Y-%m-%d"), "commit": started, "generated": rows, "real": real}
-    OUT.write_text(json.dumps(doc, indent=1, default=float))
+    doc = {"what": __doc__.split("\n\n")[0], "generated": rows, "real": real}
+    stamp.write(OUT, doc, started=started, default=float)
     print(f"wrote {OUT}")
     return 0
 

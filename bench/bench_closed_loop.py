@@ -34,7 +34,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from stamp import commit  # noqa: E402  (bench/, beside this script)
+import stamp  # noqa: E402  (bench/, beside this script)
 RESULTS = ROOT / "bench" / "results"
 VARY = {"mass": 0.1, "inertia": 0.1, "mu_sa": 0.1, "mu_op": 0.1, "mu_roll": 0.1, "v_max": 0.1}
 FAULTS = {"delay_s": 0.05, "map": {"noise_sd_m": 0.05, "corr_m": 2.0}}
@@ -110,7 +110,7 @@ def main() -> int:
     ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
     ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
-    started = commit()          # the code this run loaded (a resumed sweep: the code it resumed with)
+    started = stamp.commit()    # the code this run loaded (a resumed sweep: the code it resumed with)
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
     spec = a.out / "spec.yaml"
@@ -132,7 +132,7 @@ def main() -> int:
     if a.figure:
         shutil.copy(a.out / "summary.png", ROOT / "docs" / a.figure)
     doc = {"what": "closed-loop runs on drawn truths (bench/bench_closed_loop.py)", "label": a.label,
-           "machine": platform.machine(), "python": platform.python_version(), "date": time.strftime("%Y-%m-%d"), "commit": started,
+           "machine": platform.machine(),
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
            "scenarios": a.scenarios, "adapt_periods": a.adapt,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),
@@ -141,7 +141,7 @@ def main() -> int:
                             "mode": r["run_mode"], "sample": r["sample"], "end": r["end"], "can_cross": r["can_cross"],
                             "truth": r["truth"], "reason": r["reason"]} for r in rows if r["end"] != "reached"]}
     out = RESULTS / a.results
-    out.write_text(json.dumps(doc, indent=1))
+    stamp.write(out, doc, started=started)
     print(f"wrote {out}" + (f", docs/{a.figure}" if a.figure else ""))
     return 0
 

@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,6 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+import stamp  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "controller.json"
 FIG = ROOT / "docs" / "controller_latency.png"
 SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
@@ -104,12 +103,10 @@ def main() -> int:
         print(f"{name:14s} {scn.cost:6s} {r['status'][:40]:40s} steps {r['steps']:4d}  median {r['median_ms']:6.2f} ms  "
               f"p95 {r['p95_ms']:6.2f}  max {r['max_ms']:7.2f}  over {r['over_period']}  {r['statuses']}", flush=True)
     allat = {k: v for k, v in rows.items()}
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     doc = {"what": "Controller.step latency at a 0.1 s control period, the controller driving the simulated truth "
                    "in real time, planning in its worker threads on the same core (bench/bench_controller.py)",
-           "date": time.strftime("%Y-%m-%d"), "commit": commit, "machine": platform.processor() or platform.machine(),
            "period_s": args.period, "horizon_s": args.horizon, "cap_s": args.cap, "runs": allat}
-    OUT.write_text(json.dumps(doc, indent=1))
+    stamp.write(OUT, doc)            # and doc gets its date, for the figure's title
     print(f"wrote {OUT}")
     plot(doc)
     return 0

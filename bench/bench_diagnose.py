@@ -6,12 +6,12 @@ one core (the quality bar: well under a minute). Writes bench/results/diagnose.j
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+import stamp  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "diagnose.json"
 
 
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
                             "fitted": d.candidates[0].params, "diagnosis_time_s": round(el, 2)})
         print(res["runs"][-1], flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(res, indent=1))
+    stamp.write(OUT, res)
     return 0
 
 

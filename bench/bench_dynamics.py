@@ -11,7 +11,6 @@ Measures, in one run (ratios are what to compare across machines):
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -28,6 +27,7 @@ sys.path.insert(0, str(ROOT))
 from dynamics import Model, load_terrain, load_vehicle  # noqa: E402
 from dynamics import kernels as K  # noqa: E402
 from dynamics.resistance import steady_resistance, unit_friction_fast  # noqa: E402
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 @njit(cache=True)
@@ -127,7 +127,7 @@ def main():
     res["numba_import_and_first_run_warm_cache_s"] = warm
 
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=1))
+    stamp.write(args.out, res)
     for k, v in res.items():
         print(f"{k:45s} {v:.4g}" if isinstance(v, float) else f"{k:45s} {v}")
 

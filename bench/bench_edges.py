@@ -27,7 +27,6 @@ expands, mostly mid-transient, where a scheme that saves steady steps saves less
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import subprocess
 import sys
@@ -38,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+import stamp  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "edges.json"
 
 TIMER = r'''
@@ -264,7 +264,7 @@ def main() -> int:
     print("cost on search nodes", res["cost_on_search_nodes"], flush=True)
     res["bench_s"] = round(time.perf_counter() - t0, 1)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(res, indent=1))
+    stamp.write(OUT, res)
     print(f"wrote {OUT}")
     return 0
 

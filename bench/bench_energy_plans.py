@@ -32,6 +32,7 @@ from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+import stamp  # noqa: E402  (bench/, beside this script)
 OUT = ROOT / "bench" / "results" / "energy_plans.json"
 
 
@@ -108,7 +109,7 @@ def main(argv=None) -> int:
     if args.scenarios and OUT.exists():          # measured in parts: keep the others
         old = json.loads(OUT.read_text())
         res["scenarios"] = {**old.get("scenarios", {}), **res["scenarios"]}
-    OUT.write_text(json.dumps(res, indent=1))
+    stamp.write(OUT, res)
     print(f"wrote {OUT}")
     return 0
 

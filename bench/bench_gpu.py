@@ -33,6 +33,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 def compile_only() -> dict:
@@ -68,11 +69,10 @@ CONFIGS = {"cpu_serial": dict(device="cpu", threads=1, batch=1),     # issue 14'
 
 def _save(res: dict, out: Path) -> None:
     """Write the results so far (a run cut short by its time limit keeps them)."""
-    text = json.dumps(res, indent=1)
-    out.write_text(text)
+    stamp.write(out, res)
     extra = os.environ.get("OUT")                   # the device machine's return folder
     if extra:
-        Path(extra, out.name).write_text(text)
+        stamp.write(Path(extra, out.name), res)     # the same stamps: res has them now
 
 
 def on_gpu(out: Path, deadline_s: float, smoke: bool = False) -> dict:

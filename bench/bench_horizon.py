@@ -38,6 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 OUT = ROOT / "bench" / "results" / "horizon.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 FIG = ROOT / "docs" / "horizon.png"
 SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
 SIDES = {70: 60, 170: 130, 340: 250, 500: 360}      # route [m] -> square side [m]
@@ -146,8 +147,8 @@ def main() -> int:
         "cost_ratio_range": [float(ratios.min()), float(ratios.max())] if ratios.size else None,
         "within_5pct": int(np.sum(ratios <= 1.05)),
     }
-    args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
-                               "threads": args.threads, "summary": summary, "rows": rows}, indent=1))
+    stamp.write(args.out, {"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
+                           "threads": args.threads, "summary": summary, "rows": rows})
     print(json.dumps(summary, indent=1))
     if args.out == OUT:
         plot(json.loads(OUT.read_text()))
@@ -182,9 +183,8 @@ def seeds(scns, args) -> int:
                 "spread_pct": round(100 * (max(got) - min(got)) / min(got), 2) if got else None,
                 "whole_route_plans_spread_pct": pl.get("seed_spread_pct") if cost == "energy" else None,
                 "whole_route_plans_median_J": pl.get("seed_median_J") if cost == "energy" else None}
-    out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
-                               "threads": args.threads, "seeds": args.seeds, "summary": summary, "rows": rows},
-                              indent=1))
+    stamp.write(out, {"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
+                      "threads": args.threads, "seeds": args.seeds, "summary": summary, "rows": rows})
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -29,6 +29,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
 OUT = ROOT / "results" / "independent.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 def main(argv=None) -> int:
@@ -77,7 +78,7 @@ def main(argv=None) -> int:
            "measured_at": time.strftime("%Y-%m-%d"), "generator": "bench/independent/sim.py", "base_seeds": args.base_seeds,
            "runs": rows, "right": right, "total": len(rows),
            "least_gain_with_effect": min(r["gain"] for r in with_effect) if with_effect else None}
-    OUT.write_text(json.dumps(out, indent=1) + "\n")
+    stamp.write(OUT, out, newline=True)
     print(f"{right} of {len(rows)} causes right; least gain where an effect is hidden "
           f"{out['least_gain_with_effect']:.2f}; wrote {OUT}")
     return 0

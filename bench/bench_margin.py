@@ -38,6 +38,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 OUT = ROOT / "bench" / "results" / "margin.json"
 CURVE = ROOT / "bench" / "results" / "margin_curve.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 FIG = ROOT / "docs" / "margin.png"
 SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
 
@@ -76,7 +77,7 @@ def main() -> int:
         return 0
     if args.replot:
         d = json.loads(CURVE.read_text())
-        CURVE.write_text(json.dumps(dict(d, curve=curve(d["rows"])), indent=1))
+        stamp.write(CURVE, dict(d, curve=curve(d["rows"])))     # the file's own stamps kept, where it has them
         figure(d["rows"], FIG)
         return 0
     if args.curve:
@@ -133,10 +134,10 @@ def main() -> int:
 
 
 def _write(args, rows: dict) -> None:
-    args.out.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
-                                    "python": sys.version.split()[0], "samples": args.samples,
-                                    **({"seeds": args.seeds, "curve": curve(list(rows.values()))} if args.curve else {}),
-                                    "rows": list(rows.values())}, indent=1))
+    stamp.write(args.out, {"machine": platform.processor() or platform.machine(),
+                           "python": sys.version.split()[0], "samples": args.samples,
+                           **({"seeds": args.seeds, "curve": curve(list(rows.values()))} if args.curve else {}),
+                           "rows": list(rows.values())})
 
 
 def table(rows: list) -> str:

@@ -35,6 +35,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "ompl.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 SCALE = 1e-3
 DEFAULT_SCENARIOS = ("flat", "hill_tradeoff", "steep_hill", "mixed_terrain")
 
@@ -180,7 +181,7 @@ def main(argv=None) -> int:
         out["scenarios"][name] = {"runs": rows, "summary": summary}
         print(name, json.dumps(summary), flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(out, indent=1))
+    stamp.write(OUT, out)
     print(f"wrote {OUT}")
     return 0
 

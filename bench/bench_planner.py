@@ -28,6 +28,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "planner.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 CONFIGS = {"serial": dict(threads=1, batch=1), "threads": dict(threads=0, batch=1), "batch4": dict(threads=0, batch=4),
@@ -93,7 +94,7 @@ def main() -> int:
         res["branching"].append(r)
         print("branching", r, flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(res, indent=1))
+    stamp.write(OUT, res)
     print(f"wrote {OUT}")
     return 0
 

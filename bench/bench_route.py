@@ -40,6 +40,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+import stamp  # noqa: E402  (bench/)
 OUT = ROOT / "bench" / "results" / "route.json"
 
 
@@ -104,7 +105,7 @@ def main() -> int:
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
            "polish": args.polish, "head_tail": [PO.HEAD, PO.TAIL], "exact_up_to": PO.EXACT_UP_TO,
            "rows": rows, "slopes": slopes}
-    out.write_text(json.dumps(res, indent=1))
+    stamp.write(out, res)
     print(json.dumps(slopes, indent=1))
     print("wrote", out.relative_to(ROOT))
     return 0
@@ -140,9 +141,8 @@ def ab(args, out: Path) -> int:
                     "checked_s_median": float(np.median([r["checked"]["s"] for r in rows[-args.ab:]])),
                     "shipped_s_median": float(np.median([r["shipped"]["s"] for r in rows[-args.ab:]])),
                     "same_energy": all(r["checked"]["energy_J"] == r["shipped"]["energy_J"] for r in rows[-args.ab:])}
-    out.write_text(json.dumps({"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-                               "pairs": args.ab, "time_check_slack": shipped, "summary": summary, "rows": rows},
-                              indent=1))
+    stamp.write(out, {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
+                      "pairs": args.ab, "time_check_slack": shipped, "summary": summary, "rows": rows})
     print(json.dumps(summary, indent=1))
     print("wrote", out.relative_to(ROOT))
     return 0

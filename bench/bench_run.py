@@ -13,7 +13,6 @@ core), numba warm.
 """
 from __future__ import annotations
 
-import json
 import platform
 import sys
 import time
@@ -22,6 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "run.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 FIG = ROOT / "docs" / "run_faults.png"
 FAULTS = {"wheel_radius": {"scale_left": 1.0, "scale_right": 0.92}, "viscous_friction": {"c_Nms": 0.2}}
 STUDY = (("flat", "time"), ("hill_tradeoff", "energy"), ("hills_field", "time"))
@@ -100,7 +100,7 @@ def main() -> int:
         print("every period", cost, {k: (v["replans"], v["mean_replan_time_s"], v["executed"]) if isinstance(v, dict) else v
                                      for k, v in row.items()}, flush=True)
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(res, indent=1))
+    stamp.write(OUT, res)
     if figure_runs:
         w, runs = figure_runs
         plot_runs(w.emap, runs, w.scenario, FIG, title="hill_tradeoff, energy cost: the true vehicle's right tyres "

@@ -23,6 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "settings.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 def _config(text: str) -> dict:
@@ -73,7 +74,7 @@ def main(argv=None) -> int:
                 print(text, name, cost, json.dumps({k: row[k] for k in ("median", "spread_pct", "median_expansions",
                                                                         "median_planning_s")}), flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=1))
+    stamp.write(args.out, res)
     print(f"wrote {args.out}")
     return 0
 

@@ -30,6 +30,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "bench" / "results" / "step.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 def extract(rev: str, dest: Path) -> None:
@@ -93,7 +94,7 @@ def main(argv=None) -> int:
     res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
            "measured_at": time.strftime("%Y-%m-%d"), "baseline_rev": args.baseline, "rounds": args.rounds, "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=1) + "\n")
+    stamp.write(args.out, res, newline=True)
     print(f"wrote {args.out}")
     return 0 if all(r["identical_outputs"] for r in rows) else 1
 

@@ -22,6 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 OUT = ROOT / "bench" / "results" / "sweep.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 
 SPEC = f"""
 scenarios: [{ROOT}/scenarios/flat.yaml, {ROOT}/scenarios/runup_ramp.yaml]
@@ -75,7 +76,7 @@ def main() -> int:
            "speedup": round(t_serial / t_ray, 2), "speedup_with_start": round(t_serial / (t_ray + t_init), 2),
            "mean_task_s": round(t_serial / len(tasks), 3), "ray_overhead_per_task_s": round(per_task_s, 5),
            "found": [found_s, found_r], "same_results": same}
-    OUT.write_text(json.dumps(out, indent=1))
+    stamp.write(OUT, out)
     print(json.dumps(out, indent=1))
     shutil.rmtree(tmp, ignore_errors=True)
     return 0

@@ -31,6 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 OUT = ROOT / "bench" / "results" / "unseen.json"
+import stamp  # noqa: E402  (bench/, beside this script)
 TERRAINS = ("asphalt", "packed_dirt", "grass", "concrete")
 
 
@@ -107,7 +108,7 @@ def main() -> int:
            "settings": f"defaults (seed 0, {'one core' if a.threads == 1 else 'every core'}); maps {a.first}-{a.first + a.maps - 1}", "summary": summary, "maps": rows,
            "bench_s": round(time.perf_counter() - t0, 1)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(json.dumps(res, indent=1) + "\n")
+    stamp.write(a.out, res, newline=True)
     print(json.dumps(summary, indent=1))
     print("wrote", a.out)
     return 0

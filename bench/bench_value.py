@@ -26,8 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -35,6 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+import stamp  # noqa: E402  (bench/)
 OUT = ROOT / "bench" / "results" / "value.json"
 SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp", "narrow_pass", "hills_field")
 FIELDS = {70: 60, 170: 130, 340: 250, 500: 360}
@@ -147,11 +146,7 @@ def main() -> int:
                     help="only closed-loop runs with N drawn truths per scenario (mass, grip 10 %% sd): re-plan times")
     ap.add_argument("--out", type=Path, default=OUT)
     a = ap.parse_args()
-    doc = {"date": time.strftime("%Y-%m-%d"), "machine": platform.processor() or platform.machine(),
-           "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                    cwd=ROOT).stdout.strip(),
-           "command": "taskset -c 0 python bench/bench_value.py " + " ".join(sys.argv[1:]),
-           }
+    doc = {"command": "taskset -c 0 python bench/bench_value.py " + " ".join(sys.argv[1:])}     # + stamp.write's
     if a.replans:
         doc["replans"] = replans(a.scenarios, a.costs, a.replans)
         times = [x for r in doc["replans"] for x in r["replan_s"]]
@@ -159,13 +154,13 @@ def main() -> int:
             import numpy as np
             doc["replan_p95_s"] = float(np.percentile(times, 95))
             doc["replan_median_s"] = float(np.median(times))
-        a.out.write_text(json.dumps(doc, indent=1) + "\n")
+        stamp.write(a.out, doc, newline=True)
         print(f"wrote {a.out}")
         return 0
     doc["builds"] = builds(a.scenarios, a.routes)
     if not a.builds_only:
         doc["plans"] = plans(a.scenarios, a.costs)
-    a.out.write_text(json.dumps(doc, indent=1) + "\n")
+    stamp.write(a.out, doc, newline=True)
     print(f"wrote {a.out}")
     return 0
 

@@ -26,6 +26,7 @@ from dynamics.manoeuvres import ramp_run, straight  # noqa: E402
 from dynamics.resistance import steady_resistance_fast  # noqa: E402
 from dynamics.kinematics import wheel_speeds  # noqa: E402
 from dynamics.simulate import simulate  # noqa: E402
+import stamp  # noqa: E402  (bench/, beside this script)
 
 
 def main():
@@ -82,7 +83,7 @@ def main():
     fig.tight_layout()
     fig.savefig(ROOT / "docs" / "model.png", dpi=90)
     (ROOT / "bench" / "results").mkdir(parents=True, exist_ok=True)
-    (ROOT / "bench" / "results" / "model_report.json").write_text(json.dumps(out, indent=1))
+    stamp.write(ROOT / "bench" / "results" / "model_report.json", out)
     print(json.dumps({k: v for k, v in out.items() if k != "table_one_study"}, indent=1))
     for r in out["table_one_study"]:
         if r["N"] in (2, 3, 4, 6, 8, 11, 16, 21, 26, 31):

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+import stamp  # noqa: E402  (bench/, beside this script)
 DATA = ROOT.parent / "shared" / "data" / "real" / "drive"
 TERRAIN = {"asphalt": "asphalt", "gravel": "packed_dirt", "sand": "grass"}   # nearest shipped terrain
 FIELDS = {"torque_constant": (2.0, 8.0), "current_limit": (2.0, 80.0), "ref_accel": (0.5, 6.0)}
@@ -80,7 +81,7 @@ def main(argv=None) -> int:
                                                      "heldout_pose_error", "cause", "gain")}), flush=True)
         figs.append((name, run, base0, base1, ext, d.cause))
     (ROOT / "bench" / "results").mkdir(parents=True, exist_ok=True)
-    (ROOT / "bench" / "results" / "warthog.json").write_text(json.dumps(out, indent=1))
+    stamp.write(ROOT / "bench" / "results" / "warthog.json", out)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

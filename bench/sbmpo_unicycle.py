@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import gc
-import json
 import os
 import statistics
 import sys
@@ -24,6 +23,7 @@ for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 ROOT = Path(__file__).resolve().parents[1]
+import stamp  # noqa: E402  (bench/, beside this script)
 DEFAULT = ROOT.parent / "shared" / "data" / "bench" / "sbmpo_unicycle"
 REFERENCE = {"main": {"iterations": 410, "nodes": 1253, "cost": 8.2448, "solve_time_s": 0.78e-3},
              "suite": {"solved": 98, "total_time_s": 0.174, "median_cost": 8.42}}
@@ -72,7 +72,7 @@ def main(argv=None) -> int:
           f"(fastest {1e3 * min(passes):.0f}), "
           f"median cost {out['suite']['median_cost']:.3f} (C++ 98/100, 174 ms, 8.42)")
     if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+        stamp.write(args.json, out)
     return 0
 
 
