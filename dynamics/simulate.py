@@ -173,10 +173,10 @@ def simulate(model: Model, cmd_l, cmd_r, *, state=None, pitch=0.0, profile=None,
     pitch_t = np.broadcast_to(np.asarray(pitch, float), (n,)).copy() if profile is None else np.zeros(1)
     prof = np.zeros(0) if profile is None else np.ascontiguousarray(profile, dtype=float)
     every = max(1, int(round(record_dt / dt)))
-    out = np.empty((n // every + 1, K.NR))
+    out = np.empty((K.NR, n // every + 1))       # channel-major: each channel a contiguous row
     rows = K.rollout(model.P, model.table, S, cmd_l, cmd_r, pitch_t, prof, float(profile_start),
                      float(profile_step), float(dt), bool(open_loop), every, out)
-    data = {name: out[:rows, i].copy() for i, name in enumerate(K.CHANNELS)}
+    data = {name: out[i, :rows] for i, name in enumerate(K.CHANNELS)}
     return Trajectory(data=data, stalled=bool(S[K.S_STALLED] > 0.5), final_state=S)
 
 
