@@ -324,6 +324,16 @@ def _battery_power(il, ir, wl, wr, kl, kr, ra, regen):
 SUBSTEPS = 4   # a coarse step over which a wheel speed changes sign is redone as this many
 
 
+# Flags the kernels pass as arguments, as globals: numba types a literal True or False
+# in a call apart from a bool and compiles the callee once for each (the model's step,
+# _step, compiled four times over: checked and not, literal and variable open_loop, a
+# read-only table and not, 87 s of a fresh clone's first compile, 2026-12-06); a NumPy
+# bool as a global is typed as a plain bool (a Python one as a literal).
+CHECK = np.bool_(True)
+NO_CHECK = np.bool_(False)
+CLOSED_LOOP = np.bool_(False)
+
+
 @jit_inline
 def step(P, table, S, cmd_l, cmd_r, pitch, dt, open_loop, O):
     """Advance state S by dt [s] under commands (cmd_l, cmd_r) and pitch [rad]; outputs in
@@ -341,11 +351,11 @@ def step_slope(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O):
     accurate (a wheel dragged through zero downhill under a saturated drive: 2-3 % off
     in energy in one step; dynamics.convergence measures it). Allocates nothing."""
     if open_loop or dt <= P[P_TC] * (1.0 + 1e-9):
-        _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, False)
-    elif not _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, True):
+        _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, NO_CHECK)
+    elif not _step(P, table, S, cmd_l, cmd_r, sp, cp, dt, open_loop, O, CHECK):
         h = dt / SUBSTEPS
         for _ in range(SUBSTEPS):
-            _step(P, table, S, cmd_l, cmd_r, sp, cp, h, open_loop, O, False)
+            _step(P, table, S, cmd_l, cmd_r, sp, cp, h, open_loop, O, NO_CHECK)
 
 
 @jit_inline
@@ -732,5 +742,5 @@ def rollout_batch(P, table, S0, cmds, n_steps, pitch, dt):
     for b in range(S0.shape[0]):
         S = out[b]
         for _ in range(n_steps):
-            step(P, table, S, cmds[b, 0], cmds[b, 1], pitch, dt, False, O)
+            step(P, table, S, cmds[b, 0], cmds[b, 1], pitch, dt, CLOSED_LOOP, O)
     return out

@@ -60,7 +60,10 @@ class Model:
 
     @cached_property
     def table(self) -> np.ndarray:
-        return friction_table(self.vehicle, self.terrain)
+        # a writable copy of the shared (read-only) table: numba types a read-only array
+        # apart, and compiled the model's step once more for it than the planner's
+        # (writable) tables need (K.CHECK: a fresh clone's first compile)
+        return np.array(friction_table(self.vehicle, self.terrain))
 
     def with_(self, vehicle: Vehicle | None = None, terrain: Terrain | None = None, dt=None) -> "Model":
         return Model(vehicle or self.vehicle, terrain or self.terrain, dt if dt is not None else self.dt)

@@ -88,7 +88,6 @@ def run(args) -> int:
         model = Model.load(args.vehicle, args.terrain, args.dt)
     except ParameterError as exc:
         raise InputError(str(exc)) from None
-    model_note()
     ramp = any(x is not None for x in (args.slope_deg, args.v0, args.length))
     if sum([ramp, args.radius is not None, args.lemniscate, args.commands is not None]) > 1:
         raise InputError("expected one manoeuvre (--radius, the ramp options, --lemniscate or --commands), found several")
@@ -105,8 +104,6 @@ def run(args) -> int:
                          "shorten the run or use a longer step")
     if args.v is not None and abs(args.v) > 20:
         raise InputError(f"--v: expected a speed of at most 20 m/s in magnitude, found {args.v}")
-    info: dict = {}
-    dt = model.step_s
     if args.commands is not None:
         from ..protocol import ProtocolError, held, read_commands
         try:
@@ -114,15 +111,8 @@ def run(args) -> int:
         except ProtocolError as exc:
             raise InputError(str(exc)) from None
         end = args.duration or (t_cmd[-1] + float(np.median(np.diff(t_cmd))))
-        if end / dt > MAX_STEPS:
-            raise InputError(f"--commands: expected at most {MAX_STEPS:,} steps, found {end / dt:,.0f}")
-        cl, cr = held(t_cmd, wl_cmd, dt, end), held(t_cmd, wr_cmd, dt, end)
-        manoeuvre = "commands"
-        info = {"commands": str(args.commands)}
-    elif args.lemniscate:
-        dur = args.duration or 18.0
-        cl, cr = lemniscate(model, duration=dur, dt=dt)
-        manoeuvre = "lemniscate"
+        if end / model.step_s > MAX_STEPS:
+            raise InputError(f"--commands: expected at most {MAX_STEPS:,} steps, found {end / model.step_s:,.0f}")
     elif ramp:
         v = _need(args.v, "--v", "a desired speed in m/s")
         slope = _need(args.slope_deg, "--slope-deg", "a grade in degrees")
@@ -134,15 +124,30 @@ def run(args) -> int:
             raise InputError(f"--length: expected a length in (0, 10000] metres, found {length:g}")
         if abs(v0) > 20:
             raise InputError(f"--v0: expected a speed of at most 20 m/s in magnitude, found {v0}")
+        if args.open_loop:
+            raise InputError("--open-loop: expected a straight, circle or lemniscate manoeuvre, found a ramp")
+    elif not args.lemniscate and args.commands is None:
+        v = _need(args.v, "--v", "a desired speed in m/s")
+        if args.radius is not None and (args.radius == 0 or not math.isfinite(args.radius)):
+            raise InputError(f"--radius: expected a non-zero radius in metres, found {args.radius}")
+    model_note()             # every option checked: what follows computes
+    info: dict = {}
+    dt = model.step_s
+    if args.commands is not None:
+        cl, cr = held(t_cmd, wl_cmd, dt, end), held(t_cmd, wr_cmd, dt, end)
+        manoeuvre = "commands"
+        info = {"commands": str(args.commands)}
+    elif args.lemniscate:
+        dur = args.duration or 18.0
+        cl, cr = lemniscate(model, duration=dur, dt=dt)
+        manoeuvre = "lemniscate"
+    elif ramp:
         traj, crossed, t_top = ramp_run(model, v, v0, slope, length, args.duration or 20.0, dt)
         manoeuvre = "ramp"
         info = {"slope_deg": slope, "length_m": length, "v0": v0, "crossed": crossed, "time_to_top_s": t_top}
     else:
-        v = _need(args.v, "--v", "a desired speed in m/s")
         dur = args.duration or 10.0
         if args.radius is not None:
-            if args.radius == 0 or not math.isfinite(args.radius):
-                raise InputError(f"--radius: expected a non-zero radius in metres, found {args.radius}")
             cl, cr = circle(model, v, args.radius, dur, dt)
             manoeuvre = "circle"
             info = {"radius_m": args.radius}
@@ -157,8 +162,6 @@ def run(args) -> int:
             cl, cr = closed.i_l[1:].copy(), closed.i_r[1:].copy()
             info["open_loop_input"] = "closed-loop current profile"
         traj = simulate(model, cl, cr, open_loop=args.open_loop, record_dt=max(dt, 0.01))
-    elif args.open_loop:
-        raise InputError("--open-loop: expected a straight, circle or lemniscate manoeuvre, found a ramp")
     summary = {
         "final_speed_mps": float(traj.v[-1]), "mean_speed_mps": float(np.mean(traj.v)),
         "final_yaw_rate": float(traj.yaw_rate[-1]), "final_tau_l": float(traj.tau_l[-1]),

@@ -117,7 +117,7 @@ def _steady(P, T, S0, which, cmd, pitch, dt, n_settle, n_meas, reserve, out):
                 e0 = S[K.S_E]
                 wl0 = S[K.S_WL]
                 wr0 = S[K.S_WR]
-            K.step_slope(Pk, Tk, S, cmd[r, 0], cmd[r, 1], sp, cp, dt, False, O)
+            K.step_slope(Pk, Tk, S, cmd[r, 0], cmd[r, 1], sp, cp, dt, K.CLOSED_LOOP, O)
             if S[K.S_STALLED] > 0.0:
                 ok = 0.0
                 break

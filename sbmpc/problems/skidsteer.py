@@ -83,6 +83,8 @@ CODES = ("left the map", "stalled (drive saturated, commanded motion not achieve
 OFF_MAP, STALL, TIP, MARGIN = 1, 2, 3, 4
 # ---- edge ends ---------------------------------------------------------------------
 IN_GOAL = 1
+NO_ROWS = np.int64(0)   # no record rows written yet, as an int64: a literal 0 made numba compile edge
+                        # and edge_cost a second time (a minute of a fresh clone's first compile)
 
 # ---- params vector ---------------------------------------------------------------
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
@@ -185,7 +187,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         g = along + 0.5 * (along - prev) if i > 0 else along
         prev = along
         cp = 1.0 / math.sqrt(1.0 + g * g)     # the pitch's cosine and sine
-        K.step_slope(Pk, Tk, S, cmd_l, cmd_r, g * cp, cp, dt, False, O)
+        K.step_slope(Pk, Tk, S, cmd_l, cmd_r, g * cp, cp, dt, K.CLOSED_LOOP, O)
         v_end = O[K.O_V]
         stepped = True
         if record and rows < rec.shape[0]:
@@ -235,7 +237,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             prev_w = gw
             cw = 1.0 / math.sqrt(1.0 + gm * gm)
             T[K.S_YAW] = yaw_i
-            K.step_slope(Pw, Tk, T, cmd_l, cmd_r, gm * cw, cw, dt, False, O)
+            K.step_slope(Pw, Tk, T, cmd_l, cmd_r, gm * cw, cw, dt, K.CLOSED_LOOP, O)
             lx = S[K.S_X] - T[K.S_X]
             ly = S[K.S_Y] - T[K.S_Y]
             lag = math.sqrt(lx * lx + ly * ly)
@@ -275,7 +277,7 @@ def edge_cost(params, data, state, control, out, rec, rows, O):
 @njit(cache=True, error_model="numpy")
 def propagate(params, data, state, control, out):
     """One SBMPC edge: cost (time [s] or energy [J]) or a negative invalid code."""
-    return edge_cost(params, data, state, control, out, np.empty((0, K.NR)), 0, np.empty(K.NO))
+    return edge_cost(params, data, state, control, out, np.empty((0, K.NR)), NO_ROWS, np.empty(K.NO))
 
 
 @njit(EXPAND.signature, cache=True, error_model="numpy", parallel=True)
@@ -498,7 +500,7 @@ def sequence_cost(params, data, state, ctrl, first, extra, bound, out):
         if k == n - 1:
             steps += extra
         t0 = out[K.S_T]
-        end, _ = edge(params, data, out, ctrl[k, 0], ctrl[k, 1], steps, rec, 0, O)
+        end, _ = edge(params, data, out, ctrl[k, 0], ctrl[k, 1], steps, rec, NO_ROWS, O)
         if end < 0:
             return float(end), k - first + 1, out[K.S_T] - t0
         c = out[K.S_E] - state[K.S_E] if energy else out[K.S_T] - state[K.S_T]
@@ -537,4 +539,4 @@ def sequence_states(params, data, state, ctrl, states):
         for d in range(S.shape[0]):
             states[k, d] = S[d]
         if k < ctrl.shape[0] - 1:
-            edge(params, data, S, ctrl[k, 0], ctrl[k, 1], max(1, int(round(ctrl[k, 2] / dt))), rec, 0, O)
+            edge(params, data, S, ctrl[k, 0], ctrl[k, 1], max(1, int(round(ctrl[k, 2] / dt))), rec, NO_ROWS, O)
