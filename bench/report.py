@@ -291,6 +291,30 @@ def calibration_real() -> str:
     return "\n".join(lines)
 
 
+def independent_calibrated() -> str:
+    """validation.md: calibrate, then diagnose, on the independent implementation's runs
+    (independent_calibrated.json)."""
+    d = _load("independent_calibrated.json")
+    lines = ["| batch | run | hidden | named | held out: shipped → calibrated → with the effect | best candidate: "
+             "gain, share |", "|---|---|---|---|---|---|"]
+    for r in d["runs"]:
+        h, b = r["heldout"], r["best"] or {}
+        hidden = r["hidden"] + (f" ({_params(r['truth'])})" if r["truth"] else "")
+        named = r["cause"] + (f" ({_params(r['fitted'])})" if r["fitted"] else "")
+        mark = "" if r["right"] else " ✗"
+        lines.append(f"| {r['base_seed']} | `{Path(r['run']).stem}` | {hidden} | {named}{mark} | "
+                     f"{h['nominal']:.2f} → {h['refitted']:.2f} → {h['with_effect']:.2f} | "
+                     f"{b.get('effect', '-')}: {b.get('gain', 0):.2f}, {b.get('share', 0):.2f} |")
+    clean = d["clean_floor"]
+    secs = sorted(r["seconds"] for r in d["runs"])
+    lines += ["", f"Causes named right: {d['right']} of {d['total']} (a clean run right only as `none`). The clean "
+              f"runs' held-out error: {', '.join(f'{x:.2f}' for x in clean['nominal'])} noise units with the "
+              f"shipped model, {', '.join(f'{x:.2f}' for x in clean['calibrated'])} calibrated.",
+              "", f"*`python bench/bench_independent.py --calibrate --workers 2` ({_when(d)}; "
+              f"{secs[len(secs) // 2]:.0f} s a run, median, {secs[0]:.0f}-{secs[-1]:.0f}).*"]
+    return "\n".join(lines)
+
+
 def calibration_closed_loop() -> str:
     """validation.md: what calibration buys in planning (calibration_closed_loop.json)."""
     d = _load("calibration_closed_loop.json")
@@ -733,7 +757,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-adapt": closed_loop_adapt,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
-          "calibration-real": calibration_real, "calibration-closed-loop": calibration_closed_loop,
+          "calibration-real": calibration_real, "independent-calibrated": independent_calibrated, "calibration-closed-loop": calibration_closed_loop,
           "husky": husky, "status-defaults": status_defaults, "status-other": status_other}
 
 
