@@ -142,16 +142,9 @@ def test_a_grade_fixed_in_the_world_is_named_on_top_of_a_calibration():
     from sbmpc.calibration import calibrate, effects_on_top
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "independent"))
     import sim
-    i = next(k for k, c in enumerate(sim.CASES) if c[0] == "grade_2.5deg_world")
-    stem, effect, eff, truth = sim.CASES[i]
-    seed = 20240 + 17 * i
-    cl, cr, _ = sim.random_commands(np.random.default_rng([seed, 1]), 90.0)
-    res = sim.simulate(cl, cr, effects=eff)
+    truth = next(c[3] for c in sim.CASES if c[0] == "grade_2.5deg_world")
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / f"{stem}.csv"
-        sim.write_csv(str(path), res, cl, cr, 10, np.random.default_rng([seed, 2]),
-                      {"vehicle": "p3at", "terrain": "vinyl", "slope_deg": 0, "note": "independent"})
-        run = read_run(path)
+        run = read_run(sim.write_case("grade_2.5deg_world", tmp)[0])
     cal = calibrate([run], P3AT, VINYL, only=["mass", "mu_roll"])
     d = effects_on_top(cal, [run], effects=("grade",))[0]
     assert d["cause"] == "grade"

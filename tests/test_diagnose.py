@@ -486,17 +486,10 @@ def test_a_grade_fixed_in_the_world_found_from_the_logged_heading():
     from pathlib import Path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "independent"))
     import sim
-    i = next(k for k, c in enumerate(sim.CASES) if c[0] == "grade_2.5deg_world")
-    stem, effect, eff, truth = sim.CASES[i]
-    seed = 20240 + 17 * i
-    cl, cr, _ = sim.random_commands(np.random.default_rng([seed, 1]), 90.0)
-    res = sim.simulate(cl, cr, effects=eff)
+    truth = next(c[3] for c in sim.CASES if c[0] == "grade_2.5deg_world")
     import tempfile
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / f"{stem}.csv"
-        sim.write_csv(str(path), res, cl, cr, 10, np.random.default_rng([seed, 2]),
-                      {"vehicle": "p3at", "terrain": "vinyl", "slope_deg": 0, "note": "independent"})
-        run = read_run(path)
+        run = read_run(sim.write_case("grade_2.5deg_world", tmp)[0])
     d = diagnose(run, P3AT, VINYL)
     assert d.cause == "grade" and d.decided_on == "heldout"
     c = d.candidates[0]

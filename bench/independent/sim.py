@@ -431,23 +431,29 @@ CASES = [
 ]
 
 
+def write_case(stem, outdir, duration=90.0, base_seed=20240):
+    """Case ``stem`` of CASES simulated and written to OUTDIR/STEM.csv as generate writes
+    it: (path, the simulation, the command holds, the case's seed)."""
+    i = next(k for k, c in enumerate(CASES) if c[0] == stem)
+    seed = base_seed + 17 * i
+    cl, cr, holds = random_commands(np.random.default_rng([seed, 1]), duration)
+    res = simulate(cl, cr, effects=CASES[i][2])
+    path = os.path.join(outdir, stem + '.csv')
+    meta = {'vehicle': 'p3at', 'terrain': 'vinyl', 'slope_deg': 0,
+            'note': 'synthetic run, independent simulator'}
+    write_csv(path, res, cl, cr, 10, np.random.default_rng([seed, 2]), meta)
+    return path, res, holds, seed
+
+
 def generate(outdir, duration=90.0, base_seed=20240):
     os.makedirs(outdir, exist_ok=True)
     manifest = {'generator': 'python bench/independent/sim.py', 'duration_s': duration, 'log_hz': 100,
                 'noise_sd': NOISE, 'vehicle': 'p3at', 'terrain': 'vinyl', 'header_slope_deg': 0,
                 'runs': []}
     for i, (stem, effect, eff, mparams) in enumerate(CASES):
-        seed = base_seed + 17 * i
-        rng_cmd = np.random.default_rng([seed, 1])
-        rng_noise = np.random.default_rng([seed, 2])
-        cl, cr, holds = random_commands(rng_cmd, duration)
         t0 = time.time()
-        res = simulate(cl, cr, effects=eff)
+        path, res, holds, seed = write_case(stem, outdir, duration, base_seed)
         el = time.time() - t0
-        path = os.path.join(outdir, stem + '.csv')
-        meta = {'vehicle': 'p3at', 'terrain': 'vinyl', 'slope_deg': 0,
-                'note': 'synthetic run, independent simulator'}
-        write_csv(path, res, cl, cr, 10, rng_noise, meta)
         E = res['E']
         entry = dict(file=stem + '.csv', effect=effect,
                      param=None if not mparams else (next(iter(eff)) if eff else None),
