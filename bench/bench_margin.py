@@ -77,7 +77,8 @@ def main() -> int:
         return 0
     if args.replot:
         d = json.loads(CURVE.read_text())
-        stamp.write(CURVE, dict(d, curve=curve(d["rows"])))     # the file's own stamps kept, where it has them
+        # the rows' own stamps kept, else those of the commit that stored them (not today's)
+        stamp.write(CURVE, {**stamp.stored(CURVE), **d, "curve": curve(d["rows"])})
         figure(d["rows"], FIG)
         return 0
     if args.curve:

@@ -31,6 +31,18 @@ def commit() -> str:
 STARTED = commit()      # taken when a benchmark first imports this module: the code it loaded
 
 
+def stored(path) -> dict:
+    """{"date", "commit"} of the last commit that stored ``path`` (a results file written
+    before its script stamped it: rewritten from its own rows, it keeps when they were
+    measured, not today's date); {} where git does not know the file."""
+    try:
+        out = subprocess.run(["git", "log", "-1", "--format=%cs %h", "--", str(path)], cwd=ROOT,
+                             capture_output=True, text=True).stdout.split()
+    except OSError:
+        return {}
+    return {"date": out[0], "commit": out[1]} if len(out) == 2 else {}
+
+
 def write(path, doc: dict, *, started: str | None = None, newline: bool = False, **dumps) -> Path:
     """Write the results ``doc`` to ``path`` as JSON (``dumps``: json.dumps's keywords,
     indent=1 unless given; ``newline``: end the file with one), stamped with what the

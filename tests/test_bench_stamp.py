@@ -9,6 +9,8 @@ import time
 from fractions import Fraction
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 spec = importlib.util.spec_from_file_location("bench_stamp", ROOT / "bench" / "stamp.py")
 stamp = importlib.util.module_from_spec(spec)
@@ -93,3 +95,19 @@ def test_write_does_not_overwrite_the_docs_own_stamps(tmp_path):
     assert (tmp_path / "r.json").read_text().endswith("}\n")
     own = json.loads(stamp.write(tmp_path / "s.json", {"commit": "f00"}).read_text())
     assert own["commit"] == "f00"
+
+
+def test_a_file_rewritten_from_its_rows_keeps_the_commit_that_stored_them():
+    """stamp.stored: the date and commit of the last commit that stored a results file
+    (what a --replot keeps where the file has no stamps of its own), {} for a file git
+    does not know."""
+    import re
+    import subprocess
+    path = ROOT / "bench" / "results" / "margin_curve.json"
+    if not (ROOT / ".git").exists():
+        pytest.skip("no git repository")
+    s = stamp.stored(path)
+    want = subprocess.run(["git", "log", "-1", "--format=%h", "--", str(path)], cwd=ROOT, capture_output=True,
+                          text=True).stdout.strip()
+    assert s["commit"] == want and re.fullmatch(r"\d{4}-\d{2}-\d{2}", s["date"])
+    assert stamp.stored(ROOT / "bench" / "results" / "no_such_file.json") == {}
