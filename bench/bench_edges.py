@@ -27,7 +27,6 @@ expands, mostly mid-transient, where a scheme that saves steady steps saves less
 from __future__ import annotations
 
 import argparse
-import platform
 import subprocess
 import sys
 import tempfile
@@ -253,8 +252,7 @@ def main() -> int:
     if args.seeds < 1:
         ap.error("--seeds: expected at least 1")
     t0 = time.perf_counter()
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,
+    res = {"dt": args.dt, "period_s": args.period, "per_terrain": args.per_terrain, "seed": args.seed,
            "seeds": args.seeds,
            "convergence": convergence(args.per_terrain, args.dt, args.period, args.seed, args.seeds),
            "on_maps": map_convergence(args.per_map, args.seed, args.period)}

@@ -25,9 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -58,8 +56,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     stored = json.loads(OUT.read_text()).get("scenarios", {}) if args.keep_reference and OUT.exists() else {}
     names = args.scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml") if p.stem != "unreachable")
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "measured_at": "controller rate (1 kHz replays of the plans' controls)", "scenarios": {}}
+    res = {"measured_at": "controller rate (1 kHz replays of the plans' controls)", "scenarios": {}}
     for name in names:
         scn = SC.load(ROOT / "scenarios" / f"{name}.yaml")
         world = WO.resolve(scn)

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -147,8 +146,7 @@ def main() -> int:
         "cost_ratio_range": [float(ratios.min()), float(ratios.max())] if ratios.size else None,
         "within_5pct": int(np.sum(ratios <= 1.05)),
     }
-    stamp.write(args.out, {"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
-                           "threads": args.threads, "summary": summary, "rows": rows})
+    stamp.write(args.out, {"horizon_s": args.horizon, "threads": args.threads, "summary": summary, "rows": rows})
     print(json.dumps(summary, indent=1))
     if args.out == OUT:
         plot(json.loads(OUT.read_text()))
@@ -183,8 +181,8 @@ def seeds(scns, args) -> int:
                 "spread_pct": round(100 * (max(got) - min(got)) / min(got), 2) if got else None,
                 "whole_route_plans_spread_pct": pl.get("seed_spread_pct") if cost == "energy" else None,
                 "whole_route_plans_median_J": pl.get("seed_median_J") if cost == "energy" else None}
-    stamp.write(out, {"machine": platform.processor() or platform.machine(), "horizon_s": args.horizon,
-                      "threads": args.threads, "seeds": args.seeds, "summary": summary, "rows": rows})
+    stamp.write(out, {"horizon_s": args.horizon, "threads": args.threads, "seeds": args.seeds, "summary": summary,
+                      "rows": rows})
     print(json.dumps(summary, indent=1))
     return 0
 

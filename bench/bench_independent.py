@@ -27,7 +27,6 @@ folder; ``python bench/independent/sim.py --out DIR`` writes them where you like
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import tempfile
 import time
@@ -67,26 +66,32 @@ def calibrated(path: str, entry: dict, base: int) -> dict:
             "seconds": round(time.perf_counter() - t0, 1)}
 
 
+def batches(base_seeds):
+    """Each base seed's batch of runs, generated into a temporary folder (removed when the
+    next batch is asked for): (base seed, folder, its manifest)."""
+    sys.path.insert(0, str(ROOT / "independent"))
+    import sim
+    for base in base_seeds:
+        with tempfile.TemporaryDirectory() as tmp:
+            sim.generate(tmp, base_seed=base)
+            yield base, Path(tmp), json.loads((Path(tmp) / "manifest.json").read_text())
+
+
 def main_calibrated(args) -> int:
     """``--calibrate`` (module doc)."""
     import concurrent.futures as cf
-    sys.path.insert(0, str(ROOT / "independent"))
-    import sim
     rows = []
-    for base in args.base_seeds:
-        with tempfile.TemporaryDirectory() as tmp:
-            sim.generate(tmp, base_seed=base)
-            manifest = json.loads((Path(tmp) / "manifest.json").read_text())
-            with cf.ProcessPoolExecutor(args.workers) as pool:
-                futs = [pool.submit(calibrated, str(Path(tmp) / e["file"]), e, base) for e in manifest["runs"]]
-                for f in futs:
-                    row = f.result()
-                    rows.append(row)
-                    h = row["heldout"]
-                    print(f"{base} {row['run']:28s} hidden {row['hidden']:17s} -> {row['cause']:17s} "
-                          f"{'right' if row['right'] else 'WRONG'}  held out {h['nominal']:.2f} -> {h['calibrated']:.2f}"
-                          f" -> {h['with_effect']:.2f}  best {row['best'] and row['best']['effect']} "
-                          f"({row['seconds']} s)", flush=True)
+    for base, tmp, manifest in batches(args.base_seeds):
+        with cf.ProcessPoolExecutor(args.workers) as pool:
+            futs = [pool.submit(calibrated, str(tmp / e["file"]), e, base) for e in manifest["runs"]]
+            for f in futs:
+                row = f.result()
+                rows.append(row)
+                h = row["heldout"]
+                print(f"{base} {row['run']:28s} hidden {row['hidden']:17s} -> {row['cause']:17s} "
+                      f"{'right' if row['right'] else 'WRONG'}  held out {h['nominal']:.2f} -> {h['calibrated']:.2f}"
+                      f" -> {h['with_effect']:.2f}  best {row['best'] and row['best']['effect']} "
+                      f"({row['seconds']} s)", flush=True)
     right = sum(r["right"] for r in rows)
     clean = [r for r in rows if r["hidden"] == "none"]
     out = {"what": "calibrate, then diagnose, on runs of an independent implementation (bench_independent.py "
@@ -109,8 +114,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.calibrate:
         return main_calibrated(args)
-    sys.path.insert(0, str(ROOT / "independent"))
-    import sim
     from dynamics.discrepancy import diagnose
     from dynamics.params import load_terrain, load_vehicle
     from dynamics.runs import read_run
@@ -122,32 +125,28 @@ def main(argv=None) -> int:
         return cause in ("none", "unexplained") if hidden == "none" else cause == hidden
 
     rows = []
-    for base in args.base_seeds:
-        with tempfile.TemporaryDirectory() as tmp:
-            sim.generate(tmp, base_seed=base)
-            manifest = json.loads((Path(tmp) / "manifest.json").read_text())
-            for entry in manifest["runs"]:
-                run = read_run(Path(tmp) / entry["file"])
-                t0 = time.perf_counter()
-                d = diagnose(run, load_vehicle("p3at"), load_terrain("vinyl"))
-                named = next((c for c in d.candidates if c.effect == d.cause), None)
-                row = {"base_seed": base, "run": entry["file"], "hidden": entry["effect"], "truth": entry["params"],
-                       "cause": d.cause, "right": right(entry["effect"], d.cause), "decided_on": d.decided_on,
-                       "explained_share": d.share, "hint": d.hint,
-                       "gain": d.gain, "fitted": named.params if named else None,
-                       "stderr": named.stderr if named else None,
-                       "evidence": None if named is None or named.evidence != named.evidence else named.evidence,
-                       "rivals": list(d.rivals), "baseline_heldout_error": d.baseline_error,
-                       "best_other_gain": max((c.gain for c in d.candidates if c.effect != d.cause), default=None),
-                       "seconds": round(time.perf_counter() - t0, 2)}
-                rows.append(row)
-                print(f"{base} {entry['file']:28s} hidden {entry['effect']:17s} -> {d.cause:17s} "
-                      f"{'right' if row['right'] else 'WRONG'}  gain {d.gain:.2f}  "
-                      f"fitted {json.dumps({k: round(v, 4) for k, v in (row['fitted'] or {}).items()})}", flush=True)
+    for base, tmp, manifest in batches(args.base_seeds):
+        for entry in manifest["runs"]:
+            run = read_run(tmp / entry["file"])
+            t0 = time.perf_counter()
+            d = diagnose(run, load_vehicle("p3at"), load_terrain("vinyl"))
+            named = next((c for c in d.candidates if c.effect == d.cause), None)
+            row = {"base_seed": base, "run": entry["file"], "hidden": entry["effect"], "truth": entry["params"],
+                   "cause": d.cause, "right": right(entry["effect"], d.cause), "decided_on": d.decided_on,
+                   "explained_share": d.share, "hint": d.hint,
+                   "gain": d.gain, "fitted": named.params if named else None,
+                   "stderr": named.stderr if named else None,
+                   "evidence": None if named is None or named.evidence != named.evidence else named.evidence,
+                   "rivals": list(d.rivals), "baseline_heldout_error": d.baseline_error,
+                   "best_other_gain": max((c.gain for c in d.candidates if c.effect != d.cause), default=None),
+                   "seconds": round(time.perf_counter() - t0, 2)}
+            rows.append(row)
+            print(f"{base} {entry['file']:28s} hidden {entry['effect']:17s} -> {d.cause:17s} "
+                  f"{'right' if row['right'] else 'WRONG'}  gain {d.gain:.2f}  "
+                  f"fitted {json.dumps({k: round(v, 4) for k, v in (row['fitted'] or {}).items()})}", flush=True)
     right = sum(r["right"] for r in rows)
     with_effect = [r for r in rows if r["hidden"] != "none"]
-    out = {"machine": platform.processor() or platform.machine(), "python": platform.python_version(),
-           "measured_at": time.strftime("%Y-%m-%d"), "generator": "bench/independent/sim.py", "base_seeds": args.base_seeds,
+    out = {"generator": "bench/independent/sim.py", "base_seeds": args.base_seeds,
            "runs": rows, "right": right, "total": len(rows),
            "least_gain_with_effect": min(r["gain"] for r in with_effect) if with_effect else None}
     stamp.write(OUT, out, newline=True)

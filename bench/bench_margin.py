@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -135,8 +134,7 @@ def main() -> int:
 
 
 def _write(args, rows: dict) -> None:
-    stamp.write(args.out, {"machine": platform.processor() or platform.machine(),
-                           "python": sys.version.split()[0], "samples": args.samples,
+    stamp.write(args.out, {"samples": args.samples,
                            **({"seeds": args.seeds, "curve": curve(list(rows.values()))} if args.curve else {}),
                            "rows": list(rows.values())})
 

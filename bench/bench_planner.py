@@ -20,7 +20,6 @@ core, batch 16). Each row is one search's plan (``sbmpc.planning.plan.search_pla
 from __future__ import annotations
 
 import json
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -54,8 +53,7 @@ def main() -> int:
         for cost in ("time", "energy"):
             PL.search_plan(WO.resolve(replace(flat, planner=replace(flat.planner, **cfg))), cost)
     warm = time.perf_counter() - t0
-    res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-                 "cores": numba.config.NUMBA_NUM_THREADS, "configs": CONFIGS,
+    res: dict = {"cores": numba.config.NUMBA_NUM_THREADS, "configs": CONFIGS,
                  "warmup_s": round(warm, 2), "scenarios": {}, "map_size": [], "branching": []}
     for path in sorted((ROOT / "scenarios").glob("*.yaml")):
         scn = SC.load(path)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -102,8 +101,7 @@ def main() -> int:
                 b, a = np.polyfit(x, y, 1)
                 entry.update({"s_per_100m": round(100 * b, 3), "intercept_s": round(a, 3), "points": len(pts)})
             slopes[f"{cost}, margin {margin:g}"] = entry
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "polish": args.polish, "head_tail": [PO.HEAD, PO.TAIL], "exact_up_to": PO.EXACT_UP_TO,
+    res = {"polish": args.polish, "head_tail": [PO.HEAD, PO.TAIL], "exact_up_to": PO.EXACT_UP_TO,
            "rows": rows, "slopes": slopes}
     stamp.write(out, res)
     print(json.dumps(slopes, indent=1))
@@ -141,8 +139,7 @@ def ab(args, out: Path) -> int:
                     "checked_s_median": float(np.median([r["checked"]["s"] for r in rows[-args.ab:]])),
                     "shipped_s_median": float(np.median([r["shipped"]["s"] for r in rows[-args.ab:]])),
                     "same_energy": all(r["checked"]["energy_J"] == r["shipped"]["energy_J"] for r in rows[-args.ab:])}
-    stamp.write(out, {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-                      "pairs": args.ab, "time_check_slack": shipped, "summary": summary, "rows": rows})
+    stamp.write(out, {"pairs": args.ab, "time_check_slack": shipped, "summary": summary, "rows": rows})
     print(json.dumps(summary, indent=1))
     print("wrote", out.relative_to(ROOT))
     return 0

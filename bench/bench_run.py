@@ -13,7 +13,6 @@ core), numba warm.
 """
 from __future__ import annotations
 
-import platform
 import sys
 import time
 from dataclasses import replace
@@ -54,8 +53,7 @@ def main() -> int:
 
     t0 = time.perf_counter()
     timed_run(world("flat"), "time")                       # compile / load the cache
-    res: dict = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-                 "warmup_s": round(time.perf_counter() - t0, 2), "perfect_model": {}, "faults": {}, "warm_vs_cold": {}}
+    res: dict = {"warmup_s": round(time.perf_counter() - t0, 2), "perfect_model": {}, "faults": {}, "warm_vs_cold": {}}
     # 1. a full run on the 60 x 60 m field with a perfect model
     hf = world("hills_field")
     for cost in ("time", "energy"):

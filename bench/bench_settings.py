@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -48,8 +46,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=OUT, help=f"results file (default {OUT.relative_to(ROOT)})")
     args = ap.parse_args(argv)
     names = args.scenarios or sorted(p.stem for p in (ROOT / "scenarios").glob("*.yaml") if p.stem != "unreachable")
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "measured_at": "controller rate (1 kHz replays of the plans' controls)", "configs": {}}
+    res = {"measured_at": "controller rate (1 kHz replays of the plans' controls)", "configs": {}}
     for text in args.config:
         over = _config(text)
         rows = res["configs"].setdefault(text, {})

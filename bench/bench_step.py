@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -91,8 +90,7 @@ def main(argv=None) -> int:
                                              "q75": round(float(np.quantile(ratio, 0.75)), 3)}}
         rows.append(row)
         print(json.dumps(row), flush=True)
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "measured_at": time.strftime("%Y-%m-%d"), "baseline_rev": args.baseline, "rounds": args.rounds, "rows": rows}
+    res = {"baseline_rev": args.baseline, "rounds": args.rounds, "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     stamp.write(args.out, res, newline=True)
     print(f"wrote {args.out}")

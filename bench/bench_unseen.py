@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 import time
@@ -104,8 +103,7 @@ def main() -> int:
                                    for c in ("time", "energy", "energy_reported")},
         "planning_time_s_max": {c: max(r[c]["planning_time_s"] for r in rows) for c in ("time", "energy", "energy_reported")},
     }
-    res = {"machine": platform.processor() or platform.machine(), "python": sys.version.split()[0],
-           "settings": f"defaults (seed 0, {'one core' if a.threads == 1 else 'every core'}); maps {a.first}-{a.first + a.maps - 1}", "summary": summary, "maps": rows,
+    res = {"settings": f"defaults (seed 0, {'one core' if a.threads == 1 else 'every core'}); maps {a.first}-{a.first + a.maps - 1}", "summary": summary, "maps": rows,
            "bench_s": round(time.perf_counter() - t0, 1)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     stamp.write(a.out, res, newline=True)

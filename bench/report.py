@@ -761,7 +761,8 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-adapt": closed_loop_adapt,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
-          "calibration-real": calibration_real, "independent-calibrated": independent_calibrated, "calibration-closed-loop": calibration_closed_loop,
+          "calibration-real": calibration_real, "independent-calibrated": independent_calibrated,
+          "calibration-closed-loop": calibration_closed_loop,
           "husky": husky, "status-defaults": status_defaults, "status-other": status_other}
 
 

@@ -104,6 +104,7 @@ def run(args) -> int:
                          "shorten the run or use a longer step")
     if args.v is not None and abs(args.v) > 20:
         raise InputError(f"--v: expected a speed of at most 20 m/s in magnitude, found {args.v}")
+    dt = model.step_s
     if args.commands is not None:
         from ..protocol import ProtocolError, held, read_commands
         try:
@@ -111,8 +112,8 @@ def run(args) -> int:
         except ProtocolError as exc:
             raise InputError(str(exc)) from None
         end = args.duration or (t_cmd[-1] + float(np.median(np.diff(t_cmd))))
-        if end / model.step_s > MAX_STEPS:
-            raise InputError(f"--commands: expected at most {MAX_STEPS:,} steps, found {end / model.step_s:,.0f}")
+        if end / dt > MAX_STEPS:
+            raise InputError(f"--commands: expected at most {MAX_STEPS:,} steps, found {end / dt:,.0f}")
     elif ramp:
         v = _need(args.v, "--v", "a desired speed in m/s")
         slope = _need(args.slope_deg, "--slope-deg", "a grade in degrees")
@@ -126,13 +127,12 @@ def run(args) -> int:
             raise InputError(f"--v0: expected a speed of at most 20 m/s in magnitude, found {v0}")
         if args.open_loop:
             raise InputError("--open-loop: expected a straight, circle or lemniscate manoeuvre, found a ramp")
-    elif not args.lemniscate and args.commands is None:
+    elif not args.lemniscate:
         v = _need(args.v, "--v", "a desired speed in m/s")
         if args.radius is not None and (args.radius == 0 or not math.isfinite(args.radius)):
             raise InputError(f"--radius: expected a non-zero radius in metres, found {args.radius}")
     model_note()             # every option checked: what follows computes
     info: dict = {}
-    dt = model.step_s
     if args.commands is not None:
         cl, cr = held(t_cmd, wl_cmd, dt, end), held(t_cmd, wr_cmd, dt, end)
         manoeuvre = "commands"
