@@ -147,3 +147,44 @@ def test_a_cold_cache_is_announced_by_every_command_that_compiles(monkeypatch, c
     monkeypatch.setattr(compiling, "_cold", lambda functions: False)
     assert main(["simulate", "--v", "0.5", "--duration", "1"]) == 0
     assert "compiling" not in capsys.readouterr().err
+
+
+def test_a_bad_option_is_refused_before_the_compile_note(monkeypatch, capsys):
+    """simulate checks every option before it says it compiles (a bad --length printed
+    the note, then the error: two lines; a ramp with --open-loop was refused only after
+    the ramp was simulated)."""
+    from sbmpc.commands import compiling
+    from sbmpc.commands.cli import main
+    monkeypatch.setattr(compiling, "_cold", lambda functions: True)
+    for argv in (["simulate", "--v", "1", "--slope-deg", "10", "--v0", "1", "--length", "1e300"],
+                 ["simulate", "--v", "1", "--slope-deg", "10", "--v0", "1", "--length", "2", "--open-loop"],
+                 ["simulate", "--v", "1", "--radius", "0"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert "compiling" not in err and "\n" not in err, (argv, err)
+
+
+def test_the_models_step_compiles_once_for_the_simulator_and_the_planner():
+    """numba compiles a function once per distinct argument type, and a literal True or
+    False, or a read-only array, is a type of its own: the model's step compiled four
+    times (87 s of a fresh clone's first compile). Driven by the simulator closed and
+    open loop, at the controller rate and at a coarse step (the checked one), and by the
+    planner's edges, it has one signature."""
+    import numpy as np
+
+    from dynamics import kernels as K
+    from dynamics.params import load_terrain, load_vehicle
+    from dynamics.simulate import Model, simulate
+    from sbmpc.api import load_world
+    from sbmpc.planning import plan as PL
+    v, t = load_vehicle("p3at"), load_terrain("vinyl")
+    cmd = np.full(200, 4.0)
+    simulate(Model(v, t, 0.001), cmd, cmd)
+    simulate(Model(v, t, 0.001), cmd, cmd, open_loop=True)
+    simulate(Model(v, t, 0.05), cmd[:20], -cmd[:20])
+    assert PL.plan(load_world(str(C.ROOT / "scenarios" / "flat.yaml")), "time").found
+    # (a callee compiled inside a caller numba loaded from its cache is not in the
+    # callee's own dispatcher: its overloads are the ones numba's cache index lists)
+    for fn in (K._step, K.step_slope):
+        sigs = [key[0] for key in fn._cache._cache_file._load_index()]
+        assert len(sigs) == 1, (fn.__name__, sigs)

@@ -18,14 +18,14 @@ def _cold(functions) -> bool:
 
 def compile_note(quiet: bool = False) -> None:
     """The line for ``plan``, ``compare`` and ``run``: the search and the skid-steer's
-    edges compile for about a minute and a half (95 s on one core for `compare` on flat with a
-    model rollout, 2026-12-06; 117 s before the model's step compiled once)."""
+    edges compile for about 75 s (73 s on one core for `compare` on flat with a model rollout,
+    bench/bench_compile.py, 2026-12-07; 117 s before the model's step compiled once)."""
     if quiet:
         return
     from ..problems.skidsteer import expand_batch
     from ..search.loop import run_search
     if _cold((run_search, expand_batch)):
-        print("compiling the planner (first run only, about 1.5 minutes, mostly before the search: the planning "
+        print("compiling the planner (first run only, about 75 s, mostly before the search: the planning "
               "time printed shows part of it) ...", file=sys.stderr, flush=True)
 
 
