@@ -57,6 +57,7 @@ def calibrated(path: str, entry: dict, base: int) -> dict:
                 and all(abs(ratio[n] - entry["params"]["mu_scale"]) <= 0.1 for n in ("mu_sa", "mu_op")))
     return {"base_seed": base, "run": entry["file"], "hidden": hidden, "truth": entry["params"],
             "cause": d["cause"], "right": d["cause"] == hidden or absorbed, "absorbed": absorbed,
+            "decided_on": d["decided_on"], "share": d["share"],
             "base_ratio": ratio,
             "heldout": {"nominal": h["nominal"], "calibrated": h["calibrated"], "refitted": d["base_error"],
                         "with_effect": named["error"] if named else d["base_error"]},

@@ -789,6 +789,73 @@ def _pick(cands: list) -> tuple:
     return (max(cands, key=lambda c: c.gain), None) if cands else (None, None)
 
 
+def scored(key: str, x, se, run: Run, vehicle: Vehicle, terrain: Terrain, pitch, base: dict, chans, scales,
+           train, held, fitted_on: str = "channels") -> Candidate:
+    """The candidate of form ``key`` (a CANDIDATES name, or WORLD_GRADE) at parameters
+    ``x`` (standard errors ``se``) on top of ``vehicle`` and ``terrain``, scored against
+    the baseline's replay ``base`` on the training and held-out masks: held-out error and
+    gain, the training BIC change, the held-out and training evidence and reach
+    (:func:`_decides` judges them). ``pitch`` [rad]: the run's constant grade."""
+    names = _spec(key)[0]
+    v, ter, p = _model_for(key, x, vehicle, terrain, names, run)
+    pred = replay(run, v, ter, p + pitch)
+    err = _error(run, pred, chans, scales, held)
+    base_err, base_train = _error(run, base, chans, scales, held), _error(run, base, chans, scales, train)
+    raw = {n: float(a) for n, a in zip(names, x)}
+    if key == WORLD_GRADE:               # reported as the plane's grade and its heading
+        params, stderr = world_grade(float(x[0]), float(x[1]), tuple(map(float, se)))
+        bound = ("grade_deg",) if at_bound(key, raw) else ()
+    else:
+        params, stderr, bound = raw, {n: float(a) for n, a in zip(names, se)}, at_bound(key, raw)
+    gain = _gain(err, base_err)
+    train_error = _error(run, pred, chans, scales, train)
+    return Candidate("grade" if key == WORLD_GRADE else key, params, stderr, err, gain,
+                     _bic(_residuals(run, pred, chans, scales, train), len(names))
+                     - _bic(_residuals(run, base, chans, scales, train), 0),
+                     ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), bound,
+                     fitted_on=fitted_on,
+                     evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
+                     reach=_error(base, pred, chans, scales, held),
+                     train_evidence=heldout_evidence(run, pred, chans, scales, train, _gain(train_error, base_train),
+                                                     len(names)),
+                     train_reach=_error(base, pred, chans, scales, train),
+                     train_error=train_error, key=key, x=tuple(float(a) for a in x))
+
+
+def judge(cands: list, pose: Candidate | None = None) -> tuple:
+    """(the candidates by held-out gain, the best, what it was decided on or None): the
+    choice among fitted candidates (:func:`_pick`), shared by :func:`diagnose` and
+    :func:`sbmpc.calibration.effects_on_top`. ``pose``: the wheel_radius candidate
+    fitted to a logged pose (:func:`_pose_candidate`). A tyre's radius shows in the
+    ground motion, which the wheel speeds, torques and currents barely see: with a pose,
+    it replaces the channel fit of wheel_radius and is judged on the pose; it is the
+    cause when it halves the held-out pose error (``POSE_GAIN``) without worsening the
+    channels, unless the channels name another effect; a wheel_radius the channels named
+    without the pose's support is not the cause."""
+    cands = sorted(cands, key=lambda c: -c.gain)
+    best, decided = _pick(cands)
+    if pose is None:
+        return cands, best, decided
+    cands = sorted([c for c in cands if c.effect != "wheel_radius"] + [pose], key=lambda c: -c.gain)
+    if pose.pose_gain >= POSE_GAIN and pose.gain >= -POSE_CHANNEL_SLACK and (decided is None or best.effect == "wheel_radius"):
+        return cands, pose, "pose"
+    if decided and best.effect == "wheel_radius":      # the channels' verdict without the pose's support
+        best, decided = _pick(cands)
+    return cands, best, decided
+
+
+def share_of(best: Candidate, decided: str | None, base_err: float, base_train: float) -> float:
+    """The share of the baseline's excess that ``best`` explains, on the evidence it was
+    decided on: the pose's gain for a cause decided on the pose, the training part's
+    errors (``base_train``: the baseline's) for one decided there, else the held-out
+    part's (``base_err``)."""
+    if decided == "pose":
+        return float(best.pose_gain)
+    if decided == "training":
+        return explained_share(base_train, best.train_error)
+    return explained_share(base_err, best.heldout_error)
+
+
 MIN_SAMPLES, MIN_SEGMENT = 50, 20     # samples of a run, of its longest segment, to diagnose it
 
 
@@ -859,29 +926,7 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     todo = effects or tuple(CANDIDATES)
 
     def candidate(eff, x, se, fitted_on="channels"):
-        names = _spec(eff)[0]
-        v, ter, p = _model_for(eff, x, vehicle, terrain, names, run)
-        pred = replay(run, v, ter, p + pitch)
-        err = _error(run, pred, chans, scales, held)
-        raw = {n: float(a) for n, a in zip(names, x)}
-        if eff == WORLD_GRADE:               # reported as the plane's grade and its heading
-            params, stderr = world_grade(float(x[0]), float(x[1]), tuple(map(float, se)))
-            bound = ("grade_deg",) if at_bound(eff, raw) else ()
-        else:
-            params, stderr, bound = raw, {n: float(a) for n, a in zip(names, se)}, at_bound(eff, raw)
-        gain = _gain(err, base_err)
-        return Candidate("grade" if eff == WORLD_GRADE else eff, params, stderr, err, gain,
-                         _bic(_residuals(run, pred, chans, scales, train), len(names)) - bic0,
-                         ljung_box(((run["wl"] - pred["wl"]) / scales["wl"])[held]), bound,
-                         fitted_on=fitted_on,
-                         evidence=heldout_evidence(run, pred, chans, scales, held, gain, len(names)),
-                         reach=_error(base, pred, chans, scales, held),
-                         train_evidence=heldout_evidence(run, pred, chans, scales, train,
-                                                         _gain(_error(run, pred, chans, scales, train), base_train),
-                                                         len(names)),
-                         train_reach=_error(base, pred, chans, scales, train),
-                         train_error=_error(run, pred, chans, scales, train), key=eff,
-                         x=tuple(float(a) for a in x))
+        return scored(eff, x, se, run, vehicle, terrain, pitch, base, chans, scales, train, held, fitted_on)
 
     def fitted(key):
         c = candidate(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, train))
@@ -903,34 +948,17 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
             w = fitted(WORLD_GRADE)
             c = w if w.bic_delta < c.bic_delta else c
         cands.append(c)
-    cands.sort(key=lambda c: -c.gain)
-    best, decided = _pick(cands)
     pe_base = pose_error(run, base, held)
-    if pe_base is not None and "wheel_radius" in (effects or tuple(CANDIDATES)):
-        # a tyre's radius shows in the ground motion, which the wheel speeds, torques and
-        # currents barely see: with a pose, the wheel_radius candidate is fitted to it and
-        # judged on it (it replaces the channel fit); it is the cause when it halves the
-        # held-out pose error without worsening the channels, unless the channels name
-        # another effect
-        c = _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, base_err, bic0, pe_base)
-        if c is not None:
-            cands = [x for x in cands if x.effect != "wheel_radius"] + [c]
-            cands.sort(key=lambda x: -x.gain)
-            if c.pose_gain >= POSE_GAIN and c.gain >= -POSE_CHANNEL_SLACK and (decided is None or best.effect == "wheel_radius"):
-                best, decided = c, "pose"
-            elif decided and best.effect == "wheel_radius":      # the channels' verdict without the pose's support
-                best, decided = _pick(cands)
+    pose = None
+    if pe_base is not None and "wheel_radius" in todo:
+        pose = _pose_candidate(run, vehicle, terrain, pitch, train, held, chans, scales, base_err, bic0, pe_base)
+    cands, best, decided = judge(cands, pose)
     named = decided is not None
     # how much of what the baseline misses the best candidate explains: a cause is named
     # only where that is substantial; where a large residual is left, the verdict says so
     share, hint, unexplained = None, None, False
     if best is not None:
-        if decided == "pose":
-            share = float(best.pose_gain)
-        elif decided == "training":
-            share = explained_share(base_train, best.train_error)
-        else:
-            share = explained_share(base_err, best.heldout_error)
+        share = share_of(best, decided, base_err, base_train)
         # the residual judged is the held-out part's (a cause decided on the training part
         # may act in a short stretch of it: the independent voltage sag explained 6 % of
         # that part's excess, with a BIC change of -467)

@@ -316,20 +316,26 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
     """Calibrate, then diagnose (issue 61): per run, each add-on effect of
     :data:`dynamics.discrepancy.CANDIDATES` fitted *jointly* with the parameters the
     calibration fitted (an effect fitted on top of a calibration alone is partly absorbed
-    by it: a hidden viscous friction went into a 3x rolling resistance), scored on the
-    held-out part against the calibrated model. The cause is the effect with the largest
-    held-out gain where the evidence for it is decisive (gain at least
-    ``discrepancy.MARGIN`` and a held-out BIC change below ``-discrepancy.EVIDENCE``); the
-    share of the calibrated model's excess over the noise it explains is reported, not a
-    veto. Otherwise ``none`` where the calibrated model is within ``EXCESS_MIN`` noise
-    units, else ``unexplained``. Returns per run {run, cause, base_error, candidates:
-    [{effect, params, se, error, gain, evidence, share}]}."""
-    from dynamics.discrepancy import CANDIDATES, EVIDENCE, EXCESS_MIN, MARGIN, WORLD_GRADE, has_pose
+    by it: a hidden viscous friction went into a 3x rolling resistance), scored against
+    the calibrated base fitted again on the run (:func:`dynamics.discrepancy.scored`) and
+    judged as ``sbmpc diagnose`` judges (:func:`dynamics.discrepancy.judge`): decisive
+    evidence on the held-out part with the training part's support, else on the part
+    that alone can test the effect (a voltage sag that acts early: the training part);
+    with a logged pose, the wheel radius is fitted to the pose and judged on it, and the
+    grade is also fitted as a plane fixed in the world. The share of the base's excess
+    over the noise the cause explains is reported, not a veto. Otherwise ``none`` where
+    the calibrated model is within ``EXCESS_MIN`` noise units, else ``unexplained``.
+    Returns per run {run, cause, decided_on, share, base_error, calibrated_error, base,
+    candidates: [{effect, params, base, error, gain, evidence, train_evidence, share,
+    pose_gain}]}, the named cause first."""
+    from dynamics.discrepancy import (CANDIDATES, EXCESS_MIN, WORLD_GRADE, _bic, _pose_candidate, has_pose, judge,
+                                      pose_error, share_of)
     # the fitted parameters, and those the runs excite but the base alone could not pin
     # or tell apart: an effect the base lacks can be what confounded them (a hidden
     # viscous friction made mass and rolling resistance inseparable)
     base = [n for n, p in cal.params.items()
             if p["fitted"] or p.get("kept", "").startswith(("not pinned", "not told apart"))]
+    todo = tuple(effects or CANDIDATES)
     out = []
     for r, (ch, sc, tr, ho) in zip(runs, _parts(runs)):
         # the baseline: the base alone fitted again on this run, from the same two starts
@@ -337,52 +343,64 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
         # better optimum, would count as the effect's)
         xb = _base_refit(r, ch, sc, tr, base, cal, max_nfev)
         vb, tb = with_params(base, xb, cal.vehicle, cal.terrain)
-        e0 = _error(r, replay(r, vb, tb), ch, sc, ho)
-        cands = []
-        for eff in (effects or CANDIDATES):
+        pred0 = replay(r, vb, tb)
+        e0, e0t = _error(r, pred0, ch, sc, ho), _error(r, pred0, ch, sc, tr)
+        cands, joint = [], {}
+        for eff in todo:
             if eff == "turning_friction" and {"mu_sa", "mu_op"} <= set(base):
                 continue         # one scale on both: the same model as the fitted pair
-            row, cost = _scored(eff, r, (ch, sc, tr, ho), base, cal, e0, max_nfev)
+            c = _scored(eff, r, (ch, sc, tr, ho), base, cal, pred0, max_nfev, joint)
             if eff == "grade" and has_pose(r):
                 # with a logged heading, also as a plane fixed in the world (as diagnose
-                # does): a 2.5 deg plane was named nothing with the body's grade alone
-                world, wcost = _scored(WORLD_GRADE, r, (ch, sc, tr, ho), base, cal, e0, max_nfev)
-                row = world if wcost < cost else row
-            cands.append(row)
-        cands.sort(key=lambda c: -c["gain"])
-        best = cands[0] if cands else None
-        if best is not None and best["gain"] >= MARGIN and best["evidence"] < -EVIDENCE:
-            cause = best["effect"]
-        else:
-            cause = "none" if e0 < EXCESS_MIN else "unexplained"
-        out.append({"run": r.source, "cause": cause, "base_error": e0, "calibrated_error": cal.heldout[r.source]["calibrated"],
-                    "base": {n: float(a) for n, a in zip(base, xb)}, "candidates": cands})
+                # does: the form the training part supports better); a 2.5 deg plane was
+                # named nothing with the body's grade alone
+                w = _scored(WORLD_GRADE, r, (ch, sc, tr, ho), base, cal, pred0, max_nfev, joint)
+                c = w if w.bic_delta < c.bic_delta else c
+            cands.append(c)
+        pose = None
+        pe0 = pose_error(r, pred0, ho) if "wheel_radius" in todo else None
+        if pe0 is not None:
+            # a tyre on the calibrated base, fitted to the logged pose (as diagnose does)
+            pose = _pose_candidate(r, vb, tb, 0.0, tr, ho, ch, sc, e0, _bic(_residuals(r, pred0, ch, sc, tr), 0), pe0)
+            if pose is not None:
+                joint[pose.key] = {n: float(a) for n, a in zip(base, xb)}
+        cands, best, decided = judge(cands, pose)
+        share = share_of(best, decided, e0, e0t) if decided else None
+        if decided:
+            cands.remove(best)
+            cands.insert(0, best)
+        cause = best.effect if decided else ("none" if e0 < EXCESS_MIN else "unexplained")
+        out.append({"run": r.source, "cause": cause, "decided_on": decided, "share": share, "base_error": e0,
+                    "calibrated_error": cal.heldout[r.source]["calibrated"],
+                    "base": {n: float(a) for n, a in zip(base, xb)},
+                    "candidates": [_row(c, joint[c.key], e0, e0t) for c in cands]})
     return out
 
 
-def _scored(key, r, parts, base, cal, e0, max_nfev):
+def _row(c, base: dict, e0: float, e0t: float) -> dict:
+    """A candidate of :func:`effects_on_top` as a row (``base``: the base parameters it
+    was fitted with)."""
+    from dynamics.discrepancy import REACH_MIN, explained_share
+    # on the part that tests it: the training part for an effect the held-out part cannot see
+    share = explained_share(e0t, c.train_error) if c.reach < REACH_MIN else explained_share(e0, c.heldout_error)
+    return {"effect": c.effect, "params": c.params, "base": base, "error": c.heldout_error, "gain": c.gain,
+            "evidence": c.evidence, "train_evidence": c.train_evidence, "reach": c.reach,
+            "share": share, "fitted_on": c.fitted_on, "pose_gain": c.pose_gain}
+
+
+def _scored(key, r, parts, base, cal, pred0, max_nfev, joint):
     """The effect of form ``key`` (a candidate's name, or the world-fixed grade) fitted
     jointly with the base on run ``r`` (``parts``: its channels, scales, training and
-    held-out masks; ``e0``: the refitted base's held-out error): its row of
-    :func:`effects_on_top`, and its training part's residual sum of squares."""
-    from dynamics.discrepancy import WORLD_GRADE, _model_for, _spec, explained_share, heldout_evidence, world_grade
+    held-out masks; ``pred0``: the refitted base's replay) as a
+    :class:`dynamics.discrepancy.Candidate` against that replay; the base parameters it
+    was fitted with go into ``joint[key]``."""
+    from dynamics.discrepancy import scored
     ch, sc, tr, ho = parts
-    names = _spec(key)[0]
     x = _joint(key, r, ch, sc, tr, base, cal, max_nfev)
     v, ter = with_params(base, x[:len(base)], cal.vehicle, cal.terrain)
-    v2, ter2, p = _model_for(key, x[len(base):], v, ter, names, r)
-    pred = replay(r, v2, ter2, p)
-    e = _error(r, pred, ch, sc, ho)
-    gain = 1.0 - e / e0 if e0 > 0 else 0.0
-    ev = heldout_evidence(r, pred, ch, sc, ho, gain, len(names)) if gain > 0 else math.inf
     xe = x[len(base):]
-    params = (world_grade(float(xe[0]), float(xe[1]))[0] if key == WORLD_GRADE
-              else {n: float(a) for n, a in zip(names, xe)})
-    row = {"effect": "grade" if key == WORLD_GRADE else key, "params": params,
-           "base": {n: float(a) for n, a in zip(base, x[:len(base)])},
-           "error": e, "gain": gain, "evidence": ev,
-           "share": explained_share(e0, e) if e0 > 1.0 else 0.0}
-    return row, float(np.sum(_residuals(r, pred, ch, sc, tr) ** 2))
+    joint[key] = {n: float(a) for n, a in zip(base, x[:len(base)])}
+    return scored(key, xe, [math.nan] * len(xe), r, v, ter, 0.0, pred0, ch, sc, tr, ho)
 
 
 def _joint(eff, r, ch, sc, tr, base, cal, max_nfev):

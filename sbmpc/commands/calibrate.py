@@ -171,8 +171,11 @@ def describe(cal, doc) -> str:
                      f"({', '.join(h['channels'])})")
     for d in doc.get("diagnosis", []):
         c = d["candidates"][0] if d["candidates"] else None
+        named = c is not None and d["cause"] == c["effect"]
+        share = ("" if not named else f"pose error {100 * d['share']:.0f} % lower" if d["decided_on"] == "pose"
+                 else f"{100 * d['share']:.0f} % of the excess" + (", on the training part"
+                                                                    if d["decided_on"] == "training" else ""))
         extra = (f" ({', '.join(f'{k} {v:.4g}' for k, v in c['params'].items())}; held out {d['base_error']:.2f} -> "
-                 f"{c['error']:.2f}, {100 * c['share']:.0f} % of the excess)"
-                 if c is not None and d["cause"] == c["effect"] else f" (held out {d['base_error']:.2f})")
+                 f"{c['error']:.2f}, {share})" if named else f" (held out {d['base_error']:.2f})")
         lines.append(f"  calibrate, then diagnose, {Path(d['run']).name}: {d['cause']}{extra}")
     return "\n".join(lines)
