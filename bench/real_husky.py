@@ -12,6 +12,18 @@ on |tau|: the currents carry no sign) on the first 70 % of the files; score the 
 terrain and the nearest shipped terrain on the other 30 %. Writes bench/results/husky.json.
 
     python bench/real_husky.py [--data DIR]
+    python bench/real_husky.py --calibrate [--seconds 300] [--workers 2]
+
+``--calibrate``: the replay instead (issue 61, item 3). Each file is read as a run
+(:func:`sbmpc.realdata.read_borealtc_run`: the measured wheel speeds stand in for the
+commands, the currents are magnitudes, ``# currents: unsigned``, and the replay's are
+compared as such); per terrain the first files up to ``--seconds`` of driving are
+calibrated together from the shipped ``husky`` on the nearest shipped terrain
+(:func:`sbmpc.calibration.calibrate`: every parameter the runs excite, jointly, on the
+first 70 % of each run), then every add-on effect is fitted jointly on top on the
+longest of them (:func:`sbmpc.calibration.effects_on_top`). Held-out error (the last
+30 % of each run, noise units) per channel: nominal, calibrated, calibrated + effect.
+Writes bench/results/husky_calibrated.json.
 
 ``--data``: the folder holding BorealTC's terrain folders (ASPHALT, FLOORING, ...;
 default ../shared/data/real/borealtc beside the repository).
@@ -57,10 +69,15 @@ def main(argv=None) -> int:
     import stamp    # bench/, beside this script (here, not above: tests/test_realdata.py loads this file bare)
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DATA, help="folder of BorealTC's terrain folders")
+    ap.add_argument("--calibrate", action="store_true", help="replay, calibrate and diagnose on top (module doc)")
+    ap.add_argument("--seconds", type=float, default=300.0, help="--calibrate: driving per terrain, s")
+    ap.add_argument("--workers", type=int, default=1, help="--calibrate: processes (one terrain each)")
     args = ap.parse_args(argv)
     if not args.data.is_dir():
         print(f"real_husky: expected the BorealTC folders in {args.data}, found none", file=sys.stderr)
         return 2
+    if args.calibrate:
+        return main_calibrated(args, stamp)
     from dynamics import load_terrain, load_vehicle
     from dynamics.identify import fit_friction
     v = load_vehicle("husky")
@@ -92,6 +109,59 @@ def main(argv=None) -> int:
     (ROOT / "bench" / "results").mkdir(parents=True, exist_ok=True)
     stamp.write(ROOT / "bench" / "results" / "husky.json", out)   # beside the terrains: report.py skips them
     print("wrote bench/results/husky.json")
+    return 0
+
+
+def calibrated(folder: str, nominal: str, seconds: float) -> dict:
+    """``--calibrate`` on one terrain folder (module doc): its row."""
+    import time
+
+    from dynamics import load_terrain, load_vehicle
+    from sbmpc.calibration import calibrate, effects_on_top
+    from sbmpc.realdata import read_borealtc_run
+    t0 = time.perf_counter()
+    runs, total = [], 0.0
+    for f in sorted(Path(folder).glob("*.csv")):
+        r = read_borealtc_run(f, nominal)
+        if len(r) < 50:
+            continue                  # too short to split into a training and a held-out part
+        runs.append(r)
+        total += float(r.t[-1] - r.t[0])
+        if total >= seconds:
+            break
+    cal = calibrate(runs, load_vehicle("husky"), load_terrain(nominal))
+    longest = max(runs, key=len)
+    d = effects_on_top(cal, [longest])[0]
+    named = d["candidates"][0] if d["cause"] not in ("none", "unexplained") else None
+    per = {}
+    for r in runs:
+        h = cal.heldout[r.source]
+        per[Path(r.source).name] = {"seconds": float(r.t[-1] - r.t[0]), "nominal": h["nominal"],
+                                    "calibrated": h["calibrated"], "per_channel": h["per_channel"]}
+    return {"terrain": nominal, "runs": per, "seconds_driven": total,
+            "params": cal.params, "excitation": cal.excitation,
+            "diagnosed_run": Path(longest.source).name, "cause": d["cause"], "decided_on": d["decided_on"],
+            "share": d["share"], "effect": named and {k: named[k] for k in ("effect", "params", "gain", "evidence")},
+            "longest": {c: dict(cal.heldout[longest.source]["per_channel"][c], **d["per_channel"][c])
+                        for c in d["per_channel"]},
+            "wall_s": round(time.perf_counter() - t0, 1)}
+
+
+def main_calibrated(args, stamp) -> int:
+    """``--calibrate`` (module doc)."""
+    import concurrent.futures as cf
+    out = {"what": "calibrate, then diagnose, on BorealTC's Husky runs (bench/real_husky.py --calibrate)",
+           "seconds_per_terrain": args.seconds, "terrains": {}}
+    with cf.ProcessPoolExecutor(args.workers) as pool:
+        futs = {name: pool.submit(calibrated, str(args.data / name), nominal, args.seconds)
+                for name, nominal in NOMINAL.items() if (args.data / name).is_dir()}
+        for name, f in futs.items():
+            row = f.result()
+            out["terrains"][name] = row
+            fitted = {n: round(p["value"] / p["prior"], 3) for n, p in row["params"].items() if p["fitted"]}
+            print(name, row["cause"], fitted, json.dumps(row["longest"]), f"{row['wall_s']} s", flush=True)
+    stamp.write(ROOT / "bench" / "results" / "husky_calibrated.json", out, default=float)
+    print("wrote bench/results/husky_calibrated.json")
     return 0
 
 

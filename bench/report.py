@@ -295,8 +295,8 @@ def independent_calibrated() -> str:
     """validation.md: calibrate, then diagnose, on the independent implementation's runs
     (independent_calibrated.json)."""
     d = _load("independent_calibrated.json")
-    lines = ["| batch | run | hidden | named | held out: shipped → calibrated → with the effect | best candidate: "
-             "gain, share |", "|---|---|---|---|---|---|"]
+    lines = ["| batch | run | hidden | named | held out: shipped → calibrated → with the effect | decided on, share "
+             "(else the best candidate's gain) |", "|---|---|---|---|---|---|"]
     for r in d["runs"]:
         h, b = r["heldout"], r["best"] or {}
         hidden = r["hidden"] + (f" ({_params(r['truth'])})" if r["truth"] else "")
@@ -307,7 +307,7 @@ def independent_calibrated() -> str:
         mark = "" if r["right"] else " ✗"
         lines.append(f"| {r['base_seed']} | `{Path(r['run']).stem}` | {hidden} | {named}{mark} | "
                      f"{h['nominal']:.2f} → {h['refitted']:.2f} → {h['with_effect']:.2f} | "
-                     f"{b.get('effect', '-')}: {b.get('gain', 0):.2f}, {b.get('share', 0):.2f} |")
+                     f"{_decided(r, b)} |")
     clean = d["clean_floor"]
     secs = sorted(r["seconds"] for r in d["runs"])
     lines += ["", f"Causes named right: {d['right']} of {d['total']} (a clean run right only as `none`; a turning "
@@ -317,6 +317,18 @@ def independent_calibrated() -> str:
               "", f"*`python bench/bench_independent.py --calibrate --workers 2` ({_when(d)}; "
               f"{secs[len(secs) // 2]:.0f} s a run, median, {secs[0]:.0f}-{secs[-1]:.0f}).*"]
     return "\n".join(lines)
+
+
+def _decided(r: dict, best: dict) -> str:
+    """independent_calibrated's last column: what a named cause was decided on and the
+    share it explains (the pose's gain where decided on the pose), else the best
+    candidate and its held-out gain."""
+    on = r.get("decided_on")
+    if on:
+        what = {"heldout": "held out", "heldout_only": "held out alone", "training": "training part",
+                "pose": "pose"}.get(on, on)
+        return f"{what}, {r['share']:.2f}"
+    return f"none decisive (best {best.get('effect', '-')}: {best.get('gain', 0):.2f})"
 
 
 def calibration_closed_loop() -> str:

@@ -43,7 +43,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .params import Terrain, Vehicle
-from .runs import Run, pose_updates
+from .runs import Run, currents_unsigned, pose_updates
 from .simulate import Model, simulate
 from .synth import apply
 
@@ -214,7 +214,8 @@ def noise_scale(y: np.ndarray) -> float:
 
 
 def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch=0.0, dt: float = REPLAY_DT) -> dict:
-    """Predicted channels at the run's times (NaN where no segment covers them).
+    """Predicted channels at the run's times (NaN where no segment covers them; the
+    currents as magnitudes where the run logs them so, :func:`dynamics.runs.currents_unsigned`).
     ``pitch`` [rad]: the grade, one for the run or one per sample (each step of the
     replay takes the last sample's)."""
     model = Model(vehicle, terrain, dt)
@@ -244,6 +245,8 @@ def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch=0.0, dt: float = 
         ts = t[0] + tr.t
         for c in out:
             out[c][a:b] = np.interp(t, ts, tr.data[c])
+    if currents_unsigned(run):      # a log of magnitudes is compared with magnitudes
+        out["i_l"], out["i_r"] = np.abs(out["i_l"]), np.abs(out["i_r"])
     return out
 
 

@@ -1,10 +1,12 @@
 """Measured runs: the run CSV of docs/formats.md, read and written.
 
 A header row of column names, optionally preceded by ``# key: value`` metadata lines
-(vehicle, terrain, slope_deg, note). Required columns: ``t``, ``wl_cmd``, ``wr_cmd``,
+(vehicle, terrain, slope_deg, currents, note). Required columns: ``t``, ``wl_cmd``, ``wr_cmd``,
 ``wl``, ``wr``; optional: ``tau_l``, ``tau_r``, ``i_l``, ``i_r``, ``x``, ``y``, ``yaw``,
 ``z``, ``pitch``, ``roll``, ``v_batt``, ``segment``. Empty or NaN cells are gaps. Units
-are SI (s, rad/s, N m, A, m, rad, V).
+are SI (s, rad/s, N m, A, m, rad, V). ``# currents: unsigned`` says the current columns
+hold magnitudes (a driver that logs no sign): the replay's currents are compared as
+magnitudes too (:func:`currents_unsigned`).
 
 Segments: the ``segment`` column when present; a jump in time larger than
 ``GAP_FACTOR`` times the median step also starts a new segment (the state does not carry
@@ -26,6 +28,7 @@ MAX_ROWS = 5_000_000     # rows of a run file (about 3 h at 500 Hz); SBMPC_MAX_R
 MAX_SPAN_S = 4 * 3600.0  # replayed time (sum of the segments' spans); SBMPC_MAX_RUN_S raises it
 OPTIONAL = ("tau_l", "tau_r", "i_l", "i_r", "x", "y", "yaw", "z", "pitch", "roll", "v_batt", "segment")
 GAP_FACTOR = 10.0
+CURRENTS = ("signed", "unsigned")   # the metadata key currents: what the current columns hold
 
 
 class RunError(ValueError):
@@ -179,12 +182,21 @@ def read_run(path: Path | str) -> Run:
         if not MIN_STEP_S <= med <= MAX_STEP_S:
             raise RunError(f"{path}, column t: expected a median sample spacing between {MIN_STEP_S:g} and "
                            f"{MAX_STEP_S:g} s, found {med:.3g} s")
+    cur = meta.get("currents")
+    if cur is not None and cur.lower() not in CURRENTS:
+        raise RunError(f"{path}, metadata currents: expected {' or '.join(CURRENTS)}, found {cur!r:.40}")
     run = Run(cols, meta, str(path))
     span = sum(float(t[b - 1] - t[a]) for a, b in run.segments())
     if span > max_span:
         raise RunError(f"{path}: expected at most {max_span:g} s of driving to replay, found {span:.0f} s "
                        "(split the log, or raise the limit with the environment variable SBMPC_MAX_RUN_S)")
     return run
+
+
+def currents_unsigned(run: Run) -> bool:
+    """Whether the run's current columns hold magnitudes (``# currents: unsigned``: a
+    driver that logs no sign, as BorealTC's Husky)."""
+    return str(run.meta.get("currents", "signed")).lower() == "unsigned"
 
 
 def _line_of(lines, header_index, k):

@@ -145,9 +145,9 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
     i_l, i_r [A], and wl_cmd, wr_cmd. The dataset logs no commands: the measured wheel
     speeds stand in for them, so what the replay tests is the current it takes to
     follow them (the terrain's resistance, the motor), not the speed loop (a command
-    delay or lag cannot be seen). The logged currents are magnitudes: they are given
-    the sign of their wheel's direction of travel (a braking wheel's current comes out
-    with the wrong sign; the runs are on level ground)."""
+    delay or lag cannot be seen). The logged currents are magnitudes and stay so
+    (``# currents: unsigned``): the replay's currents are compared as magnitudes
+    (:func:`dynamics.runs.currents_unsigned`)."""
     rec = read_borealtc(path)
     if not terrain:                  # the dataset's folder names the terrain; else none (not vinyl silently)
         terrain = BOREALTC_TERRAINS.get(Path(path).resolve().parent.name.upper(), "")
@@ -160,11 +160,11 @@ def read_borealtc_run(path: Path | str, terrain: str = "") -> Run:
                        f"{t[k]:.6g} after {t[k - 1]:.6g}")
     wl, wr = rec["wl"], rec["wr"]
     cols = {"t": t - t[0], "wl_cmd": wl.copy(), "wr_cmd": wr.copy(), "wl": wl, "wr": wr,
-            "i_l": np.where(wl < 0, -1.0, 1.0) * rec["i_l"], "i_r": np.where(wr < 0, -1.0, 1.0) * rec["i_r"]}
-    meta = {"vehicle": "husky", **({"terrain": terrain} if terrain else {}), "slope_deg": "0",
+            "i_l": rec["i_l"], "i_r": rec["i_r"]}
+    meta = {"vehicle": "husky", **({"terrain": terrain} if terrain else {}), "slope_deg": "0", "currents": "unsigned",
             "note": f"BorealTC Husky {Path(path).resolve().parent.name}/{Path(path).name}: no commands logged "
                     "(the measured wheel speeds stand in for them: a command delay or lag cannot be seen), "
-                    "currents signed by the direction of travel"}
+                    "currents unsigned (magnitudes, as logged)"}
     return Run(cols, meta, str(path))
 
 

@@ -2,6 +2,7 @@
 real runs are never copied into the repository; tests/test_realdata.py uses them when
 they are beside it)."""
 import numpy as np
+import pytest
 
 from dynamics.runs import read_run
 from sbmpc.commands.cli import main
@@ -58,7 +59,7 @@ def _borealtc_like(path, n=200, rate=6.5):
     return path
 
 
-def test_import_borealtc_writes_a_signed_run_that_diagnose_reads(tmp_path, capsys):
+def test_import_borealtc_writes_an_unsigned_run_that_diagnose_reads(tmp_path, capsys):
     src = _borealtc_like(tmp_path / "SANDY_LOAM" / "pro_03.csv")
     before = src.read_bytes()
     out = tmp_path / "run.csv"
@@ -70,9 +71,8 @@ def test_import_borealtc_writes_a_signed_run_that_diagnose_reads(tmp_path, capsy
     assert len(run) == 200 and len(run.segments()) == 1
     assert np.allclose(run["wl"][:10], np.round(0.5 * 127) / 127 / 0.13, atol=1e-5)   # m/s over the 0.13 m radius
     assert np.array_equal(run["wl_cmd"], run["wl"]) and np.array_equal(run["wr_cmd"], run["wr"])
-    # currents take the sign of their wheel's travel: forward +, backward -, the pivot's two wheels apart
-    assert np.all(run["i_l"][:66] > 0) and np.all(run["i_l"][66:132] < 0)
-    assert np.all(run["i_l"][140:] > 0) and np.all(run["i_r"][140:] < 0)
+    # the currents stay magnitudes, and the file says so (the replay compares magnitudes)
+    assert run.meta["currents"] == "unsigned" and np.all(run["i_l"] > 0) and np.all(run["i_r"] > 0)
     rc = main(["diagnose", str(out)])
     assert rc == 0 and "cause:" in capsys.readouterr().out
 
@@ -188,3 +188,36 @@ def test_borealtc_from_python_checks_the_radius_and_names_the_terrain_by_its_fol
         read_borealtc(src, wheel_radius=0)
     assert read_borealtc_run(src).meta["terrain"] == "asphalt"
     assert "terrain" not in read_borealtc_run(_borealtc_like(tmp_path / "elsewhere" / "pro_05.csv")).meta
+
+
+def test_an_unsigned_current_log_is_replayed_as_magnitudes(tmp_path):
+    """A driver that logs current magnitudes (BorealTC's Husky): with ``# currents:
+    unsigned`` the replay of the generating model matches the log within its noise
+    forwards, backwards and in a pivot, where signed it would miss twice the current
+    wherever a wheel drives backwards. A metadata value other than signed or unsigned is
+    refused."""
+    from dynamics.discrepancy import _error, channels, noise_scale, replay
+    from dynamics.params import load_terrain, load_vehicle
+    from dynamics.runs import Run, RunError, write_run
+    from dynamics.synth import synth_run
+    run, _ = synth_run("none", 3, load_vehicle("husky"), load_terrain("asphalt"), duration=30.0)
+    assert np.any(run["i_l"] < -1.0) and np.any(run["i_r"] < -1.0)     # the drive brakes and reverses
+    cols = {k: v for k, v in run.columns.items() if not k.startswith("tau")}      # a log of currents
+    cols.update(i_l=np.abs(run["i_l"]), i_r=np.abs(run["i_r"]))
+    path = tmp_path / "unsigned.csv"
+    write_run(path, Run(cols, dict(run.meta, currents="unsigned"), "unsigned.csv"))
+    unsigned = read_run(path)
+    signed = Run(unsigned.columns, {k: v for k, v in unsigned.meta.items() if k != "currents"}, "signed")
+    v, t = load_vehicle("husky"), load_terrain("asphalt")
+    chans = channels(unsigned)
+    assert chans == ("wl", "wr", "i_l", "i_r")
+    scales = {c: noise_scale(run[c]) for c in chans}          # the signed log's noise
+    every = np.ones(len(run), bool)
+    pred = replay(unsigned, v, t)
+    assert np.all(pred["i_l"][np.isfinite(pred["i_l"])] >= 0.0)
+    assert _error(unsigned, pred, chans, scales, every) < 1.5
+    assert _error(signed, replay(signed, v, t), chans, scales, every) > 3.0
+    text = path.read_text().replace("# currents: unsigned", "# currents: absolute")
+    path.write_text(text)
+    with pytest.raises(RunError, match="metadata currents: expected signed or unsigned, found 'absolute'"):
+        read_run(path)
