@@ -19,7 +19,7 @@ def add_parsers(sub):
                        "timeline, the ICP pose chained, a segment where the log is not continuous. "
                        "'borealtc': a BorealTC Clearpath Husky pro_XX.csv (github.com/norlab-ulaval/BorealTC): "
                        "wheel speeds and motor currents; it logs no commands, so the measured wheel speeds stand in "
-                       "for them, and its currents are magnitudes, signed here by the wheel's direction of travel. "
+                       "for them, and its currents are magnitudes, kept so ('# currents: unsigned': the replay compares magnitudes). "
                        "'rosbag': a ROS 2 bag folder (sqlite3 or MCAP) or a ROS 1 .bag of a skid-steer robot "
                        "(/cmd_vel, /joint_states, /odom, /battery_state by default; --topics renames them; needs "
                        "pip install 'sbmpc[ros]'; docs/robot.md).")
