@@ -371,6 +371,34 @@ def husky() -> str:
     return "\n".join(lines + ["", f"*`python bench/real_husky.py` ({_when(d)}).*"])
 
 
+def husky_calibrated() -> str:
+    """validation.md: the replay calibrated on the Husky's BorealTC runs, then diagnosed on
+    top (husky_calibrated.json)."""
+    d = _load("husky_calibrated.json")
+    lines = ["| terrain | runs, s | fitted (× the shipped value) | held out, wheel speeds: nominal → calibrated | "
+             "held out, currents: nominal → calibrated → with the effect | on top |", "|---|---|---|---|---|---|"]
+    for name, r in d["terrains"].items():
+        fitted = ", ".join(f"{n} ×{p['value'] / p['prior']:.2f}" for n, p in r["params"].items()
+                           if p["fitted"] and p["prior"])
+        runs = r["runs"]
+
+        def mean(ch, which, runs=runs):
+            xs = [u["per_channel"][c][which] for u in runs.values() for c in ch if c in u["per_channel"]]
+            return sum(xs) / len(xs)
+        L = r["longest"]
+        eff = [L[c].get("with_effect") for c in ("i_l", "i_r") if c in L]
+        with_eff = f" → {sum(eff) / len(eff):.2f}" if all(e is not None for e in eff) and eff else ""
+        on = r["cause"] + (f" ({_params(r['effect']['params'])}, {r['decided_on']})" if r.get("effect") else "")
+        lines.append(f"| {name.lower().replace('_', ' ')} ({r['terrain'].replace('_', ' ')}) | {len(runs)}, "
+                     f"{r['seconds_driven']:.0f} | {fitted or 'none'} | {mean(('wl', 'wr'), 'nominal'):.2f} → "
+                     f"{mean(('wl', 'wr'), 'calibrated'):.2f} | {mean(('i_l', 'i_r'), 'nominal'):.2f} → "
+                     f"{mean(('i_l', 'i_r'), 'calibrated'):.2f}{with_eff} | {on} |")
+    return "\n".join(lines + ["", "Held-out errors in noise units, the mean over the terrain's runs and their two "
+                               "sides (with the effect: on the run diagnosed, its longest).", "",
+                               f"*`python bench/real_husky.py --calibrate --workers 2` ({_when(d)}; "
+                               f"{d['seconds_per_terrain']:.0f} s of driving a terrain).*"])
+
+
 def status_defaults() -> str:
     """status.md: the rows measured at today's defaults, each from its results file."""
     rows = []
@@ -775,7 +803,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
           "calibration-real": calibration_real, "independent-calibrated": independent_calibrated,
           "calibration-closed-loop": calibration_closed_loop,
-          "husky": husky, "status-defaults": status_defaults, "status-other": status_other}
+          "husky": husky, "husky-calibrated": husky_calibrated, "status-defaults": status_defaults, "status-other": status_other}
 
 
 def updated(text: str) -> str:
