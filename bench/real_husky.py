@@ -18,7 +18,7 @@ terrain and the nearest shipped terrain on the other 30 %. Writes bench/results/
 (:func:`sbmpc.realdata.read_borealtc_run`: the measured wheel speeds stand in for the
 commands, the currents are magnitudes, ``# currents: unsigned``, and the replay's are
 compared as such); per terrain the first files up to ``--seconds`` of driving are
-calibrated together from the shipped ``husky`` on the nearest shipped terrain
+calibrated together (a file that would pass it cut at it) from the shipped ``husky`` on the nearest shipped terrain
 (:func:`sbmpc.calibration.calibrate`: every parameter the runs excite, jointly, on the
 first 70 % of each run), then the add-on effects the runs can show (:data:`EFFECTS`:
 not the speed loop's delay or lag) are fitted jointly on top on the longest of them
@@ -127,11 +127,13 @@ def calibrated(folder: str, nominal: str, seconds: float) -> dict:
     runs, total = [], 0.0
     for f in sorted(Path(folder).glob("*.csv")):
         r = read_borealtc_run(f, nominal)
+        end = int(np.searchsorted(r.t, r.t[0] + seconds - total))      # (a long file: its first part)
+        r = r.slice(0, end) if end < len(r) else r
         if len(r) < 50:
             continue                  # too short to split into a training and a held-out part
         runs.append(r)
         total += float(r.t[-1] - r.t[0])
-        if total >= seconds:
+        if total >= seconds - 1.0:
             break
     cal = calibrate(runs, load_vehicle("husky"), load_terrain(nominal))
     longest = max(runs, key=len)

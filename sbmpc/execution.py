@@ -86,6 +86,13 @@ def deviation(X: np.ndarray, P: np.ndarray) -> tuple:
 
 
 FASTEST = 3.0        # the guard's fastest twin: battery voltage times 1 + FASTEST x planner.margin
+# m: a prediction that closes in on the map's edge (by more than CLOSING) and comes to
+# rest within this of it holds its period back: issue 62's hills_field horizon run with
+# 13 % less voltage ended a period 3 cm beyond where every one of the guard's predictions
+# did, 0.09 m from the east edge at 0.6 m/s, and braking from there left the map
+# (the predictions' braking had stopped 4 cm inside it), 2026-12-07
+EDGE_CLEARANCE = 0.15
+CLOSING = 0.01
 STANDING = math.radians(0.1)   # rad: how much steeper than where it stands a period from inside the guard's band may go (holder)
 
 
@@ -221,7 +228,8 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     `hills_field` horizon run reversing 0.1 m from its east edge left the map exactly
     where the heavier twin's prediction did, while the planning vehicle's stopped 6 mm
     short, 2026-12-06): a run never drives off its map (a horizon run with 10 % less grip left
-    `hills_field` at (48.4, 59.7), 2026-12-06). ``tilt_error`` [rad]: how
+    `hills_field` at (48.4, 59.7), 2026-12-06); and where its braking comes to rest closer
+    to the edge than EDGE_CLEARANCE, having closed in on it (:func:`_approaches_edge`). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
     `narrow_pass`'s flank 1.6 deg steeper than it says). A vehicle that already stands
@@ -254,7 +262,27 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
                 return j + 1
             if end != 0:
                 break                  # (in the goal, or stalled: the stall test's)
+        else:
+            if _approaches_edge(g.world, X, S):
+                return j + 1
     return 0
+
+
+def _approaches_edge(world, X: np.ndarray, S: np.ndarray) -> bool:
+    """Whether a prediction from X that comes to rest at S closes in on the map's edge
+    and stops within EDGE_CLEARANCE of it (the footprint's limit): a truth off every
+    prediction by a few centimetres is then still kept on the map. A period along the
+    edge, or away from it, is not held back by it (a band the guard kept at the edge
+    whatever the heading held back re-plans that ran along it)."""
+    if world is None:
+        return False
+    x0, x1, y0, y1 = world.emap.extent
+    m = world.margin
+
+    def gap(P):
+        return min(P[K.S_X] - x0, x1 - P[K.S_X], P[K.S_Y] - y0, y1 - P[K.S_Y]) - m
+    g1 = gap(S)
+    return g1 < EDGE_CLEARANCE and g1 < gap(X) - CLOSING
 
 
 MOVING = 0.3   # rad/s: a wheel turning faster than this moves the vehicle (about 3 cm/s on a P3-AT)

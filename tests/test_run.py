@@ -610,8 +610,9 @@ def test_a_heavier_vehicle_braking_towards_the_edge_is_kept_on_the_map():
     """On `flat`, at the top speed towards the east edge and commanded to reverse: the
     margin's heavier twin runs on further than the planning vehicle before it turns back.
     Placed where the planning vehicle's prediction stays on the map and the twin's leaves
-    it (a `hills_field` horizon run left the map so, 2026-12-06), the period is held back
-    by the twin's prediction (holder 2)."""
+    it (a `hills_field` horizon run left the map so, 2026-12-06), the period is held back,
+    by the twin's prediction alone too (since 2026-12-07 the planning vehicle's, ending
+    within EDGE_CLEARANCE of the edge, holds it first)."""
     from dynamics import kernels as K
     from sbmpc import execution as EX
     world = WO.resolve(SC.load(SCN / "flat.yaml"))
@@ -632,4 +633,39 @@ def test_a_heavier_vehicle_braking_towards_the_edge_is_kept_on_the_map():
     X[K.S_X] = x_hi - 0.5 * (nominal + heavy)
     assert guards[0].step(X, control, record=False)[1] != -SS.OFF_MAP
     assert guards[1].step(X, control, record=False)[1] == -SS.OFF_MAP
-    assert EX.holder(guards, X, control, True) == 2
+    assert EX.holder(guards, X, control, True) > 0       # (the planning vehicle's clearance holds it first)
+    assert EX.holder([guards[1]], X, control, True) == 1  # the twin's prediction alone holds it
+
+
+def test_the_guard_keeps_a_clearance_where_a_period_closes_in_on_the_map_edge():
+    """On `flat`, at the top speed towards the east edge: a period after which every
+    prediction brakes to rest on the map, but within EDGE_CLEARANCE of its edge, is held
+    back (a truth 3 cm beyond every prediction ran off `hills_field`'s east edge so,
+    2026-12-07); one that stops farther inside is let through, and so are periods along
+    the edge and away from it that start closer to it than the clearance."""
+    from dynamics import kernels as K
+    from sbmpc import execution as EX
+    world = WO.resolve(SC.load(SCN / "flat.yaml"))
+    v = world.vehicle
+    top = v.v_max / v.torque_constant
+    x_hi = world.emap.extent[1] - world.margin
+    guards = EX.guards(world, "time")
+    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+    control = (top, top, 1.0)
+
+    def at(x, y=6.0, yaw=0.0):
+        X = moving.copy()
+        X[K.S_X], X[K.S_Y], X[K.S_YAW] = x, y, yaw
+        return X
+    runs = []
+    for g in guards:
+        S = g.step(at(10.0), control, record=False)[2]
+        runs.append(g.step(S, (0.0, 0.0, 1.0), record=False)[2][K.S_X] - 10.0)
+    X = at(x_hi - max(runs) - 0.5 * EX.EDGE_CLEARANCE)      # every prediction stops on the map, within the clearance
+    for g in guards:
+        S = g.step(X, control, record=False)
+        assert S[1] == 0 and g.step(S[2], (0.0, 0.0, 1.0), record=False)[1] == 0
+    assert EX.holder(guards, X, control, True) > 0
+    assert EX.holder(guards, at(x_hi - max(runs) - 2.0 * EX.EDGE_CLEARANCE), control, True) == 0
+    assert EX.holder(guards, at(x_hi - 0.05, 3.0, 0.5 * math.pi), control, True) == 0    # along the edge
+    assert EX.holder(guards, at(x_hi - 0.05, 6.0, math.pi), (top, top, 1.0), True) == 0  # away from it
