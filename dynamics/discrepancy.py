@@ -207,10 +207,16 @@ def noise_scale(y: np.ndarray) -> float:
     if d.size < 3:
         return 1.0
     nz = d[d != 0.0]
+    floor = 1e-9
     if nz.size < 0.5 * d.size:      # a held (slower sensor) or quantised signal: use its changes
         d = nz if nz.size >= 3 else d
+        if nz.size:
+            # at least the rounding noise of its smallest step (the quantum) / sqrt(12): a
+            # quantised speed whose steps mostly go one way has a median absolute deviation
+            # of 0 (BorealTC's Husky at a steady speed: errors of 6e7 noise units)
+            floor = max(floor, float(np.min(np.abs(nz))) / math.sqrt(12.0))
     s = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
-    return s if s > 1e-9 else 1e-9
+    return s if s > floor else floor
 
 
 def replay(run: Run, vehicle: Vehicle, terrain: Terrain, pitch=0.0, dt: float = REPLAY_DT) -> dict:
