@@ -568,6 +568,23 @@ def test_a_period_that_only_the_optimistic_twin_drives_off_the_map_is_held_back(
     assert EX.holder([_Predicts(off), _Predicts(0), _Predicts(0)], None, (1.0, 1.0, 1.0), True) == 1
 
 
+def _towards_east_edge():
+    """`flat` with a P3-AT at its top speed (after 3 s from the start): (world, top wheel
+    speed [rad/s], the east limit of the vehicle's centre [m], the run's guards, at(x, y,
+    yaw): that state moved to (x, y) heading yaw)."""
+    from dynamics import kernels as K
+    from sbmpc import execution as EX
+    world = WO.resolve(SC.load(SCN / "flat.yaml"))
+    top = world.vehicle.v_max / world.vehicle.torque_constant
+    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+
+    def at(x, y=6.0, yaw=0.0):
+        X = moving.copy()
+        X[K.S_X], X[K.S_Y], X[K.S_YAW] = x, y, yaw
+        return X
+    return world, top, world.emap.extent[1] - world.margin, EX.guards(world, "time"), at
+
+
 def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
     """On `flat`, driving east at the top speed towards the map's edge and commanded a
     fifth beyond it (a plan's sampled speeds reach past what the drive holds): a period
@@ -577,19 +594,9 @@ def test_the_guard_keeps_a_truth_faster_than_every_prediction_on_the_map():
     holds it back first); a period that ends farther inside, and one along the edge, are
     let through."""
     from dynamics import kernels as K
-    world = WO.resolve(SC.load(SCN / "flat.yaml"))
-    v = world.vehicle
-    top = v.v_max / v.torque_constant
-    x_hi = world.emap.extent[1] - world.margin
+    world, top, x_hi, guards, at = _towards_east_edge()
     control = (1.2 * top, 1.2 * top, 1.0)
-    fast = replace(world, vehicle=v.replace(v_max=1.22 * v.v_max))
-    guards = EX.guards(world, "time")
-    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
-
-    def at(x, y=6.0, yaw=0.0):
-        X = moving.copy()
-        X[K.S_X], X[K.S_Y], X[K.S_YAW] = x, y, yaw
-        return X
+    fast = replace(world, vehicle=world.vehicle.replace(v_max=1.22 * world.vehicle.v_max))
     runs = [g.step(at(10.0), control, record=False)[2][K.S_X] - 10.0 for g in guards[:3]]
     truth = EX.Executor(fast, "time").step(at(10.0), control, record=False)[2][K.S_X] - 10.0
     assert truth > max(runs) + 0.02                       # the faster truth drives further than all three
@@ -615,19 +622,13 @@ def test_a_heavier_vehicle_braking_towards_the_edge_is_kept_on_the_map():
     within EDGE_CLEARANCE of the edge, holds it first)."""
     from dynamics import kernels as K
     from sbmpc import execution as EX
-    world = WO.resolve(SC.load(SCN / "flat.yaml"))
-    v = world.vehicle
-    top = v.v_max / v.torque_constant
-    x_hi = world.emap.extent[1] - world.margin
-    guards = EX.guards(world, "time")
-    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+    _, top, x_hi, guards, at = _towards_east_edge()
     control = (-0.4 * top, -0.4 * top, 1.0)
 
     def reach(g, X):
         rec, _, _ = g.step(X, control)
         return rec[:, K.R_X].max() - X[K.S_X]
-    X = moving.copy()
-    X[K.S_X], X[K.S_Y] = 10.0, 6.0
+    X = at(10.0)
     nominal, heavy = reach(guards[0], X), reach(guards[1], X)
     assert heavy > nominal                                # the heavier twin runs on further
     X[K.S_X] = x_hi - 0.5 * (nominal + heavy)
@@ -645,18 +646,8 @@ def test_the_guard_keeps_a_clearance_where_a_period_closes_in_on_the_map_edge():
     the edge and away from it that start closer to it than the clearance."""
     from dynamics import kernels as K
     from sbmpc import execution as EX
-    world = WO.resolve(SC.load(SCN / "flat.yaml"))
-    v = world.vehicle
-    top = v.v_max / v.torque_constant
-    x_hi = world.emap.extent[1] - world.margin
-    guards = EX.guards(world, "time")
-    moving = EX.Executor(world, "time").step(WO.start_state(world), (top, top, 3.0), record=False)[2]
+    _, top, x_hi, guards, at = _towards_east_edge()
     control = (top, top, 1.0)
-
-    def at(x, y=6.0, yaw=0.0):
-        X = moving.copy()
-        X[K.S_X], X[K.S_Y], X[K.S_YAW] = x, y, yaw
-        return X
     runs = []
     for g in guards:
         S = g.step(at(10.0), control, record=False)[2]
