@@ -152,3 +152,42 @@ def test_a_grade_fixed_in_the_world_is_named_on_top_of_a_calibration():
     assert c["params"]["grade_deg"] == pytest.approx(truth["grade_deg"], abs=0.15)
     assert c["params"]["toward_deg"] == pytest.approx(truth["toward_deg"], abs=3.0)
     assert c["error"] < 0.5 * d["base_error"]
+
+
+def _independent_case(stem):
+    """The independent implementation's 90 s run ``stem`` (batch 20240) and its truth."""
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from dynamics.runs import read_run
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench" / "independent"))
+    import sim
+    truth = next(c[3] for c in sim.CASES if c[0] == stem)
+    with tempfile.TemporaryDirectory() as tmp:
+        return read_run(sim.write_case(stem, tmp)[0]), truth
+
+
+@pytest.mark.slow
+def test_on_top_of_a_calibration_a_tyre_is_judged_on_the_pose_and_a_late_sag_on_the_held_out_part():
+    """Calibrate, then diagnose, judged as diagnose judges (discrepancy.judge): the
+    independent implementation's 7 % small left tyre is fitted to the logged pose and named
+    on it (scales within 0.02 of the truth; on the wheel channels alone its batch 31000
+    twin was fitted as 0.82 and 0.89), and its voltage sag, which acts only late in the
+    run where the training part cannot see it, is fitted on the held-out part and named
+    with the higher bar (before: `unexplained`, the sag 0.81 from an uninformed fit)."""
+    from sbmpc.calibration import calibrate, effects_on_top
+    run, truth = _independent_case("wheel_radius_left_7pct")
+    cal = calibrate([run], P3AT, VINYL, only=["mass", "mu_roll"])
+    d = effects_on_top(cal, [run], effects=("wheel_radius",))[0]
+    assert d["cause"] == "wheel_radius" and d["decided_on"] == "pose"
+    c = d["candidates"][0]
+    assert c["params"]["scale_left"] == pytest.approx(truth["scale_left"], abs=0.02)
+    assert c["params"]["scale_right"] == pytest.approx(truth["scale_right"], abs=0.02)
+    assert c["pose_gain"] >= 0.5
+    run, truth = _independent_case("voltage_sag_1.0")
+    cal = calibrate([run], P3AT, VINYL, only=["mass", "mu_roll"])
+    d = effects_on_top(cal, [run], effects=("voltage_sag",))[0]
+    assert d["cause"] == "voltage_sag" and d["decided_on"] == "heldout_only"
+    assert d["candidates"][0]["params"]["sag_V_per_kJ"] == pytest.approx(truth["sag_V_per_kJ"], abs=0.15)
+    assert d["per_channel"]["wl"]["with_effect"] < d["per_channel"]["wl"]["base"]
