@@ -135,6 +135,8 @@ def calibrated(folder: str, nominal: str, seconds: float) -> dict:
         total += float(r.t[-1] - r.t[0])
         if total >= seconds - 1.0:
             break
+    if not runs:
+        raise SystemExit(f"real_husky: {folder}: no file of at least 50 samples within --seconds {seconds:g}")
     cal = calibrate(runs, load_vehicle("husky"), load_terrain(nominal))
     longest = max(runs, key=len)
     d = effects_on_top(cal, [longest], EFFECTS)[0]

@@ -376,7 +376,8 @@ def husky_calibrated() -> str:
     top (husky_calibrated.json)."""
     d = _load("husky_calibrated.json")
     lines = ["| terrain | runs, s | fitted (× the shipped value) | held out, wheel speeds: nominal → calibrated | "
-             "held out, currents: nominal → calibrated → with the effect | on top |", "|---|---|---|---|---|---|"]
+             "held out, currents: nominal → calibrated | on top, on the longest run | its currents: calibrated → "
+             "with the effect |", "|---|---|---|---|---|---|---|"]
     for name, r in d["terrains"].items():
         fitted = ", ".join(f"{n} ×{p['value'] / p['prior']:.2f}" for n, p in r["params"].items()
                            if p["fitted"] and p["prior"])
@@ -386,15 +387,18 @@ def husky_calibrated() -> str:
             xs = [u["per_channel"][c][which] for u in runs.values() for c in ch if c in u["per_channel"]]
             return sum(xs) / len(xs)
         L = r["longest"]
-        eff = [L[c].get("with_effect") for c in ("i_l", "i_r") if c in L]
-        with_eff = f" → {sum(eff) / len(eff):.2f}" if all(e is not None for e in eff) and eff else ""
+        cur = [c for c in ("i_l", "i_r") if c in L]
+        base = sum(L[c]["base"] for c in cur) / len(cur)
+        eff = [L[c].get("with_effect") for c in cur]
+        longest = f"{base:.2f}" + (f" → {sum(eff) / len(eff):.2f}" if all(e is not None for e in eff) else "")
         on = r["cause"] + (f" ({_params(r['effect']['params'])}, {r['decided_on']})" if r.get("effect") else "")
         lines.append(f"| {name.lower().replace('_', ' ')} ({r['terrain'].replace('_', ' ')}) | {len(runs)}, "
                      f"{r['seconds_driven']:.0f} | {fitted or 'none'} | {mean(('wl', 'wr'), 'nominal'):.2f} → "
                      f"{mean(('wl', 'wr'), 'calibrated'):.2f} | {mean(('i_l', 'i_r'), 'nominal'):.2f} → "
-                     f"{mean(('i_l', 'i_r'), 'calibrated'):.2f}{with_eff} | {on} |")
+                     f"{mean(('i_l', 'i_r'), 'calibrated'):.2f} | {on} | {longest} |")
     return "\n".join(lines + ["", "Held-out errors in noise units, the mean over the terrain's runs and their two "
-                               "sides (with the effect: on the run diagnosed, its longest).", "",
+                               "sides; the last column on the run diagnosed (its longest), the base fitted again on "
+                               "it, then with the effect.", "",
                                f"*`python bench/real_husky.py --calibrate --workers 2` ({_when(d)}; "
                                f"{d['seconds_per_terrain']:.0f} s of driving a terrain).*"])
 

@@ -247,8 +247,8 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     tipped over braking on the pass's flank after a hold, 2026-12-06 (before the brake
     was driven, such runs "stopped" with the vehicle at speed). Returns which guard holds the
     period back, 1-based (1: the planning vehicle, 2: the pessimistic twin, 3: the
-    optimistic one, 4: the fastest, which holds a period that leaves the map only), 0:
-    none."""
+    optimistic one, 4: the fastest, which holds a period that leaves the map or closes in on
+    its edge only), 0: none."""
     where = guards[0].world if guards else None
     floor = PB.standing_tilt(where, X) + STANDING if where is not None else 0.0
     brake = (0.0, 0.0, control[2])
@@ -269,20 +269,26 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
 
 
 def _approaches_edge(world, X: np.ndarray, S: np.ndarray) -> bool:
-    """Whether a prediction from X that comes to rest at S closes in on the map's edge
-    and stops within EDGE_CLEARANCE of it (the footprint's limit): a truth off every
-    prediction by a few centimetres is then still kept on the map. A period along the
-    edge, or away from it, is not held back by it (a band the guard kept at the edge
-    whatever the heading held back re-plans that ran along it)."""
+    """Whether a prediction from X that comes to rest at S closes in on one of the map's
+    edges (by more than CLOSING) and stops within EDGE_CLEARANCE of it (the footprint's
+    limit): a truth off every prediction by a few centimetres is then still kept on the
+    map. A period along the edge, or away from it, is not held back by it (a band the
+    guard kept at the edge whatever the heading held back re-plans that ran along it);
+    nor is one towards a goal whose disc reaches into the clearance (the last periods
+    must be driven there)."""
     if world is None:
         return False
     x0, x1, y0, y1 = world.emap.extent
     m = world.margin
 
-    def gap(P):
-        return min(P[K.S_X] - x0, x1 - P[K.S_X], P[K.S_Y] - y0, y1 - P[K.S_Y]) - m
-    g1 = gap(S)
-    return g1 < EDGE_CLEARANCE and g1 < gap(X) - CLOSING
+    def gaps(x, y):
+        return np.array([x - x0, x1 - x, y - y0, y1 - y]) - m
+    g0 = gaps(float(X[K.S_X]), float(X[K.S_Y]))
+    g1 = gaps(float(S[K.S_X]), float(S[K.S_Y]))
+    close = (g1 < EDGE_CLEARANCE) & (g1 < g0 - CLOSING)
+    goal = world.scenario.goal
+    towards_goal = gaps(goal["x"], goal["y"]) - goal["radius"] < EDGE_CLEARANCE
+    return bool(np.any(close & ~towards_goal))
 
 
 MOVING = 0.3   # rad/s: a wheel turning faster than this moves the vehicle (about 3 cm/s on a P3-AT)

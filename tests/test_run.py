@@ -660,3 +660,13 @@ def test_the_guard_keeps_a_clearance_where_a_period_closes_in_on_the_map_edge():
     assert EX.holder(guards, at(x_hi - max(runs) - 2.0 * EX.EDGE_CLEARANCE), control, True) == 0
     assert EX.holder(guards, at(x_hi - 0.05, 3.0, 0.5 * math.pi), control, True) == 0    # along the edge
     assert EX.holder(guards, at(x_hi - 0.05, 6.0, math.pi), (top, top, 1.0), True) == 0  # away from it
+    # towards a goal whose disc reaches into the clearance: let through (the last periods)
+    w = guards[0].world
+    near = replace(w, scenario=replace(w.scenario, goal=dict(w.scenario.goal, x=x_hi - 0.1, y=6.0, radius=0.3)))
+    assert EX.holder([EX.Executor(near, "time", tip_guard=True)], X, control, True) == 0
+    assert EX.holder([EX.Executor(w, "time", tip_guard=True)], X, control, True) == 1
+    # in a corner: along the west edge, 0.05 m from it, closing in on the south edge
+    x_lo, y_lo = guards[0].world.emap.extent[0] + guards[0].world.margin, guards[0].world.emap.extent[2] + \
+        guards[0].world.margin
+    assert EX.holder(guards, at(x_lo + 0.05, y_lo + max(runs) + 0.5 * EX.EDGE_CLEARANCE, -0.5 * math.pi), control,
+                     True) > 0
