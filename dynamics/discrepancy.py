@@ -831,6 +831,20 @@ def scored(key: str, x, se, run: Run, vehicle: Vehicle, terrain: Terrain, pitch,
                      train_error=train_error, key=key, x=tuple(float(a) for a in x))
 
 
+def unseen_in_training(c: Candidate, run: Run, vehicle: Vehicle, terrain: Terrain, pitch, base: dict, chans, scales,
+                       train, held) -> Candidate:
+    """``c`` (a candidate :func:`scored` on top of ``vehicle`` and ``terrain``), or, where
+    the training part cannot see it and so it is not decided (a voltage sag that limits
+    the drive only late in the run: its fit there is uninformed), the same form fitted on
+    the held-out part, replaying the whole run, ``fitted_on="heldout"`` (:func:`_decides`
+    judges it as data the fit has seen). Shared by :func:`diagnose` and
+    :func:`sbmpc.calibration.effects_on_top`."""
+    if not (c.train_reach < REACH_MIN <= c.reach and _decides(c) is None):
+        return c
+    x, se = fit_candidate(c.key, run, vehicle, terrain, chans, scales, held, math.inf)
+    return scored(c.key, x, se, run, vehicle, terrain, pitch, base, chans, scales, train, held, "heldout")
+
+
 def judge(cands: list, pose: Candidate | None = None) -> tuple:
     """(the candidates by held-out gain, the best, what it was decided on or None): the
     choice among fitted candidates (:func:`_pick`), shared by :func:`diagnose` and
@@ -934,18 +948,10 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     cands = []
     todo = effects or tuple(CANDIDATES)
 
-    def candidate(eff, x, se, fitted_on="channels"):
-        return scored(eff, x, se, run, vehicle, terrain, pitch, base, chans, scales, train, held, fitted_on)
-
     def fitted(key):
-        c = candidate(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, train))
-        if c.train_reach < REACH_MIN <= c.reach and _decides(c) is None:
-            # the training part cannot see it (a voltage sag that limits the drive only
-            # late in the run): its fit there is uninformed; fit it on the held-out part,
-            # replaying the whole run (_decides judges it as data the fit has seen)
-            c = candidate(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, held, math.inf),
-                          fitted_on="heldout")
-        return c
+        c = scored(key, *fit_candidate(key, run, vehicle, terrain, chans, scales, train), run, vehicle, terrain,
+                   pitch, base, chans, scales, train, held)
+        return unseen_in_training(c, run, vehicle, terrain, pitch, base, chans, scales, train, held)
 
     for i, eff in enumerate(todo):
         if progress is not None:

@@ -330,9 +330,8 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
     {base, with_effect}} (held-out errors, noise units; with_effect where a cause is
     named), calibrated_error, base, candidates: [{effect, params, base, error, gain,
     evidence, train_evidence, share, pose_gain}]}, the named cause first."""
-    from dynamics.discrepancy import (CANDIDATES, EXCESS_MIN, REACH_MIN, WORLD_GRADE, _bic, _decides, _model_for,
-                                      _pose_candidate, _spec, fit_candidate, has_pose, judge, pose_error, scored,
-                                      share_of)
+    from dynamics.discrepancy import (CANDIDATES, EXCESS_MIN, WORLD_GRADE, _bic, _model_for, _pose_candidate, _spec,
+                                      has_pose, judge, pose_error, share_of, unseen_in_training)
     # the fitted parameters, and those the runs excite but the base alone could not pin
     # or tell apart: an effect the base lacks can be what confounded them (a hidden
     # viscous friction made mass and rolling resistance inseparable)
@@ -353,13 +352,11 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
             if eff == "turning_friction" and {"mu_sa", "mu_op"} <= set(base):
                 continue         # one scale on both: the same model as the fitted pair
             c = _scored(eff, r, (ch, sc, tr, ho), base, cal, pred0, max_nfev, joint)
-            if c.train_reach < REACH_MIN <= c.reach and _decides(c) is None:
-                # the training part cannot see it (a voltage sag that limits the drive only
-                # late in the run): fitted on the held-out part on top of the refitted base,
-                # and judged as data the fit has seen (as diagnose does)
-                x, se = fit_candidate(eff, r, vb, tb, ch, sc, ho, math.inf)
-                c = scored(eff, x, se, r, vb, tb, 0.0, pred0, ch, sc, tr, ho, "heldout")
-                joint[eff] = {n: float(a) for n, a in zip(base, xb)}
+            # the training part cannot see it (a voltage sag that acts late): fitted on the
+            # held-out part on top of the refitted base, as diagnose does
+            held = unseen_in_training(c, r, vb, tb, 0.0, pred0, ch, sc, tr, ho)
+            if held is not c:
+                c, joint[eff] = held, {n: float(a) for n, a in zip(base, xb)}
             if eff == "grade" and has_pose(r):
                 # with a logged heading, also as a plane fixed in the world (as diagnose
                 # does: the form the training part supports better); a 2.5 deg plane was
@@ -398,9 +395,9 @@ def effects_on_top(cal: Calibration, runs: list, effects=None, max_nfev: int = 3
 def _row(c, base: dict, e0: float, e0t: float) -> dict:
     """A candidate of :func:`effects_on_top` as a row (``base``: the base parameters it
     was fitted with)."""
-    from dynamics.discrepancy import REACH_MIN, explained_share
+    from dynamics.discrepancy import REACH_MIN, share_of
     # on the part that tests it: the training part for an effect the held-out part cannot see
-    share = explained_share(e0t, c.train_error) if c.reach < REACH_MIN else explained_share(e0, c.heldout_error)
+    share = share_of(c, "training" if c.reach < REACH_MIN else "heldout", e0, e0t)
     return {"effect": c.effect, "params": c.params, "base": base, "error": c.heldout_error, "gain": c.gain,
             "evidence": c.evidence, "train_evidence": c.train_evidence, "reach": c.reach,
             "share": share, "fitted_on": c.fitted_on, "pose_gain": c.pose_gain}
