@@ -54,6 +54,18 @@ def test_bad_run_files_name_line_and_column(tmp_path, capsys, text, words):
     assert p.read_text() == text                   # never modified
 
 
+@given(st.integers(20, 400), st.integers(3, 8), st.integers(1, 3))
+@settings(max_examples=30, deadline=None)
+def test_a_quantised_signal_stepping_one_way_has_its_rounding_noise(n, hold, m):
+    """A wheel speed logged in quanta of 1/127 m/s that holds for a few samples and then
+    steps, always the same way (BorealTC's Husky at a steady speed): the median absolute
+    deviation of its steps is 0, and its noise was taken as 1e-9 (held-out errors of 6e7
+    noise units). It is the rounding noise of its step, step / sqrt(12)."""
+    q = 1.0 / 127.0 / 0.13
+    y = 2.0 + m * q * (np.arange(n) // hold)
+    assert noise_scale(y) == pytest.approx(m * q / math.sqrt(12.0), rel=1e-9)
+
+
 def test_noise_scale_recovers_white_noise_on_a_stepping_signal():
     rng = np.random.default_rng(0)
     y = np.repeat(rng.uniform(-5, 5, 40), 100) + rng.normal(0, 0.05, 4000)
