@@ -411,6 +411,20 @@ def twin_planner(world: WO.World, tip: bool = False) -> WO.World:
     return replace(tw, scenario=replace(tw.scenario, planner=ps))
 
 
+TURNING = 0.5    # share of the current limit each side's current exceeds, in opposite directions, in a turning stall
+
+
+def turning_stall(currents: tuple, vehicle) -> bool:
+    """Whether a drive that stalled with the sides' ``currents`` (il, ir) [A] stalled in a
+    turn: the currents in opposite directions, each beyond ``TURNING`` of the current limit (a skid-steered vehicle held
+    by its turning resistance: on hills_field half the stalls of drawn vehicles were pivots
+    and tight turns on gentle ground, 0-5 deg of pitch, at +-3.6 A; a stall on a climb has
+    both sides at the limit the same way)."""
+    lim = TURNING * vehicle.current_limit
+    il, ir = float(currents[0]), float(currents[1])
+    return il * ir < 0.0 and min(abs(il), abs(ir)) > lim
+
+
 RETRACE_PERIODS = (2, 4)   # periods driven back along the way it came before a held run stops (retrace)
 
 
@@ -456,4 +470,4 @@ def stalled_again(stalls: list, X: np.ndarray) -> bool:
 
 __all__ = ["FASTEST", "Executor", "HELD", "MOVING", "STANDING", "holder", "moving", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
-           "marked", "twin_planner", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again"]
+           "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again"]

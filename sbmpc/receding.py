@@ -628,7 +628,8 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if fitted is not None:
                     base_key = ES.key(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-            if ps.margin > 0.0 and EX.stalled_again(stalls, X):
+            if ps.margin > 0.0 and EX.stalled_again(stalls, X) and not EX.turning_stall((X[K.S_IL], X[K.S_IR]),
+                                                                                       world.vehicle):
                 # stalled again where it stalled before, with the plans of the vehicle as
                 # measured: the slope ahead is steeper than the map says (or the vehicle weaker
                 # there than measured); the re-plans keep off it

@@ -319,6 +319,33 @@ def test_one_stall_reported_twice_counts_once_and_a_later_one_counts_again(flat)
     assert not ctrl._marks          # no second stall near the first: nothing marked a wall
 
 
+@pytest.mark.parametrize("currents, wall", [((3.0, -3.0), False), ((3.0, 3.0), True)])
+def test_a_second_stall_near_the_first_marks_a_wall_ahead_unless_it_was_in_a_turn(flat, currents, wall):
+    """A second stall within MARK_NEAR of the first makes the slope ahead a wall in the
+    plans' map; not where the two sides' currents pulled against each other at the
+    drive's limit, a turn the vehicle could not make (on hills_field about half the drawn
+    vehicles' stalls, on gentle ground): the ground ahead is not what held it."""
+    ctrl = Controller(flat, "time", period_s=0.1, lockstep=True)
+    real = R._Executor(flat, "time")
+    X = WO.start_state(flat)
+    stalls = (20, 32)                # control periods whose measurement says stalled, in a turn
+    for k in range(45):
+        m = R.measured(X, flat.vehicle, k in stalls)
+        if k in stalls:
+            m = replace(m, il=currents[0], ir=currents[1])
+        cmd = ctrl.step(float(X[K.S_T]), m)
+        assert not cmd.done, ctrl.reason
+        _, end, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s), record=False)
+        if k + 1 in stalls:
+            R._protected(X, real)
+    ctrl.close()
+    assert ctrl.stalls == 2
+    (x0, y0), (x1, y1) = ctrl.stall_at
+    assert math.hypot(x1 - x0, y1 - y0) < EX.MARK_NEAR
+    assert bool(ctrl._marks) is wall
+    assert any("slope(s) kept off" in p.why for p in ctrl.plans) is wall
+
+
 def test_a_second_back_off_goes_further_back_along_the_way_never_forward_again(flat):
     """execution.back_along: the first back-off retraces the way's last 2 periods (a stop,
     then each negated, latest first) and takes them off the way; the second the 4 before

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from dynamics import kernels as K
 from dynamics.discrepancy import diagnose
 from dynamics.params import vehicle_to_yaml
 from dynamics.synth import apply, synth_run
@@ -364,6 +365,20 @@ def test_after_a_stall_the_drive_restarts_and_the_re_plans_get_away(runup):
     assert res.stalls == runup.scenario.run.max_stalls + 1
     after = [r for r in res.plans if r.why.startswith("stalled")]
     assert len(after) == runup.scenario.run.max_stalls and all(r.plan.found for r in after)
+
+
+@pytest.mark.parametrize("current_limit, control, turning", [(2.0, (3.0, -3.0, 2.0), True),
+                                                             (0.3, (6.0, 6.0, 2.0), False)])
+def test_a_stall_in_a_pivot_is_a_turning_stall_and_one_going_straight_is_not(flat, current_limit, control, turning):
+    """execution.turning_stall on the model's own stalls, from rest on flat: a P3-AT given
+    2 A of current cannot pivot (its turning resistance holds it; the sides' currents at
+    +-2 A), one given 0.3 A cannot even roll straight (both sides at +0.3 A, as on a climb
+    too steep for the drive)."""
+    w = replace(flat, vehicle=flat.vehicle.replace(current_limit=current_limit))
+    _, end, S = EX.Executor(w, "time").step(WO.start_state(w), control, record=False)
+    assert end == -SS.STALL
+    assert abs(S[K.S_IL]) == pytest.approx(current_limit, rel=0.02)
+    assert EX.turning_stall((S[K.S_IL], S[K.S_IR]), w.vehicle) is turning
 
 
 def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_margins_twin(runup, monkeypatch):

@@ -31,7 +31,10 @@ default, and gets the same wheel speeds until the period ends):
    says why;
 6. after a **stall**, the plans are made for the margin's pessimistic twin of the
    planning vehicle (it proved weaker there), and a second stall near an earlier one
-   makes the slope ahead a wall in their map (:meth:`Controller._as_weaker`).
+   makes the slope ahead a wall in their map (:meth:`Controller._as_weaker`), unless it
+   stalled in a turn (the sides' currents pulling against each other at the limit: the
+   ground ahead did not hold it). A stall reported again within the stall test's time,
+   where the vehicle stood, is the same stall (:meth:`Controller._same_stall`).
 
 :meth:`Controller.step` never waits on a plan (``lockstep=False``, a robot): where the
 plan it needs is not ready, the command holds the wheels at rest (``status``
@@ -138,6 +141,7 @@ class Controller:
         self._fitting = None          # the adaptation's fit being made in the route worker (run.adapt_periods)
         self._since_fit = 0           # periods driven since the last adaptation's fit
         self._marks = ()              # slopes a second stall near the first marked impassable
+        self._currents = (0.0, 0.0)   # each side's current [A], as measured (else estimated) at the last call
         self._retraced = 0            # retraces tried (execution.RETRACE_PERIODS)
         self._way: list = []          # the periods driven along the way it came (not those driven back)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
@@ -210,6 +214,7 @@ class Controller:
         # the map's tilt error where the vehicle stands, from the IMU (the guard's)
         self._tilt = 0.0 if m.pitch is None else EX.tilt_error(self.world, X, m.pitch, m.roll)
         self._X = X
+        self._currents = m.currents(self.world.vehicle) or (float(X[K.S_IL]), float(X[K.S_IR]))
         self._last_t = float(t)
         cmd = self._advance(t, X, stalled)
         self.latencies.append(time.perf_counter() - t0)
@@ -463,7 +468,7 @@ class Controller:
         inf["fit"] = fitted
         self.inferred.append(inf)
         marks = self._marks
-        if EX.stalled_again(self.stall_at, X):
+        if EX.stalled_again(self.stall_at, X) and not EX.turning_stall(self._currents, self.world.vehicle):
             marks = marks + (EX.ahead(self.world, X, control),)
         base, twin = self._base, self._as_twin
         if fitted is not None:
