@@ -98,6 +98,24 @@ def closed_loop_totals(name: str = "closed_loop.json") -> str:
             f"10 %: {t['groups_meeting_cost_p90_1.10']} of {t.get('groups_crossable', t['groups'])} rows).")
 
 
+HILLS_SERIES = ("closed_loop_edge.json", "closed_loop_stall.json", "closed_loop_nomark.json", "closed_loop_turns.json")
+
+
+def closed_loop_hills() -> str:
+    """robustness.md: hills_field's horizon rows, measured again after each change to what
+    a stall means (HILLS_SERIES, each file's label says what it ran)."""
+    lines = ["| results | date, commit | what ran | reached | stopped | no way on | failed | stalls |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name in HILLS_SERIES:
+        d = _load(name)
+        e = d["totals"]["ends"]
+        stalls = sum(g["stalls"] for g in d["groups"].values())
+        lines.append(f"| {name} | {d['date']}, {d['commit']} | {d.get('label') or '-'} | {e.get('reached', 0)} of "
+                     f"{d['totals']['runs']} | {e.get('stopped', 0)} | {e.get('no_path', 0)} | {e.get('failed', 0)} | "
+                     f"{stalls} |")
+    return "\n".join(lines)
+
+
 def closed_loop_adapt() -> str:
     """Adaptation on and off on the same truths (closed_loop_adapt_off/on.json)."""
     off, on = _load("closed_loop_adapt_off.json"), _load("closed_loop_adapt_on.json")
@@ -803,6 +821,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
+          "closed-loop-hills": closed_loop_hills,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
           "calibration-real": calibration_real, "independent-calibrated": independent_calibrated,
