@@ -40,23 +40,24 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "real" / "borealtc"
 from sbmpc.realdata import BOREALTC_TERRAINS as NOMINAL  # noqa: E402  (nearest shipped terrain)
-NO_LOAD_CURRENT = 1.35    # A, dataset code
 TRAIN_FRACTION = 0.7
 # --calibrate's add-on effects: the measured speeds stand in for the commands, so the speed
 # loop's delay and lag cannot be seen (sbmpc import borealtc says so); the others can
-EFFECTS = ("wheel_radius", "viscous_friction", "voltage_sag", "shear_relaxation", "grade", "turning_friction")
+EFFECTS = ("wheel_radius", "viscous_friction", "no_load_current", "voltage_sag", "shear_relaxation", "grade", "turning_friction")
 
 
-def terrain_samples(folder: Path, files: list, torque_constant: float) -> dict:
+def terrain_samples(folder: Path, files: list, vehicle) -> dict:
     from sbmpc.realdata import read_borealtc, steady_samples
     parts = [steady_samples(read_borealtc(folder / f)) for f in files]
-    return with_torques({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, torque_constant)
+    return with_torques({k: np.concatenate([p[k] for p in parts]) for k in parts[0]}, vehicle)
 
 
-def with_torques(s: dict, torque_constant: float) -> dict:
-    """Steady stretches with wheel torques [N m] from the (unsigned) motor currents."""
-    s["tau_l"] = torque_constant * np.maximum(s["i_l"] - NO_LOAD_CURRENT, 0.0)
-    s["tau_r"] = torque_constant * np.maximum(s["i_r"] - NO_LOAD_CURRENT, 0.0)
+def with_torques(s: dict, vehicle) -> dict:
+    """Steady stretches with wheel torques [N m] from the (unsigned) motor currents, less
+    what the motors draw turning freely (the vehicle's no_load_current)."""
+    k, i0 = vehicle.torque_constant, vehicle.no_load_current
+    s["tau_l"] = k * np.maximum(s["i_l"] - i0, 0.0)
+    s["tau_r"] = k * np.maximum(s["i_r"] - i0, 0.0)
     return s
 
 
@@ -91,11 +92,11 @@ def main(argv=None) -> int:
         files = sorted(p.name for p in folder.glob("*.csv"))
         if len(files) < 2:
             # one long file: split it by time instead of by file
-            train, held = _split_one(folder / files[0], v.torque_constant)
+            train, held = _split_one(folder / files[0], v)
         else:
             k = max(1, int(round(TRAIN_FRACTION * len(files))))
-            train = terrain_samples(folder, files[:k], v.torque_constant)
-            held = terrain_samples(folder, files[k:], v.torque_constant)
+            train = terrain_samples(folder, files[:k], v)
+            held = terrain_samples(folder, files[k:], v)
         ter0 = load_terrain(nominal)
         fit = fit_friction(v, ter0, train["wl"], train["wr"], train["tau_l"], train["tau_r"], magnitudes=True)
         turning = np.abs(train["wr"] - train["wl"]) > 1.0
@@ -173,14 +174,14 @@ def main_calibrated(args, stamp) -> int:
     return 0
 
 
-def _split_one(path: Path, torque_constant: float):
+def _split_one(path: Path, vehicle):
     from sbmpc.realdata import read_borealtc, steady_samples
     rec = read_borealtc(path)
     t = rec["t"]
     cut = t[0] + TRAIN_FRACTION * (t[-1] - t[0])
     halves = []
     for m in (t < cut, t >= cut):
-        halves.append(with_torques(steady_samples({k: a[m] for k, a in rec.items()}), torque_constant))
+        halves.append(with_torques(steady_samples({k: a[m] for k, a in rec.items()}), vehicle))
     return halves
 
 

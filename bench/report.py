@@ -421,6 +421,33 @@ def husky_calibrated() -> str:
                                f"{d['seconds_per_terrain']:.0f} s of driving a terrain).*"])
 
 
+def husky_no_load() -> str:
+    """validation.md: the Husky's replay without and with the motors' no-load current
+    (husky_calibrated_no_i0.json against husky_calibrated.json)."""
+    old, new = _load("husky_calibrated_no_i0.json"), _load("husky_calibrated.json")
+    lines = ["| terrain | currents held out, nominal: without → with i0 | calibrated: without → with i0 | "
+             "mu_roll fitted (× the shipped): without → with i0 | torque constant fitted: without → with i0 |",
+             "|---|---|---|---|---|"]
+
+    def mean(r, which):
+        xs = [u["per_channel"][c][which] for u in r["runs"].values() for c in ("i_l", "i_r") if c in u["per_channel"]]
+        return sum(xs) / len(xs)
+
+    def factor(r, name):
+        p = r["params"].get(name)
+        return "-" if not p or not p["fitted"] else f"×{p['value'] / p['prior']:.2f}"
+    for name, a in old["terrains"].items():
+        b = new["terrains"].get(name)
+        if b is None:
+            continue
+        lines.append(f"| {name.lower().replace('_', ' ')} | {mean(a, 'nominal'):.2f} → {mean(b, 'nominal'):.2f} | "
+                     f"{mean(a, 'calibrated'):.2f} → {mean(b, 'calibrated'):.2f} | {factor(a, 'mu_roll')} → "
+                     f"{factor(b, 'mu_roll')} | {factor(a, 'torque_constant')} → {factor(b, 'torque_constant')} |")
+    return "\n".join(lines + ["", f"*Without: {_when(old)}; with the `husky` file's `no_load_current: 1.35` A: "
+                                   f"{_when(new)}; both `python bench/real_husky.py --calibrate --workers 2`, held-out "
+                                   "errors in noise units, the mean over a terrain's runs and both sides.*"])
+
+
 def status_defaults() -> str:
     """status.md: the rows measured at today's defaults, each from its results file."""
     rows = []
@@ -822,6 +849,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "closed-loop-hills": closed_loop_hills,
+          "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
           "calibration-real": calibration_real, "independent-calibrated": independent_calibrated,

@@ -72,6 +72,7 @@ CANDIDATES = {
     "actuator_lag": (("lag_s",), (0.0,), (0.3,), (0.03,), 0.0),
     "wheel_radius": (("scale_left", "scale_right"), (0.7, 0.7), (1.3, 1.3), (1.0, 1.0), 0.0),
     "viscous_friction": (("c_Nms",), (-1.0,), (3.0,), (0.1,), 0.0),
+    "no_load_current": (("i0_A",), (0.0,), (20.0,), (0.5,), 0.0),
     "voltage_sag": (("sag_V_per_kJ",), (0.0,), (5.0,), (0.3,), 0.0),
     "shear_relaxation": (("tau_s",), (0.0,), (2.0,), (0.2,), 0.0),
     "grade": (("grade_deg",), (-20.0,), (20.0,), (0.0,), 0.0),

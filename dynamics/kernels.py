@@ -48,8 +48,8 @@ INV_OMEGA_EPS = 1.0 / OMEGA_EPS
 # ---- parameter vector P ----------------------------------------------------------
 (P_M, P_I, P_R, P_B, P_ALPHA, P_MUROLL, P_MUSA, P_MUOP, P_PRESS, P_VMAX, P_K, P_RA,
  P_IMAX, P_KP, P_KI, P_KD, P_AREF, P_REGEN, P_SCL, P_SCR, P_VISC, P_LAG, P_SAG,
- P_SHEARLAG, P_M11, P_M12, P_TC, P_KSL, P_KSR) = range(29)
-NP = 29
+ P_SHEARLAG, P_M11, P_M12, P_TC, P_KSL, P_KSR, P_I0) = range(30)
+NP = 30
 
 # ---- state vector S --------------------------------------------------------------
 (S_WL, S_WR, S_REFL, S_REFR, S_INTL, S_INTR, S_IL, S_IR, S_FL, S_FR, S_X, S_Y, S_Z,
@@ -97,6 +97,7 @@ def pack(vehicle: Vehicle, terrain: Terrain) -> np.ndarray:
     P[P_M11], P[P_M12] = mass_matrix(v.mass, v.inertia, v.wheel_radius, v.width, t.alpha)
     P[P_TC] = 1.0 / v.controller_rate
     P[P_KSL], P[P_KSR] = v.torque_scale_left, v.torque_scale_right
+    P[P_I0] = v.no_load_current
     return P
 
 
@@ -107,7 +108,8 @@ def _clip(x, lo, hi):
 
 @jit_inline
 def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r):
-    """Resistance torques C (eqs. 17-22, with rolling and the viscous extension) [N m] of
+    """Resistance torques C (eqs. 17-22, with rolling, the viscous extension and the
+    motors' no-load current: :func:`dynamics.resistance.drive_friction`) [N m] of
     both sides at wheel speeds (wl, wr) [rad/s] on a slope of cosine cp with gravity
     torques (g_l, g_r) [N m] (eq. 24; they enter eq. 22's choice of coefficient), from the unit
     frictions (fl, fr) and their slopes there (:func:`unit_friction_fast`), and their
@@ -135,17 +137,24 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r)
     visc = P[P_VISC]
     rim_l = r * scl
     rim_r = r * scr
+    # the motors' no-load current: a Coulomb torque k i0 against each side's rotation inside
+    # the drive (not in eq. 22's choice: the ground sees what the wheel passes on),
+    # regularised below OMEGA_EPS as the rolling resistance is (0 without it: the paper's model)
+    t0_l = P[P_K] * P[P_KSL] * P[P_I0]
+    t0_r = P[P_K] * P[P_KSR] * P[P_I0]
+    cf_l = t0_l * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0)
+    cf_r = t0_r * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0)
     F_l, dF_l, dR_l, dG_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press,
                                        P[P_MUSA], P[P_MUOP], visc * wl + g_l, rim_l)
     F_r, dF_r, dR_r, dG_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press,
                                        P[P_MUSA], P[P_MUOP], visc * wr + g_r, rim_r)
-    res_l = rim_l * F_l + visc * wl
-    res_r = rim_r * F_r + visc * wr
+    res_l = rim_l * F_l + visc * wl + cf_l
+    res_r = rim_r * F_r + visc * wr + cf_r
     # (in eq. 22's band the motor holds no torque: res = -g, its slope in w zero)
-    j_ll = rim_l * (dF_l * dll + dR_l * droll_l + dG_l * visc) + visc
+    j_ll = rim_l * (dF_l * dll + dR_l * droll_l + dG_l * visc) + visc + (t0_l * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0)
     j_lr = rim_l * dF_l * dlr
     j_rl = rim_r * dF_r * drl
-    j_rr = rim_r * (dF_r * drr + dR_r * droll_r + dG_r * visc) + visc
+    j_rr = rim_r * (dF_r * drr + dR_r * droll_r + dG_r * visc) + visc + (t0_r * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0)
     return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
 
 

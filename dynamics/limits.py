@@ -25,9 +25,12 @@ def available_torque(vehicle: Vehicle, omega: float) -> float:
 
 
 def required_torque(vehicle: Vehicle, terrain: Terrain, grade: float, omega: float) -> float:
-    """Torque [N m] of one side that holds wheel speed omega [rad/s] straight up a grade [rad]."""
+    """Torque [N m] of one side that holds wheel speed omega [rad/s] straight up a grade [rad]
+    (the drive's own friction with it: the viscous term and, climbing at any speed, the
+    motors' no-load current)."""
     v = vehicle
-    return v.wheel_radius * v.mass * G * (math.sin(grade) + terrain.mu_roll * math.cos(grade)) / 2.0 + v.viscous * omega
+    return (v.wheel_radius * v.mass * G * (math.sin(grade) + terrain.mu_roll * math.cos(grade)) / 2.0
+            + v.viscous * omega + v.torque_constant * v.no_load_current)
 
 
 def steepest_grade(vehicle: Vehicle, terrain: Terrain, speed: float = 0.0) -> float:
@@ -74,8 +77,10 @@ def holds_turn(vehicle: Vehicle, terrain: Terrain, wl: float, wr: float, margin:
     """Whether the drive holds wheel speeds (wl, wr) [rad/s] in a steady turn on level
     ground: eq. 22's steady resistance of each side, times ``margin``, within what the
     drive delivers at that side's speed (eqs. 26, 27 and the current limit)."""
-    from .resistance import steady_resistance
+    from .resistance import drive_friction, steady_resistance
     tl, tr = steady_resistance(wl, wr, vehicle, terrain)
+    tl = tl + drive_friction(vehicle, wl, 0)
+    tr = tr + drive_friction(vehicle, wr, 1)
     return (margin * abs(tl) <= available_torque(vehicle, abs(wl))
             and margin * abs(tr) <= available_torque(vehicle, abs(wr)))
 

@@ -34,8 +34,9 @@ class Vehicle:
     are ``patch_width`` = b wide. The drive is a current-controlled DC motor per side
     (eqs. 26, 27) under a modified PID (Fig. 4).
 
-    The ``*_scale``, ``viscous``, ``delay``, ``lag`` and ``sag`` fields are model extensions
-    found by ``sbmpc diagnose``; their defaults leave the paper's model unchanged.
+    The ``*_scale``, ``viscous``, ``no_load_current``, ``delay``, ``lag`` and ``sag`` fields
+    are model extensions found by ``sbmpc diagnose``; their defaults leave the paper's
+    model unchanged.
     """
 
     name: str = "p3at"
@@ -60,6 +61,7 @@ class Vehicle:
     radius_scale_left: float = 1.0     # effective / nominal rolling radius, left side
     radius_scale_right: float = 1.0    # effective / nominal rolling radius, right side
     viscous: float = 0.0               # N m s/rad, extra resistance torque per wheel speed
+    no_load_current: float = 0.0       # A, what each side's motors draw turning freely (their own friction)
     delay: float = 0.0                 # s, commands reach the drive late
     lag: float = 0.0                   # s, first-order lag of delivered current
     sag: float = 0.0                   # V/J, fall of available voltage per energy drawn
@@ -149,7 +151,7 @@ _BOUNDS: dict[str, tuple[float, float, bool]] = {
     "kd": (0.0, 1e6, True), "ref_accel": (0.0, 1e3, True),
     "radius_scale_left": (0.0, 2.0, False), "radius_scale_right": (0.0, 2.0, False),
     "torque_scale_left": (0.0, 2.0, False), "torque_scale_right": (0.0, 2.0, False),
-    "viscous": (-1e3, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),
+    "viscous": (-1e3, 1e3, True), "no_load_current": (0.0, 1e3, True), "delay": (0.0, 10.0, True), "lag": (0.0, 10.0, True),
     "sag": (0.0, 1e3, True), "shear_lag": (0.0, 10.0, True),
     "command_separation": (0.0, 100.0, True),
     "alpha": (1.0, 20.0, True), "mu_roll": (0.0, 2.0, True), "mu_sa": (0.0, 5.0, True),
@@ -195,6 +197,7 @@ def _validated(obj, src: str):
 # keys a parameter file may leave out without naming a ``base``: what the paper's model
 # does without them (no extension, no regeneration, equal wheels) or only labels
 OPTIONAL = {"name", "description", "sources", "regen", "radius_scale_left", "radius_scale_right", "viscous",
+            "no_load_current",
             "delay", "lag", "sag", "shear_lag", "command_separation", "torque_scale_left", "torque_scale_right"}
 
 

@@ -113,6 +113,21 @@ def rolling_resistance(mu_roll, mass, pitch, omega):
     return mu_roll * mass * G * np.cos(pitch) / 2.0 * np.clip(omega / OMEGA_EPS, -1.0, 1.0)
 
 
+def drive_friction(vehicle: Vehicle, omega, side: int = 0):
+    """The drive's own friction torque at one side's wheels [N m] (model extensions, 0 in
+    the paper's model): the viscous c w and the motors' no-load current i0 [A], a Coulomb
+    torque k s i0 sign(w) (k the torque constant at the wheel, s the side's torque scale:
+    side 0 left, 1 right) that the drive supplies on top of the load, so that a motor
+    turning freely draws i0 (regularised below ``OMEGA_EPS`` as the rolling resistance is).
+    The compiled step's ``_resistance`` adds the same; the viscous term also enters eq.
+    22's choice of coefficient (:func:`side_force`'s load), the no-load current does not:
+    it stays inside the drive."""
+    v = vehicle
+    w = np.asarray(omega, float)
+    k = v.torque_constant * (v.torque_scale_left, v.torque_scale_right)[side]
+    return v.viscous * w + k * v.no_load_current * np.clip(w / OMEGA_EPS, -1.0, 1.0)
+
+
 def patch_pressure(vehicle: Vehicle, pitch=0.0):
     """Normal pressure [Pa] of each of the four equal patches: m g cos(pitch) / (2 b (L - C))."""
     v = vehicle
@@ -232,7 +247,7 @@ def _side_torques(unit_l, unit_r, wl, wr, vehicle: Vehicle, terrain: Terrain, pi
     """Eqs. 18, 21 and 22 for both sides from unit frictions: the resistance torques
     [N m] with each side's coefficient chosen by :func:`side_force` (gravity of eq. 24 on
     ``pitch`` [rad] and the viscous term in its load), the same rule as the compiled
-    closed loop."""
+    closed loop. The drive's own friction (:func:`drive_friction`) is not in them."""
     r = vehicle.wheel_radius
     p = patch_pressure(vehicle, pitch)
     grav = vehicle.mass * G * r * np.sin(pitch) / 2.0          # eq. 24, per side [N m]

@@ -13,7 +13,7 @@ import numpy as np
 
 from . import kernels as K
 from .params import Terrain, Vehicle, load_terrain, load_vehicle
-from .resistance import friction_table, steady_resistance_fast
+from .resistance import drive_friction, friction_table, steady_resistance_fast
 from .body import gravity_torque
 from .params import G, checked_number
 
@@ -90,8 +90,10 @@ class Model:
             v = self.vehicle
             tl, tr = steady_resistance_fast(wl, wr, v, self.terrain, pitch)
             g = gravity_torque(v.mass, G, v.wheel_radius, pitch)     # (times each side's radius scale)
-            il = (float(tl) + g * v.radius_scale_left + v.viscous * wl) / (v.torque_constant * v.torque_scale_left)
-            ir = (float(tr) + g * v.radius_scale_right + v.viscous * wr) / (v.torque_constant * v.torque_scale_right)
+            il = (float(tl) + g * v.radius_scale_left + float(drive_friction(v, wl, 0))) / (
+                v.torque_constant * v.torque_scale_left)
+            ir = (float(tr) + g * v.radius_scale_right + float(drive_friction(v, wr, 1))) / (
+                v.torque_constant * v.torque_scale_right)
             S[K.S_IL], S[K.S_IR] = il, ir
             if v.ki > 0:
                 S[K.S_INTL], S[K.S_INTR] = il / v.ki, ir / v.ki

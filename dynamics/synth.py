@@ -24,6 +24,7 @@ STRENGTHS = {
     "actuator_lag": ("lag_s", (0.02, 0.07)),         # >= 0.1 s the PID loop limit-cycles
     "wheel_radius": ("scale", (0.90, 0.95)),            # one side smaller (worn or flat tyre)
     "viscous_friction": ("c_Nms", (0.15, 0.5)),
+    "no_load_current": ("i0_A", (0.3, 0.8)),          # the motors' own friction (a P-3AT's draws 3.62 A at most)
     "voltage_sag": ("sag_V_per_kJ", (0.5, 1.0)),
     "shear_relaxation": ("tau_s", (0.25, 0.6)),
     "grade": ("grade_deg", (3.0, 6.0)),
@@ -63,6 +64,8 @@ def apply(vehicle: Vehicle, effect: str, params: dict, terrain: Terrain | None =
         v = v.replace(radius_scale_left=params["scale_left"], radius_scale_right=params["scale_right"])
     elif effect == "viscous_friction":
         v = v.replace(viscous=params["c_Nms"])
+    elif effect == "no_load_current":
+        v = v.replace(no_load_current=params["i0_A"])
     elif effect == "voltage_sag":
         v = v.replace(sag=params["sag_V_per_kJ"] / 1000.0)
     elif effect == "shear_relaxation":

@@ -186,6 +186,25 @@ def test_beyond_the_steepest_grade_the_vehicle_decelerates_whatever_the_command(
     assert crossed and not tr.stalled
 
 
+def test_the_steepest_grade_with_the_motors_no_load_current_is_the_one_the_model_holds():
+    """dynamics.limits counts the motors' no-load current (no_load_current: the drive's
+    own Coulomb friction, k i0 of its torque) as the compiled step does: a P3-AT whose
+    motors draw 0.8 A turning freely holds a grade no steeper than the closed form
+    sin b + mu cos b = 2 k (I_max - i0) / (r m g)), decelerates 1.5 deg beyond it and
+    holds a slow speed 2 deg below."""
+    m = Model.load("p3at", "vinyl")
+    v = m.vehicle.replace(no_load_current=0.8)
+    m = m.with_(vehicle=v)
+    beta = steepest_grade(v, m.terrain)
+    rhs = 2.0 * v.torque_constant * (v.current_limit - 0.8) / (v.wheel_radius * v.mass * 9.81)
+    assert math.sin(beta) + m.terrain.mu_roll * math.cos(beta) == pytest.approx(rhs, rel=1e-3)
+    assert math.degrees(beta) < math.degrees(steepest_grade(m.vehicle.replace(no_load_current=0.0), m.terrain)) - 2.0
+    tr, crossed, _ = ramp_run(m, 0.5, 0.6, math.degrees(beta) + 1.5, 50.0, duration=4.0)
+    assert np.all(np.diff(tr.v[tr.s > 0.05]) <= 1e-9) and not crossed
+    tr, crossed, _ = ramp_run(m, 0.3, 0.3, math.degrees(beta) - 2.0, 3.0, duration=15.0)
+    assert crossed and not tr.stalled
+
+
 def test_steep_ramp_crossing_depends_on_entry_speed(vinyl):
     """Paper Figs. 19, 20: the same steep ramp is crossed from a fast entry and not from a slow one."""
     fast, crossed_fast, t_top = ramp_run(vinyl, 1.2, 0.9, 17.0, 1.0, duration=6.0)

@@ -85,6 +85,7 @@ TOLERANCE = {   # absolute tolerance on the fitted parameter
     "actuator_lag": {"lag_s": 0.012},
     "wheel_radius": {"scale_left": 0.01, "scale_right": 0.01},
     "viscous_friction": {"c_Nms": 0.03},
+    "no_load_current": {"i0_A": 0.03},
     "voltage_sag": {"sag_V_per_kJ": 0.15},
     "shear_relaxation": {"tau_s": 0.08},
     "grade": {"grade_deg": 0.3},

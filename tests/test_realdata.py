@@ -63,8 +63,8 @@ def test_borealtc_eq28_friction_ranks_the_terrains_and_beats_the_nominal_on_held
     for name in ("FLOORING", "ICE"):
         files = sorted(p.name for p in (BOREALTC / name).glob("*.csv"))
         k = int(round(0.7 * len(files)))
-        train = rh.terrain_samples(BOREALTC / name, files[:k], v.torque_constant)
-        held = rh.terrain_samples(BOREALTC / name, files[k:], v.torque_constant)
+        train = rh.terrain_samples(BOREALTC / name, files[:k], v)
+        held = rh.terrain_samples(BOREALTC / name, files[k:], v)
         assert train["wl"].size > 100 and held["wl"].size >= 10
         ter0 = load_terrain(rh.NOMINAL[name])
         fit = fit_friction(v, ter0, train["wl"], train["wr"], train["tau_l"], train["tau_r"], magnitudes=True)

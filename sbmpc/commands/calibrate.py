@@ -121,7 +121,7 @@ def _with_sources(cal, names: str):
 
 
 # effects a vehicle or terrain file holds (a grade belongs to the ground under one run)
-FILE_EFFECTS = ("command_delay", "actuator_lag", "wheel_radius", "viscous_friction", "voltage_sag",
+FILE_EFFECTS = ("command_delay", "actuator_lag", "wheel_radius", "viscous_friction", "no_load_current", "voltage_sag",
                 "shear_relaxation", "turning_friction")
 
 
