@@ -150,7 +150,8 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r)
                                        P[P_MUSA], P[P_MUOP], visc * wr + g_r, rim_r)
     res_l = rim_l * F_l + visc * wl + cf_l
     res_r = rim_r * F_r + visc * wr + cf_r
-    # (in eq. 22's band the motor holds no torque: res = -g, its slope in w zero)
+    # (in eq. 22's band the motor holds no torque beyond the drive's own friction: res = -g
+    # + cf, its slope in w that of cf alone)
     j_ll = rim_l * (dF_l * dll + dR_l * droll_l + dG_l * visc) + visc + (t0_l * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0)
     j_lr = rim_l * dF_l * dlr
     j_rl = rim_r * dF_r * drl

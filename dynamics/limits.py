@@ -27,7 +27,7 @@ def available_torque(vehicle: Vehicle, omega: float) -> float:
 def required_torque(vehicle: Vehicle, terrain: Terrain, grade: float, omega: float) -> float:
     """Torque [N m] of one side that holds wheel speed omega [rad/s] straight up a grade [rad]
     (the drive's own friction with it: the viscous term and, climbing at any speed, the
-    motors' no-load current)."""
+    motors' no-load current at the nominal torque constant: a symmetric drive)."""
     v = vehicle
     return (v.wheel_radius * v.mass * G * (math.sin(grade) + terrain.mu_roll * math.cos(grade)) / 2.0
             + v.viscous * omega + v.torque_constant * v.no_load_current)

@@ -346,6 +346,50 @@ def test_a_second_stall_near_the_first_marks_a_wall_ahead_unless_it_was_in_a_tur
     assert any("slope(s) kept off" in p.why for p in ctrl.plans) is wall
 
 
+def test_a_turning_stall_is_read_from_the_currents_at_the_stall_while_a_robot_waits_for_the_fit(flat, monkeypatch):
+    """On a robot (lockstep=False) the fit a stall asks for is made in the worker while
+    step keeps being called, each call with the currents of a drive held at rest: the
+    turn is judged on the currents of the call that reported the stall, so a second
+    turning stall near the first still marks no wall."""
+    from sbmpc.robot import controller as CT
+    slow = CT._fit
+
+    def fit(*a, **k):
+        time.sleep(0.3)
+        return slow(*a, **k)
+    monkeypatch.setattr(CT, "_fit", fit)
+    ctrl = Controller(flat, "time", period_s=0.1, lockstep=False)
+    real = R._Executor(flat, "time")
+    X = WO.start_state(flat)
+    first, driving, k = None, 0, 0
+    while X[K.S_T] < 30.0 and ctrl.stalls < 2:
+        # the first stall 2 periods in, the second 0.4 s after it drives again (past STALL_TIME: a new one)
+        flag = (first is None and ctrl.periods >= 2) or (first is not None and driving == 4)
+        m = R.measured(X, flat.vehicle, flag)
+        if flag:
+            m = replace(m, il=3.0, ir=-3.0)
+        before = ctrl.stalls
+        cmd = ctrl.step(float(X[K.S_T]), m)
+        assert not cmd.done, ctrl.reason
+        if ctrl.stalls > before:
+            first = ctrl.periods
+            R._protected(X, real)
+        elif first is not None and cmd.status == "horizon":
+            driving += 1
+        _, _, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s), record=False)
+        time.sleep(0.01)
+        k += 1
+    deadline = time.time() + 10.0
+    while ctrl.status in ("planning", "waiting") and time.time() < deadline:
+        ctrl.step(float(X[K.S_T]) + 0.1 * (k := k + 1), R.measured(X, flat.vehicle))
+        time.sleep(0.05)
+    ctrl.close()
+    assert ctrl.stalls == 2
+    (x0, y0), (x1, y1) = ctrl.stall_at
+    assert math.hypot(x1 - x0, y1 - y0) < EX.MARK_NEAR
+    assert not ctrl._marks
+
+
 def test_a_second_back_off_goes_further_back_along_the_way_never_forward_again(flat):
     """execution.back_along: the first back-off retraces the way's last 2 periods (a stop,
     then each negated, latest first) and takes them off the way; the second the 4 before

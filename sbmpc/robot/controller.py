@@ -156,6 +156,9 @@ class Controller:
         self.stalls = 0
         self.stall_at: list = []
         self._stall_t = None          # robot time of the last stall counted [s]
+        self._stall_call = -1         # the step call that counted it
+        self._stall_currents = (0.0, 0.0)   # each side's current [A] at it
+        self._calls = 0               # step calls that reached the policy
         self.periods = 0
         self.driven: list = []
         self.latencies: list = []
@@ -215,6 +218,7 @@ class Controller:
         self._tilt = 0.0 if m.pitch is None else EX.tilt_error(self.world, X, m.pitch, m.roll)
         self._X = X
         self._currents = m.currents(self.world.vehicle) or (float(X[K.S_IL]), float(X[K.S_IR]))
+        self._calls += 1
         self._last_t = float(t)
         cmd = self._advance(t, X, stalled)
         self.latencies.append(time.perf_counter() - t0)
@@ -468,7 +472,7 @@ class Controller:
         inf["fit"] = fitted
         self.inferred.append(inf)
         marks = self._marks
-        if EX.stalled_again(self.stall_at, X) and not EX.turning_stall(self._currents, self.world.vehicle):
+        if EX.stalled_again(self.stall_at, X) and not EX.turning_stall(self._stall_currents, self.world.vehicle):
             marks = marks + (EX.ahead(self.world, X, control),)
         base, twin = self._base, self._as_twin
         if fitted is not None:
@@ -572,15 +576,17 @@ class Controller:
         if self._stall_t is None:
             return False
         x, y = self.stall_at[-1]
-        return (X[K.S_T] - self._stall_t < K.STALL_TIME
-                and math.hypot(X[K.S_X] - x, X[K.S_Y] - y) < SAME_STALL_M)
+        # (a control period of STALL_TIME or more reports the second sighting at the next call)
+        soon = X[K.S_T] - self._stall_t < K.STALL_TIME or self._calls == self._stall_call + 1
+        return soon and math.hypot(X[K.S_X] - x, X[K.S_Y] - y) < SAME_STALL_M
 
     def _stalled_here(self, X: np.ndarray):
         """A stall counted and placed; the reason to stop once there are more than
         ``run.max_stalls``, else None."""
         self.stalls += 1
         self.stall_at.append((float(X[K.S_X]), float(X[K.S_Y])))
-        self._stall_t = float(X[K.S_T])
+        self._stall_t, self._stall_call = float(X[K.S_T]), self._calls
+        self._stall_currents = self._currents       # (read after the fit, which later calls wait for)
         if self.stalls > self.settings.max_stalls:
             inf = self.evidence.infer(X)
             self.inferred.append(inf)
@@ -685,7 +691,7 @@ class Controller:
             off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
             rebuilt = adapted = False
             if stalled and self._same_stall(X):
-                stalled, off = False, True      # the stall already counted: a plan from the restarted drive
+                off = True      # the stall already counted: a plan from the restarted drive, nothing refitted
             elif stalled:
                 failed = self._stalled_here(X)
                 if failed:
