@@ -389,6 +389,16 @@ def husky() -> str:
     return "\n".join(lines + ["", f"*`python bench/real_husky.py` ({_when(d)}).*"])
 
 
+CURRENTS = ("i_l", "i_r")
+
+
+def _runs_mean(terrain: dict, channels, which: str) -> float:
+    """A Husky terrain's held-out error (``which``: 'nominal', 'calibrated') over its runs
+    and ``channels`` (husky_calibrated*.json)."""
+    xs = [u["per_channel"][c][which] for u in terrain["runs"].values() for c in channels if c in u["per_channel"]]
+    return sum(xs) / len(xs)
+
+
 def husky_calibrated() -> str:
     """validation.md: the replay calibrated on the Husky's BorealTC runs, then diagnosed on
     top (husky_calibrated.json)."""
@@ -400,20 +410,16 @@ def husky_calibrated() -> str:
         fitted = ", ".join(f"{n} ×{p['value'] / p['prior']:.2f}" for n, p in r["params"].items()
                            if p["fitted"] and p["prior"])
         runs = r["runs"]
-
-        def mean(ch, which, runs=runs):
-            xs = [u["per_channel"][c][which] for u in runs.values() for c in ch if c in u["per_channel"]]
-            return sum(xs) / len(xs)
         L = r["longest"]
-        cur = [c for c in ("i_l", "i_r") if c in L]
+        cur = [c for c in CURRENTS if c in L]
         base = sum(L[c]["base"] for c in cur) / len(cur)
         eff = [L[c].get("with_effect") for c in cur]
         longest = f"{base:.2f}" + (f" → {sum(eff) / len(eff):.2f}" if all(e is not None for e in eff) else "")
         on = r["cause"] + (f" ({_params(r['effect']['params'])}, {r['decided_on']})" if r.get("effect") else "")
         lines.append(f"| {name.lower().replace('_', ' ')} ({r['terrain'].replace('_', ' ')}) | {len(runs)}, "
-                     f"{r['seconds_driven']:.0f} | {fitted or 'none'} | {mean(('wl', 'wr'), 'nominal'):.2f} → "
-                     f"{mean(('wl', 'wr'), 'calibrated'):.2f} | {mean(('i_l', 'i_r'), 'nominal'):.2f} → "
-                     f"{mean(('i_l', 'i_r'), 'calibrated'):.2f} | {on} | {longest} |")
+                     f"{r['seconds_driven']:.0f} | {fitted or 'none'} | {_runs_mean(r, ('wl', 'wr'), 'nominal'):.2f} → "
+                     f"{_runs_mean(r, ('wl', 'wr'), 'calibrated'):.2f} | {_runs_mean(r, CURRENTS, 'nominal'):.2f} → "
+                     f"{_runs_mean(r, CURRENTS, 'calibrated'):.2f} | {on} | {longest} |")
     return "\n".join(lines + ["", "Held-out errors in noise units, the mean over the terrain's runs and their two "
                                "sides; the last column on the run diagnosed (its longest), the base fitted again on "
                                "it, then with the effect.", "",
@@ -430,8 +436,7 @@ def husky_no_load() -> str:
              "|---|---|---|---|---|"]
 
     def mean(r, which):
-        xs = [u["per_channel"][c][which] for u in r["runs"].values() for c in ("i_l", "i_r") if c in u["per_channel"]]
-        return sum(xs) / len(xs)
+        return _runs_mean(r, CURRENTS, which)
 
     def factor(r, name):
         p = r["params"].get(name)

@@ -132,30 +132,30 @@ def _resistance(P, S, wl, wr, cp, a_shear, fl, fr, dll, dlr, drl, drr, g_l, g_r)
         drr *= a_shear
     press = P[P_PRESS] * cp
     roll = P[P_MUROLL] * P[P_M] * G * cp / 2.0
-    droll_l = roll * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
-    droll_r = roll * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
+    # the regularised sign of each wheel's rotation and its slope [s/rad]: the rolling
+    # resistance's and the motors' no-load current's (both Coulomb, OMEGA_EPS wide at rest)
+    sg_l = _clip(wl * INV_OMEGA_EPS, -1.0, 1.0)
+    sg_r = _clip(wr * INV_OMEGA_EPS, -1.0, 1.0)
+    dsg_l = INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0
+    dsg_r = INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0
     visc = P[P_VISC]
     rim_l = r * scl
     rim_r = r * scr
     # the motors' no-load current: a Coulomb torque k i0 against each side's rotation inside
-    # the drive (not in eq. 22's choice: the ground sees what the wheel passes on),
-    # regularised below OMEGA_EPS as the rolling resistance is (0 without it: the paper's model)
+    # the drive (not in eq. 22's choice: the ground sees what the wheel passes on; 0 without
+    # it: the paper's model)
     t0_l = P[P_K] * P[P_KSL] * P[P_I0]
     t0_r = P[P_K] * P[P_KSR] * P[P_I0]
-    cf_l = t0_l * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0)
-    cf_r = t0_r * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0)
-    F_l, dF_l, dR_l, dG_l = side_force(fl, roll * _clip(wl * INV_OMEGA_EPS, -1.0, 1.0), wl, press,
-                                       P[P_MUSA], P[P_MUOP], visc * wl + g_l, rim_l)
-    F_r, dF_r, dR_r, dG_r = side_force(fr, roll * _clip(wr * INV_OMEGA_EPS, -1.0, 1.0), wr, press,
-                                       P[P_MUSA], P[P_MUOP], visc * wr + g_r, rim_r)
-    res_l = rim_l * F_l + visc * wl + cf_l
-    res_r = rim_r * F_r + visc * wr + cf_r
+    F_l, dF_l, dR_l, dG_l = side_force(fl, roll * sg_l, wl, press, P[P_MUSA], P[P_MUOP], visc * wl + g_l, rim_l)
+    F_r, dF_r, dR_r, dG_r = side_force(fr, roll * sg_r, wr, press, P[P_MUSA], P[P_MUOP], visc * wr + g_r, rim_r)
+    res_l = rim_l * F_l + visc * wl + t0_l * sg_l
+    res_r = rim_r * F_r + visc * wr + t0_r * sg_r
     # (in eq. 22's band the motor holds no torque beyond the drive's own friction: res = -g
-    # + cf, its slope in w that of cf alone)
-    j_ll = rim_l * (dF_l * dll + dR_l * droll_l + dG_l * visc) + visc + (t0_l * INV_OMEGA_EPS if abs(wl) < OMEGA_EPS else 0.0)
+    # + k i0 sign(w), its slope in w that of the last term alone)
+    j_ll = rim_l * (dF_l * dll + dR_l * (roll * dsg_l) + dG_l * visc) + visc + t0_l * dsg_l
     j_lr = rim_l * dF_l * dlr
     j_rl = rim_r * dF_r * drl
-    j_rr = rim_r * (dF_r * drr + dR_r * droll_r + dG_r * visc) + visc + (t0_r * INV_OMEGA_EPS if abs(wr) < OMEGA_EPS else 0.0)
+    j_rr = rim_r * (dF_r * drr + dR_r * (roll * dsg_r) + dG_r * visc) + visc + t0_r * dsg_r
     return res_l, res_r, j_ll, j_lr, j_rl, j_rr, fl, fr
 
 

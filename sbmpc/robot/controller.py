@@ -141,7 +141,6 @@ class Controller:
         self._fitting = None          # the adaptation's fit being made in the route worker (run.adapt_periods)
         self._since_fit = 0           # periods driven since the last adaptation's fit
         self._marks = ()              # slopes a second stall near the first marked impassable
-        self._currents = (0.0, 0.0)   # each side's current [A], as measured (else estimated) at the last call
         self._retraced = 0            # retraces tried (execution.RETRACE_PERIODS)
         self._way: list = []          # the periods driven along the way it came (not those driven back)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
@@ -217,7 +216,6 @@ class Controller:
         # the map's tilt error where the vehicle stands, from the IMU (the guard's)
         self._tilt = 0.0 if m.pitch is None else EX.tilt_error(self.world, X, m.pitch, m.roll)
         self._X = X
-        self._currents = m.currents(self.world.vehicle) or (float(X[K.S_IL]), float(X[K.S_IR]))
         self._calls += 1
         self._last_t = float(t)
         cmd = self._advance(t, X, stalled)
@@ -586,7 +584,11 @@ class Controller:
         self.stalls += 1
         self.stall_at.append((float(X[K.S_X]), float(X[K.S_Y])))
         self._stall_t, self._stall_call = float(X[K.S_T]), self._calls
-        self._stall_currents = self._currents       # (read after the fit, which later calls wait for)
+        # each side's current at the stall, as measured (this call's sample), else estimated:
+        # read after the fit, which a robot's later calls (its drive at rest) wait for
+        row = self._samples[-1][1]
+        self._stall_currents = ((row[K.R_IL], row[K.R_IR]) if not np.isnan(row[K.R_IL])
+                                else (float(X[K.S_IL]), float(X[K.S_IR])))
         if self.stalls > self.settings.max_stalls:
             inf = self.evidence.infer(X)
             self.inferred.append(inf)
