@@ -2,7 +2,8 @@
 goal, the vehicle (its own footprint) animated along the ``time`` timeline, and time
 series of speed, wheel torques, currents, power and energy. Saved to ``.rrd`` with a
 blueprint (:func:`blueprint`: the 3-D view beside one time-series view per quantity,
-named with its unit, every plan in its path's colour); ``rerun FILE.rrd`` opens it on a
+named with its unit, every plan in its path's colour: speed, power and energy in sight,
+the wheel torques and motor currents in tabs below them); ``rerun FILE.rrd`` opens it on a
 desktop. The world is Z-up, right-handed (x east, y north), in metres.
 
 Entities (one set per plan label, e.g. ``time`` and ``energy``)::
@@ -43,8 +44,20 @@ FOV_Y_DEG = 55.0              # the viewer's default vertical field of view
 VIEW_PX = 600.0               # a small 3-D view's height [px] (in a taller one, labels lie further apart)
 CHAR_PX, LINE_PX = 6.5, 24.0  # a label's width per character and its height [px], its box included (~6 and 20)
 LIFTS = 0.3 * np.arange(31)   # [m] the heights above its place a label may be lifted to, in turn
-# the time series views, in rows (each view taller than in one grid: the y axes keep labels)
-ROWS = (("speed", "power", "energy"), ("tau_l", "tau_r"), ("i_l", "i_r"))
+# the time series views in two rows, so that each is tall enough for its y axis to label at
+# least two values in a 1280 x 720 window (the viewer labels ticks at powers of ten where they
+# are 20 px apart or more: some 210 px of plot for data from 0 to just under a power of ten,
+# and three rows left under 170 px there). The top row keeps the trade-off in sight; the
+# drive's views share the second, one pair at a time, in tabs (the currents are the torques
+# through the motor constant: the same curves).
+TOP_ROW = ("speed", "power", "energy")
+TABS = (("wheel torques", ("tau_l", "tau_r")), ("motor currents", ("i_l", "i_r")))
+ROW_SHARES = (1.0, 1.0)       # the top row and the tabs (whose bar takes some 24 px of theirs)
+# the 3-D view's and the plots' shares of the width: at 1280 px, the 3-D view wide enough for
+# the whole map from the default eye (some 1.08 times its height, 652 px there) and each
+# top-row view for its title with its unit (some 187 px); at 1600 x 900 the map's nearest
+# corner reaches a few pixels past the view's left edge
+COLUMN_SHARES = (5.0, 4.0)
 # (entity, trajectory key, view title: short enough for a third of the plots' width)
 SERIES = (("speed", "v", "speed [m/s]"), ("tau_l", "tau_l", "left torque [N m]"),
           ("tau_r", "tau_r", "right torque [N m]"), ("i_l", "i_l", "left current [A]"),
@@ -71,22 +84,28 @@ def camera(emap) -> tuple:
 
 def blueprint(emap=None):
     """The layout: the 3-D scene (terrain, paths, markers, vehicles) beside time-series
-    views, one per quantity, titled with its unit, in three rows (:data:`ROWS`: a view must
-    be about 200 px high for its y axis to label more than 0). With a map, the 3-D view's
+    views, one per quantity, titled with its unit, in two rows (:data:`TOP_ROW`: speed,
+    power and energy; below, tabs of the wheel torques and the motor currents,
+    :data:`TABS`): a view must be about 210 px high for its y axis to label more than 0,
+    and three rows are too low for that in a 1280 x 720 window. With a map, the 3-D view's
     eye looks at it from the south-west, low enough to show its relief (:func:`camera`),
     and the time panel, collapsed to its play bar (height for the views), plays from the
     start, looping (the vehicles move at once; a recording otherwise opens at its last
     instant)."""
     import rerun.blueprint as rrb
     title = {name: t for name, _, t in SERIES}
-    rows = [rrb.Horizontal(*(rrb.TimeSeriesView(origin=f"plots/{n}", name=title[n]) for n in row)) for row in ROWS]
+
+    def row(names, name=None):
+        return rrb.Horizontal(*(rrb.TimeSeriesView(origin=f"plots/{n}", name=title[n]) for n in names), name=name)
+    plots = rrb.Vertical(row(TOP_ROW), rrb.Tabs(*(row(names, tab) for tab, names in TABS), active_tab=0),
+                         row_shares=list(ROW_SHARES))
     eye = None
     if emap is not None:
         pos, target = camera(emap)
         eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=pos, look_target=target, eye_up=[0.0, 0.0, 1.0])
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Spatial3DView(origin="/", name="terrain, paths and vehicles", eye_controls=eye),
-                       rrb.Vertical(*rows), column_shares=[3, 2]),
+                       plots, column_shares=list(COLUMN_SHARES)),
         rrb.TimePanel(timeline="time", play_state="playing", loop_mode="all", state="collapsed"),
         collapse_panels=True)
 

@@ -186,35 +186,62 @@ def _labelled_y_ticks(lo: float, hi: float, height_px: float) -> int:
     return int(np.floor((hi + 0.05 * span) / step) - np.ceil((lo - 0.05 * span) / step) + 1)
 
 
+# the viewer's frame, measured on screenshots of rerun's web viewer (0.41) at 1280 x 720 and
+# 1600 x 900: its top bar, the time panel collapsed to its play bar, a view's title bar, the
+# time axis under a plot, a tab bar; a view's title with its unit shows whole where the view
+# is some 110 px (icons) and 7 px a character wide ('speed [m/s]' at 187 px, not at 185)
+WINDOWS = ((1280, 720), (1600, 900))
+TOP_BAR, TIME_BAR, TITLE_BAR, TIME_AXIS, TAB_BAR = 36.0, 30.0, 24.0, 31.0, 24.0
+
+
+def _title_px(title: str) -> float:
+    return 110.0 + 7.0 * len(title)
+
+
+def _layout(bp, width: float, height: float) -> dict:
+    """{view: (width, height) [px]} of every view of blueprint ``bp`` in a browser window
+    ``width`` x ``height``, its containers sharing their space by their shares (a tab's
+    content under the tab bar; every tab counted, one shows at a time)."""
+    import rerun.blueprint as rrb
+    panel = {"collapsed": TIME_BAR, "expanded": 250.0, "hidden": 0.0}[str(bp.time_panel.state).lower()]
+    out = {}
+
+    def split(total, n, shares):
+        shares = np.ones(n) if shares is None else np.asarray(shares, float)
+        return total * shares / shares.sum()
+
+    def walk(node, w, h):
+        if isinstance(node, rrb.Horizontal):
+            for child, cw in zip(node.contents, split(w, len(node.contents), node.column_shares)):
+                walk(child, cw, h)
+        elif isinstance(node, rrb.Vertical):
+            for child, ch in zip(node.contents, split(h, len(node.contents), node.row_shares)):
+                walk(child, w, ch)
+        elif isinstance(node, rrb.Grid):
+            cols = node.grid_columns or int(np.ceil(np.sqrt(len(node.contents))))
+            rows = -(-len(node.contents) // cols)
+            for child in node.contents:
+                walk(child, w / cols, h / rows)
+        elif isinstance(node, rrb.Tabs):
+            for child in node.contents:
+                walk(child, w, h - TAB_BAR)
+        else:
+            out[node] = (w, h)
+    walk(bp.root_container, float(width), height - TOP_BAR - panel)
+    return out
+
+
 def test_every_plot_labels_its_y_axis(tradeoff):
-    """Before: 'battery power' and 'energy used' (and the torques) showed only '0' on their
-    y axes: seven views in a two-column grid (four rows) over an expanded time panel were
-    some 110 px high in a 900 px window, too little for ticks 20 px apart over 0..80 W or
-    0..950 J. Now each view, in the heights the blueprint gives it in a 900 px window (the
-    time panel collapsed to its 30 px bar, 32 px of menu, 55 px of title and time axis),
-    labels at least two values of every series it shows; power and energy are logged in
-    W and J, numbers between 0.1 and 10000."""
+    """Before: in a 1280 x 720 window 'energy used' (and speed) showed only one value on its
+    y axis: seven views in three rows were some 165 px of plot each, too little for ticks
+    20 px apart over 0..1 m/s or 0..950 J. Now each time-series view, in the size the
+    blueprint gives it in a 1280 x 720 and in a 1600 x 900 window (views in two rows: speed,
+    power and energy above, the torques and the currents in tabs below), labels at least two
+    values of every series it shows; power and energy are logged in W and J, numbers
+    between 0.1 and 10000."""
     import rerun.blueprint as rrb
     w, plans, path = tradeoff
     bp = recording.blueprint(w.emap)
-    panel = {"collapsed": 30.0, "expanded": 250.0, "hidden": 0.0}[str(bp.time_panel.state).lower()]
-    heights = {}
-
-    def walk(node, h):
-        if isinstance(node, rrb.TimeSeriesView):
-            heights[node.origin] = h - 55.0
-        elif isinstance(node, rrb.Vertical):
-            for child in node.contents:
-                walk(child, h / len(node.contents))
-        elif isinstance(node, rrb.Grid):
-            rows = -(-len(node.contents) // (node.grid_columns or 1))
-            for child in node.contents:
-                walk(child, h / rows)
-        elif isinstance(node, (rrb.Horizontal, rrb.Tabs)):
-            for child in node.contents:
-                walk(child, h)
-    walk(bp.root_container, 900.0 - 32.0 - panel)
-    assert {f"plots/{name}" for name, _, _ in recording.SERIES} == {str(o) for o in heights}
     from rerun.chunk import RrdReader
     values: dict = {}
     for ch in RrdReader(str(path)).stream().to_chunks():
@@ -222,8 +249,43 @@ def test_every_plot_labels_its_y_axis(tradeoff):
         if "Scalars:scalars" in rb.schema.names:
             v = np.asarray(rb.column(rb.schema.names.index("Scalars:scalars")).to_pylist(), float).ravel()
             values[str(ch.entity_path)] = np.r_[values.get(str(ch.entity_path), []), v]
-    for origin, h in heights.items():
-        v = np.concatenate([values[f"/{origin}/{c}"] for c in plans])
-        assert _labelled_y_ticks(v.min(), v.max(), h) >= 2, (origin, h)
-        if origin in ("plots/power", "plots/energy"):
-            assert 0.1 <= np.abs(v).max() <= 1e4
+    for size in WINDOWS:
+        views = {str(v.origin): h - TITLE_BAR - TIME_AXIS for v, (_, h) in _layout(bp, *size).items()
+                 if isinstance(v, rrb.TimeSeriesView)}
+        assert {f"plots/{name}" for name, _, _ in recording.SERIES} == set(views)
+        for origin, h in views.items():
+            v = np.concatenate([values[f"/{origin}/{c}"] for c in plans])
+            assert _labelled_y_ticks(v.min(), v.max(), h) >= 2, (size, origin, h)
+            if origin in ("plots/power", "plots/energy"):
+                assert 0.1 <= np.abs(v).max() <= 1e4
+
+
+def test_the_layout_reads_at_a_glance_at_1280(tradeoff):
+    """Before: at 1280 x 720 the top row's titles lost their units ('speed >'). Now speed,
+    power and energy are in sight together, outside any tab; every view is wide enough for
+    its title with its unit at 1280 px; and the 3-D view holds the whole map as the default
+    eye sees it (its corners projected, :func:`recording.project`, scaled to the view's
+    height) at 1280 x 720, and at 1600 x 900 all but the tip of its nearest corner (empty
+    ground, 12 px at most past the view's edge: the price of the titles at 1280 px)."""
+    import rerun.blueprint as rrb
+    w, plans, path = tradeoff
+    bp = recording.blueprint(w.emap)
+
+    def tabbed(node, inside=False):
+        if isinstance(node, (rrb.Horizontal, rrb.Vertical, rrb.Grid, rrb.Tabs)):
+            return set().union(*(tabbed(c, inside or isinstance(node, rrb.Tabs)) for c in node.contents))
+        return {str(node.origin)} if inside else set()
+    assert not {"plots/speed", "plots/power", "plots/energy"} & tabbed(bp.root_container)
+    e = w.emap
+    ny, nx = e.shape
+    (ox, oy), r = e.origin, e.resolution
+    corners = [[x, y, float(e.height(x, y))] for x in (ox, ox + (nx - 1) * r) for y in (oy, oy + (ny - 1) * r)]
+    half = np.abs(recording.project(e, corners)[:, 0]).max() / recording.VIEW_PX     # of the drawn height
+    for size, past in zip(WINDOWS, (0.0, 12.0)):
+        layout = _layout(bp, *size)
+        if size[0] == 1280:
+            for v, (vw, _) in layout.items():
+                if isinstance(v, rrb.TimeSeriesView):
+                    assert vw >= _title_px(str(v.name)), (str(v.name), vw)
+        (vw, vh), = [s for v, s in layout.items() if isinstance(v, rrb.Spatial3DView)]
+        assert half * (vh - TITLE_BAR) - 0.5 * vw <= past, (size, vw)
