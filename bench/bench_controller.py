@@ -34,14 +34,14 @@ SCENARIOS = ("flat", "hill_tradeoff", "mixed_terrain", "steep_hill", "runup_ramp
 BINS_MS = [0, 1, 2, 5, 10, 20, 50, 100, 1000]
 
 
-def one(world, cost: str, period: float, cap: float) -> dict:
+def one(world, cost: str, period: float, cap: float, beside: bool | None = None) -> dict:
     from dynamics import kernels as K
     from sbmpc import receding as R
     from sbmpc.planning import world as WO
     from sbmpc.problems import skidsteer as SS
     from sbmpc.robot import Controller
     t_build = time.perf_counter()
-    ctrl = Controller(world, cost, period_s=period)
+    ctrl = Controller(world, cost, period_s=period, beside=beside)
     build = time.perf_counter() - t_build
     real = R._Executor(world, cost)
     X = WO.start_state(world)
@@ -68,12 +68,15 @@ def one(world, cost: str, period: float, cap: float) -> dict:
     return {"status": "reached" if end == SS.IN_GOAL or ctrl.status == "reached" else
             ("stopped: " + (ctrl.reason or "")[:200] if ctrl.done else f"capped at {cap:g} s" if end == 0 else
              f"ended: {SS.CODES[-end - 1]}"),
-            "driven_s": round(float(X[K.S_T]), 2), "steps": len(lat), "build_s": round(build, 3),
+            "driven_s": round(float(X[K.S_T]), 2),
+            "to_goal_m": round(max(0.0, float(np.hypot(X[K.S_X] - world.scenario.goal["x"], X[K.S_Y] - world.scenario.goal["y"]))
+                                   - world.scenario.goal["radius"]), 2), "steps": len(lat), "build_s": round(build, 3),
             "median_ms": round(float(np.median(lat)), 3), "p95_ms": round(float(np.percentile(lat, 95)), 3),
             "max_ms": round(float(lat.max()), 3), "over_period": int((lat > 1e3 * period).sum()),
             "histogram": {"bins_ms": BINS_MS, "counts": hist.tolist()},
             "statuses": {s: statuses.count(s) for s in dict.fromkeys(statuses)},
-            "plans": len(ctrl.plans), "fallbacks": ctrl.horizon.fallbacks}
+            "plans": len(ctrl.plans), "fallbacks": ctrl.horizon.fallbacks, "energy_J": round(float(X[K.S_E]), 1),
+            "rejoined": ctrl.horizon.rejoined, "beside_made": len(ctrl.horizon.beside_s)}
 
 
 def main() -> int:
@@ -83,8 +86,13 @@ def main() -> int:
     ap.add_argument("--cap", type=float, default=90.0, help="seconds of driving per run at most")
     ap.add_argument("--period", type=float, default=0.1)
     ap.add_argument("--horizon", type=float, default=10.0)
+    ap.add_argument("--beside", choices=("off", "on"), default=None,
+                    help="run.beside for every run (default: each scenario's own)")
+    ap.add_argument("--results", default=None, help="results file name in bench/results (default controller.json; "
+                    "another name draws no figure)")
     ap.add_argument("--plot-only", action="store_true", help="draw the figure from the results file")
     args = ap.parse_args()
+    out = OUT if args.results is None else OUT.parent / args.results
     if args.plot_only:
         plot(json.loads(OUT.read_text()))
         return 0
@@ -98,17 +106,19 @@ def main() -> int:
     for name, scn in worlds:
         scn = replace(scn, planner=replace(scn.planner, horizon_s=args.horizon))
         w = WO.resolve(scn)
-        r = one(w, scn.cost, args.period, args.cap)
+        r = one(w, scn.cost, args.period, args.cap, None if args.beside is None else args.beside == "on")
         rows[name] = dict(r, cost=scn.cost)
         print(f"{name:14s} {scn.cost:6s} {r['status'][:40]:40s} steps {r['steps']:4d}  median {r['median_ms']:6.2f} ms  "
               f"p95 {r['p95_ms']:6.2f}  max {r['max_ms']:7.2f}  over {r['over_period']}  {r['statuses']}", flush=True)
     allat = {k: v for k, v in rows.items()}
     doc = {"what": "Controller.step latency at a 0.1 s control period, the controller driving the simulated truth "
                    "in real time, planning in its worker threads on the same core (bench/bench_controller.py)",
-           "period_s": args.period, "horizon_s": args.horizon, "cap_s": args.cap, "runs": allat}
-    stamp.write(OUT, doc)            # and doc gets its date, for the figure's title
-    print(f"wrote {OUT}")
-    plot(doc)
+           "period_s": args.period, "horizon_s": args.horizon, "cap_s": args.cap,
+           "beside": args.beside or "the scenarios' own", "runs": allat}
+    stamp.write(out, doc)            # and doc gets its date, for the figure's title
+    print(f"wrote {out}")
+    if out == OUT:
+        plot(doc)
     return 0
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
-PAGES = [ROOT / "README.md", ROOT / "docs" / "status.md", ROOT / "docs" / "validation.md",
+PAGES = [ROOT / "README.md", ROOT / "docs" / "status.md", ROOT / "docs" / "validation.md", ROOT / "docs" / "planner.md",
          ROOT / "docs" / "robustness.md", ROOT / "scenarios" / "README.md"]
 MARK = re.compile(r"(<!-- report:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /report:(?P=name) -->)", re.S)
 
@@ -117,20 +117,46 @@ def closed_loop_hills() -> str:
 
 
 def closed_loop_adapt() -> str:
-    """Adaptation on and off on the same truths (closed_loop_adapt_off/on.json)."""
-    off, on = _load("closed_loop_adapt_off.json"), _load("closed_loop_adapt_on.json")
-    lines = [f"*`python bench/bench_closed_loop.py --modes whole_route --adapt N` on "
-             f"{', '.join(on['scenarios'])}, both costs, {on['samples']} truths each ({on['date']}; the same truths "
-             f"in both: the draw does not depend on the run settings).*", "",
+    """Adaptation off, on with the file's margin, and on with the margin firmed by the
+    estimate, on the same truths (closed_loop_adapt_off/on/firm.json)."""
+    rows = [("0", _load("closed_loop_adapt_off.json")), ("5, the file's margin", _load("closed_loop_adapt_on.json")),
+            ("5, the margin firmed (`run.firm_margin`)", _load("closed_loop_adapt_firm.json"))]
+    on = rows[1][1]
+    lines = [f"*`python bench/bench_closed_loop.py --modes whole_route --adapt N [--firm-margin]` on "
+             f"{', '.join(on['scenarios'])}, both costs, {on['samples']} truths each ({_when(*(d for _, d in rows))}; "
+             "the same truths in all: the draw does not depend on the run settings; the file's margin measured "
+             "at the code before run.firm_margin, the same path as the key off).*", "",
              "| run.adapt_periods | runs | reached (crossable) | stopped / no path / failed | re-plans, median | "
              "executed / own plan, median (p90) | executed / prediction, median (p90) |", "|---|---|---|---|---|---|---|"]
-    for d in (off, on):
+    for name, d in rows:
         t = d["totals"]
         e = t["ends"]
-        lines.append(f"| {d.get('adapt_periods', 0)} | {t['runs']} | {e.get('reached', 0)} "
+        lines.append(f"| {name} | {t['runs']} | {e.get('reached', 0)} "
                      f"({t['p_reach_crossable']:.2f}) | {e.get('stopped', 0)} / {e.get('no_path', 0)} / "
                      f"{e.get('failed', 0)} | {t.get('replans_median', '-')} | {_ratio(t['over_own_plan'])} | "
                      f"{_ratio(t.get('over_prediction'))} |")
+    return "\n".join(lines)
+
+
+def hand_over_beside() -> str:
+    """The hand-over with and without the plans made beside, on a robot's clock
+    (controller_beside_{off,on}.json and _hf for hills_field's longer cap)."""
+    pairs = [(_load(f"controller_beside_off{x}.json"), _load(f"controller_beside_on{x}.json"), n)
+             for x, n in (("", "narrow_pass"), ("_hf", "hills_field"))]
+    docs = [d for a, b, _ in pairs for d in (a, b)]
+    lines = [f"*`taskset -c 0 python bench/bench_controller.py --scenarios S --field --beside off|on [--cap C]` "
+             f"(the controller at {docs[0]['period_s']:g} s driving the simulated truth in real time on one core; "
+             f"{_when(*docs)})*", "",
+             "| scenario, cost | `run.beside` | end | driven [s] | energy [J] | held at rest, waiting [s] | "
+             "whole-route plans from where it stood | plans made beside (hand-overs onto one) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for off, on, name in pairs:
+        for d, b in ((off, "off"), (on, "on")):
+            r = d["runs"][name]
+            end = r["status"] if r["status"] == "reached" else f"{r['status'].split(',')[0]}, {r['to_goal_m']} m to go"
+            wait = (r["statuses"].get("waiting", 0) + r["statuses"].get("planning", 0)) * d["period_s"]
+            lines.append(f"| {name}, {r['cost']} | {b} | {end} | {r['driven_s']:.1f} | {r['energy_J']:.0f} | "
+                         f"{wait:.1f} | {r['fallbacks']} | {r['beside_made']} ({r['rejoined']}) |")
     return "\n".join(lines)
 
 
@@ -518,7 +544,9 @@ def status_defaults() -> str:
                  "issue 60: p95 ≤ 50 ms, never past the period: "
                  + ("met" if all(r["p95_ms"] <= 50 and r["over_period"] == 0 for r in runs.values()) else "not met")
                  + "; never waiting on a whole-route plan: "
-                 + ("met" if sum(r["fallbacks"] for r in runs.values()) == 0 else "not met"),
+                 + ("met" if sum(r["fallbacks"] for r in runs.values()) == 0 else
+                    "not met by default; with `run.beside` far fewer waits, but runs not reliably better "
+                    "([planner.md](planner.md#measured-off-by-default))"),
                  "`taskset -c 0 python bench/bench_controller.py`"))
     return _table(rows)
 
@@ -853,7 +881,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
-          "closed-loop-hills": closed_loop_hills,
+          "closed-loop-hills": closed_loop_hills, "hand-over-beside": hand_over_beside,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,

@@ -7,6 +7,7 @@ window of the run).
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -185,14 +186,55 @@ def key(fitted: dict) -> tuple:
 
 
 @functools.lru_cache(maxsize=16)
-def as_measured(world: WO.World, factors: tuple) -> WO.World:
+def as_measured(world: WO.World, factors: tuple, margin: float | None = None) -> WO.World:
     """The planning world scaled by the online fit's factors (:data:`FIT`, :func:`scaled`),
-    named by those beyond 2 %. Cached per world and factors (rounded to 0.01: re-plans
-    share its grids and value)."""
+    named by those beyond 2 %, its ``planner.margin`` ``margin`` where given
+    (:func:`firmed_margin`). Cached per world, factors (rounded to 0.01: re-plans share its
+    grids and value) and margin."""
     f = dict(zip(FIT, factors))
     w = scaled(world, f)
-    said = ", ".join(f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02)
-    return replace(w, vehicle=w.vehicle.replace(name=f"{world.vehicle.name} as measured" + (f" ({said})" if said else "")))
+    said = [f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02]
+    ps = world.scenario.planner
+    if margin is not None and margin != ps.margin:
+        w = replace(w, scenario=replace(w.scenario, planner=replace(ps, margin=float(margin))))
+        said.append(f"margin {margin:.2f}")
+    return replace(w, vehicle=w.vehicle.replace(
+        name=f"{world.vehicle.name} as measured" + (f" ({', '.join(said)})" if said else "")))
+
+
+MARGIN_FLOOR = 0.05   # the least planner.margin an estimate leaves (below)
+MARGIN_SE = 2.0       # ... and the standard errors of the twin's factors it covers
+
+
+def firmed_margin(world: WO.World, f: dict) -> float:
+    """``planner.margin`` for plans made for the vehicle as fitted (:func:`fit`): the
+    margin's twin scales mass (with inertia) and grip, which the fit now knows to its
+    standard errors, so the margin covers ``MARGIN_SE`` of the larger of the two (rounded
+    up to 0.01), never more than the file's and never less than ``MARGIN_FLOOR``: the fit
+    says nothing of the map's error (5 cm of height error is about 1.4 deg of slope on
+    hills_field), nor of the ground ahead of where the vehicle drove. A factor the periods
+    do not excite keeps the prior's standard error (``FIT_PRIOR`` 0.15), and the file's
+    margin with it."""
+    m = world.scenario.planner.margin
+    se = max(f["se"]["mass"], f["se"]["grip"])
+    return min(m, max(MARGIN_FLOOR, math.ceil(100.0 * MARGIN_SE * se - 1e-9) / 100.0))
+
+
+def adapts(world: WO.World, f: dict | None, planned: tuple, firm: bool) -> WO.World | None:
+    """The vehicle as measured (:func:`as_measured`) that an adaptation plans for from
+    here on, or None where the fit ``f`` (:func:`fit`; None: none) is not
+    :func:`confident` or says the vehicle planned for: ``planned`` = (its factors
+    (:func:`key`), its margin), the factors each within 3 % and the margin the same. With
+    ``firm`` (``run.firm_margin``, and no stall in this run: after one the plans are made
+    for the margin's twin, the model having proved wrong) the margin firms with the
+    estimate (:func:`firmed_margin`); else the file's stays."""
+    if f is None or not confident(f):
+        return None
+    margin = firmed_margin(world, f) if firm else world.scenario.planner.margin
+    factors, was = planned
+    if max(abs(a - b) for a, b in zip(key(f), factors)) <= 0.03 and abs(margin - was) < 0.005:
+        return None
+    return as_measured(world, key(f), margin)
 
 
 def confident(f: dict, tol: float = 0.05) -> bool:

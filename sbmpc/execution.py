@@ -62,6 +62,7 @@ class HorizonStats:
     fallback_s: list = field(default_factory=list)
     settled: int = 0
     rejoined: int = 0        # hand-overs onto the whole-route plan made beside (planning.rejoin)
+    beside_s: list = field(default_factory=list)    # per plan made beside: robot time [s] it took to be ready
 
     def to_json(self) -> dict:
         s = np.array(self.seconds) if self.seconds else np.zeros(1)
@@ -72,7 +73,8 @@ class HorizonStats:
                 "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
                 "kept_previous": self.kept_previous, "from_measured": self.from_measured,
                 "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s],
-                "settled": self.settled, "rejoined": self.rejoined}
+                "settled": self.settled, "rejoined": self.rejoined, "beside_made": len(self.beside_s),
+                "beside_median_s": float(np.median(self.beside_s)) if self.beside_s else 0.0}
 
 
 
@@ -468,6 +470,16 @@ def stalled_again(stalls: list, X: np.ndarray) -> bool:
     return any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
 
 
+def marks_wall(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> bool:
+    """Whether a stall at X (the last of ``stalls`` [(x, y)]) makes the slope ahead a wall
+    in the plans' map (:func:`marked`): stalled again within MARK_NEAR of an earlier stall
+    (:func:`stalled_again`), and not in a turn (:func:`turning_stall` of each side's
+    ``currents`` (il, ir) [A] at the stall): the ground ahead did not hold a vehicle that
+    could not make a turn. The controller's rule and the whole-route runs'."""
+    return stalled_again(stalls, X) and not turning_stall(currents, vehicle)
+
+
 __all__ = ["FASTEST", "Executor", "HELD", "MOVING", "STANDING", "holder", "moving", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
-           "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again"]
+           "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again",
+           "marks_wall"]

@@ -52,7 +52,7 @@ from .scenario import RunSettings
 from . import truth as TT
 from .robot.messages import measured  # noqa: F401
 from . import estimate as ES
-from .estimate import FIT, Evidence, confident, fit as fit_vehicle
+from .estimate import FIT, Evidence, fit as fit_vehicle
 from . import execution as EX
 from .execution import (HELD, SETTLED, STUCK_HORIZONS, HorizonStats, Replan, deviation,  # noqa: F401
                         Executor as _Executor, guards as _guards, held as _held, keeps_margin as _keeps_margin,
@@ -628,8 +628,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if fitted is not None:
                     base_key = ES.key(fitted)
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-            if ps.margin > 0.0 and EX.stalled_again(stalls, X) and not EX.turning_stall((X[K.S_IL], X[K.S_IR]),
-                                                                                       world.vehicle):
+            if ps.margin > 0.0 and EX.marks_wall(stalls, X, (X[K.S_IL], X[K.S_IR]), world.vehicle):
                 # stalled again where it stalled before, with the plans of the vehicle as
                 # measured: the slope ahead is steeper than the map says (or the vehicle weaker
                 # there than measured); the re-plans keep off it
@@ -666,15 +665,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # confident and says another vehicle than the one planned for, re-plan as it
                 since_fit = 0
                 f = fit_vehicle(evidence, world, cost)
-                if f is not None and confident(f):
-                    key = ES.key(f)
-                    if max(abs(a - b) for a, b in zip(key, base_key)) > 0.03:     # another vehicle than planned for
-                        base, base_key = ES.as_measured(world, key), key
-                        planner = EX.twin_planner(base) if as_twin else base
-                        model = _Executor(planner, cost)
-                        out.planned_as = base.vehicle.name
-                        out.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
-                        why = (why + "; " if why else "") + f"adapted: {base.vehicle.name}"
+                now = ES.adapts(world, f, (base_key, base.scenario.planner.margin), rs.firm_margin and not as_twin)
+                if now is not None:         # another vehicle, or margin, than planned for
+                    base, base_key = now, ES.key(f)
+                    planner = EX.twin_planner(base) if as_twin else base
+                    model = _Executor(planner, cost)
+                    out.planned_as = base.vehicle.name
+                    out.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f, "margin": base.scenario.planner.margin})
+                    why = (why + "; " if why else "") + f"adapted: {base.vehicle.name}"
 
 
 def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, deadline: float) -> RunResult:

@@ -190,7 +190,10 @@ class RunSettings:
     the vehicle as measured (0: only at stalls); beside: a horizon run's controller makes
     a whole-route plan beside its horizon plans from the start and hands over to it
     without planning the whole route again (:mod:`sbmpc.planning.rejoin`; off by
-    default: docs/planner.md says what it measured).
+    default: docs/planner.md says what it measured); firm_margin: an adaptation also
+    firms the margin to two standard errors of the fitted mass and grip
+    (:func:`sbmpc.estimate.firmed_margin`; off by default: docs/robustness.md says what it
+    measured).
     """
 
     trigger: str = "tolerance"
@@ -206,6 +209,7 @@ class RunSettings:
     control_period_s: float = 0.1
     adapt_periods: int = 0
     beside: bool = False
+    firm_margin: bool = False
 
 
 _RUN_RANGES = {
@@ -500,11 +504,12 @@ def _run(spec, probs: _Problems) -> RunSettings:
             probs.add("run.trigger", "'tolerance' or 'every'", spec["trigger"])
         else:
             kw["trigger"] = spec["trigger"]
-    if "beside" in spec:
-        if not isinstance(spec["beside"], bool):
-            probs.add("run.beside", "true or false", spec["beside"])
-        else:
-            kw["beside"] = spec["beside"]
+    for key in ("beside", "firm_margin"):
+        if key in spec:
+            if not isinstance(spec[key], bool):
+                probs.add(f"run.{key}", "true or false", spec[key])
+            else:
+                kw[key] = spec[key]
     return RunSettings(**kw)
 
 
@@ -738,6 +743,7 @@ def json_schema() -> dict:
     run = _ranges(_RUN_RANGES)
     run["trigger"] = {"enum": list(TRIGGERS)}
     run["beside"] = {"type": "boolean"}
+    run["firm_margin"] = {"type": "boolean"}
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",

@@ -152,3 +152,84 @@ def test_the_controller_hands_over_to_the_plan_made_beside_without_waiting_for_a
     assert out.status == "reached", out.reason
     assert out.horizon.rejoined == 1 and out.horizon.fallbacks == 0
     assert any("made beside" in p.why for p in out.plans)
+
+
+def test_a_hand_over_takes_a_plan_made_beside_from_ahead_of_the_vehicle_not_the_one_from_the_start(flat, monkeypatch):
+    """The plans made beside are kept fresh: each from where the horizon plan predicts
+    the vehicle a little later than the last took to make. With the horizon plans
+    stubbed blind after t = 8 s, the hand-over takes one made from beyond t = 2 s
+    (the first, from the start at t = 0, is 8 s stale by then), with no whole-route plan
+    from where the vehicle stood, and the vehicle reaches the goal."""
+    real = HZ.HorizonPlanner.plan
+
+    def blind(self, start, previous=None, budget_s=None):
+        if self.tracks is None and start[K.S_T] > 8.0:
+            return HZ.HorizonPlan(start, [], np.inf, np.inf, False, "", 0, 0.0, reason="stubbed: no way on")
+        return real(self, start, previous, budget_s)
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
+    world = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, beside=True)))
+    out = R.run(world, "time")
+    assert out.status == "reached", out.reason
+    assert out.horizon.rejoined >= 1 and out.horizon.fallbacks == 0
+    assert len(out.horizon.beside_s) >= 2
+    made = [p for p in out.plans if "made beside" in p.why]
+    assert made and made[0].t > 2.0, [(p.t, p.why) for p in made]
+
+
+def test_in_a_lockstep_run_a_plan_made_beside_is_ready_when_a_robots_would_be(flat, monkeypatch):
+    """The run clock: a plan made beside that takes W s of wall time counts as ready in a
+    lockstep run (``sbmpc run``, whose simulated clock runs faster than the wall's) W s
+    of robot time after it was asked for, at the first period's end after that, never
+    earlier (a run whose first horizon plan took longer would see it at t = 0) and not
+    much later (the run waits for it as a robot would, instead of meeting it many
+    seconds of driving later)."""
+    import time as _time
+    from sbmpc.robot import controller as CT
+    W = 0.6
+
+    def slow(world, cost, X, cancel, ahead=()):
+        _time.sleep(W)
+        return None, None, X, _time.perf_counter()
+    monkeypatch.setattr(CT, "_beside", slow)
+    real = HZ.HorizonPlanner.plan
+
+    def slow_first(self, start, previous=None, budget_s=None):
+        if start[K.S_T] == 0.0:
+            _time.sleep(2 * W)      # the simulated clock stands still: the plan beside is done at t = 0
+        return real(self, start, previous, budget_s)
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", slow_first)
+    ctrl = CT.Controller(flat, "time", period_s=0.1, lockstep=True, beside=True)
+    from test_controller import _drive      # (tests/ is on the path: no package)
+    try:
+        _drive(flat, ctrl, t_max=5.0)
+    finally:
+        ctrl.close()
+    lag = ctrl.horizon.beside_s
+    assert len(lag) >= 2, lag
+    period = flat.scenario.planner.period_s
+    assert all(W - 1e-6 <= x <= W + period + 0.3 for x in lag), lag
+
+
+def test_a_tracker_is_offered_only_where_its_horizon_plans_can_reach_the_path(flat):
+    """At a hand-over with no plan made beside that the vehicle joins, the newest whose
+    path passes within half the look-ahead at top speed is tracked; one further away (made
+    where the vehicle no longer is) is not: the tracker would lead it back (a plan from
+    the start, 2-20 m behind, cost 32-59 % more on hills_field)."""
+    from sbmpc.robot import controller as CT
+    tr = _l_path()
+    plan = SimpleNamespace(trajectory=tr, cost="time", controls=[], found=True)
+    ctrl = CT.Controller(flat, "time", period_s=0.1, beside=True)
+    try:
+        ctrl._last_t = 0.0
+        ps = flat.scenario.planner
+        reach = 0.5 * ps.horizon_s * WO.wheel_speed_range(flat)[1] * flat.vehicle.wheel_radius
+        X = WO.start_state(flat)
+        X[K.S_X], X[K.S_Y], X[K.S_YAW] = 8.0, 2.0 + reach + 0.5, math.pi   # beyond reach, facing away
+        ctrl._offers = [(ctrl.plan_world, plan, "tracker", X.copy())]
+        assert ctrl._rejoin(X, "test") is None
+        X[K.S_Y] = 2.0 + reach - 0.5
+        got = ctrl._rejoin(X, "test")
+        assert got is not None and got[1] == "tracker"
+        assert ctrl._offers == []           # used once
+    finally:
+        ctrl.close()

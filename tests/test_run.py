@@ -373,12 +373,20 @@ def test_a_stall_in_a_pivot_is_a_turning_stall_and_one_going_straight_is_not(fla
     """execution.turning_stall on the model's own stalls, from rest on flat: a P3-AT given
     2 A of current cannot pivot (its turning resistance holds it; the sides' currents at
     +-2 A), one given 0.3 A cannot even roll straight (both sides at +0.3 A, as on a climb
-    too steep for the drive)."""
+    too steep for the drive). A second such stall where the first was marks a wall ahead
+    only where it was not in a turn (execution.marks_wall)."""
     w = replace(flat, vehicle=flat.vehicle.replace(current_limit=current_limit))
     _, end, S = EX.Executor(w, "time").step(WO.start_state(w), control, record=False)
     assert end == -SS.STALL
     assert abs(S[K.S_IL]) == pytest.approx(current_limit, rel=0.02)
     assert EX.turning_stall((S[K.S_IL], S[K.S_IR]), w.vehicle) is turning
+    # the rule both the controller and the whole-route runs mark walls by: a second stall
+    # where one was makes the slope ahead a wall, unless it was in a turn; a first never
+    here = (float(S[K.S_X]), float(S[K.S_Y]))
+    currents = (S[K.S_IL], S[K.S_IR])
+    assert EX.marks_wall([here, here], S, currents, w.vehicle) is not turning
+    assert not EX.marks_wall([here], S, currents, w.vehicle)
+    assert not EX.marks_wall([(here[0] + 2 * EX.MARK_NEAR, here[1]), here], S, currents, w.vehicle)
 
 
 def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_margins_twin(runup, monkeypatch):

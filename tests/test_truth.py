@@ -280,16 +280,19 @@ def test_a_lighter_vehicle_on_a_map_5_cm_off_stops_rather_than_roll_over_on_the_
 def test_a_run_that_adapts_plans_for_the_vehicle_it_measures(flat):
     """A P3-AT with 20 % less battery voltage (its top speed 20 % lower) on the floor:
     refitted every 3 periods (run.adapt_periods), the first fit pins v_max at 0.80 (the
-    others at 1) and the run re-plans once as that vehicle: it arrives 2.9 s sooner, with
-    1 re-plan instead of 9, and its prediction is nearer what it executes."""
+    others at 1, mass and grip to standard errors that leave, with run.firm_margin, the
+    margin's floor, 0.05 of the file's 0.10) and the run re-plans once as that vehicle: it arrives 2.9 s sooner,
+    with 1 re-plan instead of 9, and its prediction is nearer what it executes."""
     from dataclasses import replace
+    from sbmpc import estimate as E
     slow = flat.vehicle.replace(v_max=0.8 * flat.vehicle.v_max)
     plain = R.run(flat, "time", slow)
-    res = R.run(flat, "time", slow, replace(flat.scenario.run, adapt_periods=3))
+    res = R.run(flat, "time", slow, replace(flat.scenario.run, adapt_periods=3, firm_margin=True))
     assert plain.end == res.end == "reached"
     assert len(res.adapted) == 1 and res.adapted[0]["fit"]["v_max"] == pytest.approx(0.8, abs=0.01)
     assert all(abs(res.adapted[0]["fit"][k] - 1.0) < 0.02 for k in ("mass", "current_limit", "grip", "mu_roll"))
-    assert res.planned_as == "p3at as measured (v_max x0.80)" and not plain.adapted
+    assert res.adapted[0]["margin"] == E.MARGIN_FLOOR
+    assert res.planned_as == "p3at as measured (v_max x0.80, margin 0.05)" and not plain.adapted
     assert res.replans < plain.replans and res.travel_time_s < plain.travel_time_s - 2.0
 
 
@@ -299,3 +302,38 @@ def test_a_run_that_adapted_names_its_planning_vehicle_before_any_stall(flat):
     out = R.RunResult("flat", "time", "p3at", "p3at", flat.scenario.run)
     measured = E.as_measured(flat, (1.0, 0.8, 1.0, 1.0, 1.0))
     assert R._named(flat, measured, out, measured) == "p3at, then p3at as measured (v_max x0.80)"
+
+
+@settings(max_examples=60, deadline=None)
+@given(se_mass=st.floats(0.0, 0.3), se_grip=st.floats(0.0, 0.3), more=st.floats(0.0, 0.1))
+def test_the_margin_firms_with_the_estimate_and_never_below_its_floor_or_above_the_file(flat, se_mass, se_grip, more):
+    """The margin an adaptation plans with (estimate.firmed_margin): two standard errors
+    of the larger of the twin's factors (mass, grip), rounded up to 0.01, within the
+    floor and the file's margin; a less certain fit never gets a smaller margin; a
+    factor the periods never excited (the prior's 0.15) keeps the file's."""
+    from sbmpc import estimate as E
+    fit = {"se": {"mass": se_mass, "grip": se_grip}}
+    m = E.firmed_margin(flat, fit)
+    file_margin = flat.scenario.planner.margin
+    assert E.MARGIN_FLOOR <= m <= file_margin
+    assert m >= min(file_margin, 2.0 * max(se_mass, se_grip) - 1e-9)
+    looser = {"se": {"mass": se_mass + more, "grip": se_grip}}
+    assert E.firmed_margin(flat, looser) >= m
+    assert E.firmed_margin(flat, {"se": {"mass": E.FIT_PRIOR, "grip": 0.0}}) == file_margin
+
+
+def test_a_firm_fit_of_the_files_own_vehicle_plans_with_the_smaller_margin_but_not_as_the_twin(flat):
+    """A confident fit that says the vehicle planned for (every factor 1) still changes
+    the plans where it firms the margin (0.10 -> 0.05); asked again with that margin it
+    changes nothing; without run.firm_margin (the default; and where the plans are made
+    for the margin's twin, a stall in this run having shown the model wrong) the file's
+    margin stays and nothing changes."""
+    from sbmpc import estimate as E
+    fit = {k: 1.0 for k in E.FIT} | {"se": {k: 0.01 for k in E.FIT}}
+    ones = (1.0,) * len(E.FIT)
+    w = E.adapts(flat, fit, (ones, flat.scenario.planner.margin), True)
+    assert w is not None and w.scenario.planner.margin == E.MARGIN_FLOOR
+    assert w.vehicle.mass == flat.vehicle.mass and "margin 0.05" in w.vehicle.name
+    assert E.adapts(flat, fit, (ones, E.MARGIN_FLOOR), True) is None
+    assert E.adapts(flat, fit, (ones, flat.scenario.planner.margin), False) is None
+    assert E.adapts(flat, {**fit, "se": {k: 0.2 for k in E.FIT}} | {"mass": 1.1}, (ones, 0.1), True) is None

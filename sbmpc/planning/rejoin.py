@@ -137,9 +137,9 @@ def beside(world: World, cost: str, start: np.ndarray, cancel=None) -> tuple:
     """(plan, tracker or None): a whole-route plan of ``world`` for ``cost`` from the
     planner state ``start`` (:func:`sbmpc.planning.plan.plan`, its own budget) and, where
     it found one, the horizon planner that tracks it (:func:`tracker`). What the
-    controller's route worker makes beside the horizon from the start. ``cancel``: a
-    threading.Event that calls it off (:class:`Cancelled` raised at the search's next
-    budget check)."""
+    controller's third worker makes beside the horizon.
+    ``cancel``: a threading.Event that calls it off (:class:`Cancelled` raised at the
+    search's next budget check)."""
     progress = None if cancel is None else _calls_off(cancel)
     p = PL.plan(world, cost, progress=progress, start=start, time_progress=progress)
     if cancel is not None and cancel.is_set():

@@ -21,11 +21,17 @@ default, and gets the same wheel speeds until the period ends):
    cost has not fallen for ``STUCK_HORIZONS`` horizons, the controller **hands over** to a
    whole-route plan (:func:`sbmpc.planning.plan.plan`, in a second worker thread) from
    the vehicle at rest and follows it, re-planning the whole route where the vehicle
-   leaves it; with ``beside`` (``run.beside``), the hand-over waits for no new plan: the
-   whole-route plan made in a third worker from the start (:mod:`sbmpc.planning.rejoin`)
-   is followed from where the vehicle joins it within the run's tolerances, or horizon
-   plans whose terminal cost leads onto its path and along it (status 'tracking') take
-   the vehicle there; off it or at its end short of the goal, they take over again;
+   leaves it; with ``beside`` (``run.beside``), the hand-over waits for no new plan:
+   whole-route plans made in a third worker at the lowest CPU priority, kept fresh (each
+   from where the horizon plan predicts the vehicle a little later than the last took to
+   make), are offered (:mod:`sbmpc.planning.rejoin`), and the hand-over makes the newest
+   that passes within reach the horizon plans' guide: their terminal cost runs onto its
+   path and along it (status 'tracking'), every period planned and guarded as before.
+   Only where no offer is ready, or the tracker too finds no way on, does it plan the
+   whole route from where the vehicle stands (and its tracker takes over again off
+   that plan). (Following an offer's controls from where the vehicle joined it, within
+   the run's tolerances, stalled the nominal vehicle on ``hills_field`` in 3 of 3 energy
+   runs: its plans ride the drive's limit, and a join 0.25 m/s slow loses the run-up);
 5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
    then whole-route); where that too is held back, the controller stops for good and
    says why;
@@ -45,9 +51,10 @@ works, and every plan's wall-clock time is kept (``horizon.seconds``).
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -66,6 +73,7 @@ from .estimator import Estimator
 from .messages import STATUSES, Command, Measurement, to_twist
 
 PERIOD_RANGE = (0.05, 1.0)     # s: the control periods the controller takes
+BESIDE_OFFERS = 3              # the plans made beside kept for a hand-over (the newest)
 SAME_STALL_M = 0.25            # m: a stall reported this close to the last, within STALL_TIME of it, is that one again
 
 
@@ -145,9 +153,10 @@ class Controller:
         self._way: list = []          # the periods driven along the way it came (not those driven back)
         self._horizon_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-horizon")
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
-        self._beside_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-beside")
+        self._beside_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-beside", initializer=_low)
         self.beside = self.settings.beside if beside is None else bool(beside)
-        self._beside = None           # (world, future of rejoin.beside): the whole-route plan made beside
+        self._beside = None           # (world, future of _beside, cancel, robot time, wall time): being made
+        self._offers: list = []       # [(world, plan, tracker, start)]: plans made beside, ready, newest last
         # the record
         self.plans: list = []
         self.horizon = EX.HorizonStats(ps.horizon_s)
@@ -270,7 +279,7 @@ class Controller:
         :meth:`step` holds the wheels at rest ('stopped')."""
         self.closed = True
         if self._beside is not None:
-            self._beside[2].set()           # a plan made beside is called off
+            self._beside[2].set()           # the plan made beside is called off
         self._horizon_pool.shutdown(wait=True, cancel_futures=True)
         self._route_pool.shutdown(wait=True, cancel_futures=True)
         self._beside_pool.shutdown(wait=True, cancel_futures=True)
@@ -396,30 +405,80 @@ class Controller:
                 break
         return p
 
-    def _start_beside(self, X: np.ndarray) -> None:
-        """The whole-route plan made beside the horizon (:func:`sbmpc.planning.rejoin.beside`)
-        from X for the world planned, in the third worker; an earlier one is called off."""
+    def _start_beside(self, X: np.ndarray, ahead: tuple = ()) -> None:
+        """A whole-route plan made beside the horizon (:func:`_beside`) for the world
+        planned, in the third worker, from the state the model predicts at the end of the
+        periods ``ahead`` [(wl, wr, duration_s)] driven from X (none: from X); one still
+        being made is called off."""
         if not self.beside:
             return
         if self._beside is not None:
             self._beside[2].set()
         cancel = threading.Event()
-        fut = self._beside_pool.submit(_beside, self.plan_world, self.cost, X.copy(), cancel)
-        self._beside = (self.plan_world, fut, cancel, X.copy())
+        fut = self._beside_pool.submit(_beside, self.plan_world, self.cost, X.copy(), cancel, tuple(ahead))
+        self._beside = (self.plan_world, fut, cancel, float(self._last_t), time.perf_counter())
 
-    def _rejoin(self, X: np.ndarray, why: str):
-        """At a hand-over: (plan, tracker) of the whole-route plan made beside
-        (:mod:`sbmpc.planning.rejoin`), waited for where it is not ready yet (it was
-        started with the run: as a rule it is); None where there is none for the world
-        planned (none made, one for a model since replaced, or it found no plan). Used
-        once: a later hand-over plans the whole route from where the vehicle stands."""
-        if self._beside is None or self._beside[0] is not self.plan_world:
-            return None
-        _, fut, _, X0 = self._beside
+    def _poll_beside(self, t: float) -> None:
+        """The plan being made beside taken up where it is ready at robot time ``t`` [s]:
+        kept among the offers (the newest ``BESIDE_OFFERS``) where it found one. A robot's
+        clock is the wall clock; a lockstep run's (``sbmpc run``) runs faster, so there
+        the plan counts as ready only once as much robot time as wall time has passed from
+        its asking to its end, and the run waits for it no longer than a robot would have
+        (the run clock: the vehicle meets the plans made beside when a robot would)."""
+        if self._beside is None:
+            return
+        world, fut, _, t0, wall0 = self._beside
+        if self.lockstep and not fut.done():
+            left = (t - t0) - (time.perf_counter() - wall0)
+            if left > 0.0:
+                wait([fut], timeout=left)
+        if not fut.done():
+            return
+        p, tr, X0, ended = fut.result()
+        if self.lockstep and t - t0 < ended - wall0:
+            return
         self._beside = None
-        p, tr = yield _Await(fut, "waiting")
-        if tr is None:
+        self.horizon.beside_s.append(round(t - t0, 3))
+        if tr is not None and world is self.plan_world:
+            self._offers = (self._offers + [(world, p, tr, X0)])[-BESIDE_OFFERS:]
+
+    def _refresh_beside(self, X: np.ndarray, h) -> None:
+        """Keeps the plans made beside fresh while horizon plans drive: once the last is
+        taken up, the next is made from where the horizon plan ``h`` (from X) predicts the
+        vehicle a little longer ahead than the last one took to make (at most the plan's
+        last period): so the vehicle is on it, or near, when it is ready."""
+        self._poll_beside(self._last_t)
+        if not self.beside or self._beside is not None or not h.found or h.goal:
+            return
+        steps = periods(h.controls, self.world.scenario.planner.period_s)
+        lag = self.horizon.beside_s[-1] if self.horizon.beside_s else 0.0
+        k = min(len(steps) - 1, int(math.ceil(lag / self.world.scenario.planner.period_s)) + 1)
+        if k >= 1:
+            self._start_beside(X, steps[:k])
+
+    def _rejoin(self, X: np.ndarray, why: str, tracked=None):
+        """At a hand-over: (plan, tracker) of a whole-route plan made beside
+        (:mod:`sbmpc.planning.rejoin`) that is ready now, never waited for: the newest
+        offer that X joins (:meth:`_join`), else the newest offer other than ``tracked``
+        (the plan the horizon plans track now) whose path passes within reach of the
+        tracker's horizon plans, which lead onto it; None where there is none for the world
+        planned."""
+        self._poll_beside(self._last_t)
+        offers = [o for o in self._offers if o[0] is self.plan_world]
+        if not offers:
             return None
+        got = next((o for o in reversed(offers) if self._join(o[1], X) is not None), None)
+        if got is None:
+            # a tracker leads onto a path its horizon plans can reach (half the look-ahead
+            # at the top speed): one made where the vehicle no longer is would lead it back
+            ps = self.world.scenario.planner
+            reach = 0.5 * ps.horizon_s * WO.wheel_speed_range(self.world)[1] * self.world.vehicle.wheel_radius
+            got = next((o for o in reversed(offers) if o[1] is not tracked
+                        and _distance_to_path(o[1], X) <= reach), None)
+            if got is None:
+                return None
+        _, p, tr, X0 = got
+        self._offers = [o for o in self._offers if o is not got]
         self.horizon.rejoined += 1
         self._record(p, X0, f"{why}: the whole-route plan made beside from t = {X0[K.S_T]:.1f} s", False, X0)
         return p, tr
@@ -470,7 +529,7 @@ class Controller:
         inf["fit"] = fitted
         self.inferred.append(inf)
         marks = self._marks
-        if EX.stalled_again(self.stall_at, X) and not EX.turning_stall(self._stall_currents, self.world.vehicle):
+        if EX.marks_wall(self.stall_at, X, self._stall_currents, self.world.vehicle):
             marks = marks + (EX.ahead(self.world, X, control),)
         base, twin = self._base, self._as_twin
         if fitted is not None:
@@ -496,8 +555,9 @@ class Controller:
                 self._since_fit = 0
                 snap = ES.Evidence()
                 snap.periods.extend(self.evidence.periods)
-                self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, self._base_key,
-                                                        self._as_twin, self._marks)
+                planned = (self._base_key, self._base.scenario.planner.margin)
+                self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, planned,
+                                                        self._as_twin, self._marks, self.settings.firm_margin)
             return False
         if not (self.lockstep or self._fitting.done()):
             return False
@@ -508,7 +568,7 @@ class Controller:
         self.planner, self.plan_world, self.model, self._base = planner, w, EX.Executor(w, self.cost), base
         self._base_key = ES.key(f)
         self.planned_as = base.vehicle.name
-        self.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f})
+        self.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f, "margin": base.scenario.planner.margin})
         return True
 
     def _planning_as(self, adapted: bool) -> str:
@@ -628,16 +688,14 @@ class Controller:
             if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
                 why = ("the horizon plan found no way on" if not h.found else
                        f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
-                got = None if tracking is not None else (yield from self._rejoin(X, why))
+                got = self._rejoin(X, why, tracking)
                 if got is not None:
-                    # the hand-over without waiting: the plan made beside, from where the
-                    # vehicle is on it, else horizon plans that lead onto it
+                    # the hand-over without waiting: horizon plans that lead onto the plan
+                    # made beside and along it
                     self.planner, tracking = got[1], got[0]
                     togo.clear()
-                    guide, kept = self._join(tracking, X), EX.keeps_margin(tracking)
-                    if guide is None:
-                        h = self._made((yield from self._await_horizon(X)), f"{why}: onto the whole-route plan "
-                                       "made beside", X)
+                    h = self._made((yield from self._await_horizon(X)), f"{why}: onto the whole-route plan "
+                                   "made beside", X)
                     continue
                 p, guide, kept = yield from route(X, f"{why}: whole-route plan")
                 if not p.found:
@@ -685,6 +743,8 @@ class Controller:
             if guide is not None:
                 guide.pop(0)
             control = self._on_ticks(control)
+            if guide is None:
+                self._refresh_beside(X, h)
             _, _, P = self.model.step(X, control, record=False)
             nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
                    if guide is None else None)           # made while the period is driven
@@ -709,9 +769,10 @@ class Controller:
                 tracking = None         # (the tracker was of the model replaced)
                 self._start_beside(X)
             if guide is not None and tracking is not None and (off or not guide):
-                # off the plan made beside, or at its end short of the goal: the tracker's
-                # horizon plans take over again (nothing waited for)
-                why = "off the whole-route plan made beside" if off else "its end short of the goal"
+                # off a whole-route plan made from where the vehicle stood (the tracker had
+                # no way on there), or at its end short of the goal: the tracker's horizon
+                # plans take over again (nothing waited for)
+                why = "off the whole-route plan" if off else "the whole-route plan ended short of the goal"
                 guide = None
                 h = self._made((yield from self._await_horizon(X)), why, X)
                 continue
@@ -730,11 +791,6 @@ class Controller:
                             return "stopped", (f"no way on from ({Xb[K.S_X]:.2f}, {Xb[K.S_Y]:.2f}) at "
                                                f"t = {Xb[K.S_T]:.1f} s, after backing off: {p.reason}")
                 continue
-            if tracking is not None and not stalled:
-                guide = self._join(tracking, X)       # on the plan made beside: it is followed
-                if guide is not None:
-                    kept = EX.keeps_margin(tracking)
-                    continue
             togo.append(self.planner.to_go(X))
             if off:
                 st.from_measured += 1
@@ -762,28 +818,59 @@ def _fit(evidence, world: WO.World, cost: str) -> dict | None:
         return None
 
 
-def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, marks: tuple) -> tuple:
+def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, marks: tuple,
+           firm: bool = False) -> tuple:
     """(fit, vehicle as measured, planning world, horizon planner) of the controller's
     adaptation (:meth:`Controller._adapt`); the last three None where the fit failed, is
-    not confident or says the vehicle planned for (its factors ``planned``, each within
-    3 %)."""
+    not confident or says the vehicle planned for (``planned``: its factors and margin;
+    ``firm``: ``run.firm_margin``, :func:`sbmpc.estimate.adapts`)."""
     f = _fit(evidence, world, cost)
-    if f is None or not ES.confident(f):
+    now = ES.adapts(world, f, planned, firm and not twin)
+    if now is None:
         return f, None, None, None
-    if max(abs(a - b) for a, b in zip(ES.key(f), planned)) <= 0.03:
-        return f, None, None, None
-    now = ES.as_measured(world, ES.key(f))
     w = _planning_world(now, twin, marks)
     return f, now, w, HorizonPlanner.of(w, cost)
 
 
-def _beside(world: WO.World, cost: str, X: np.ndarray, cancel) -> tuple:
-    """:func:`sbmpc.planning.rejoin.beside`, (None, None) where it failed or was called
-    off: a plan made beside is an offer, never the reason a run stops."""
+def _beside(world: WO.World, cost: str, X: np.ndarray, cancel, ahead: tuple = ()) -> tuple:
+    """(plan, tracker, start, wall clock at its end [s, perf_counter]):
+    :func:`sbmpc.planning.rejoin.beside` from the state the planning model predicts at the
+    end of the periods ``ahead`` driven from X (the horizon plan's next periods); plan and
+    tracker None where it failed, was called off or the prediction stalled: a plan made
+    beside is an offer, never the reason a run stops. Run in the controller's third
+    worker at the lowest CPU priority (:func:`_low`): the horizon plans the robot drives
+    come first."""
+    p = tr = None
     try:
-        return RJ.beside(world, cost, X, cancel)
+        if not cancel.is_set():
+            ex = EX.Executor(world, cost)
+            stalled = False
+            for c in ahead:
+                _, end, X = ex.step(X, c, record=False)
+                if end < 0:
+                    stalled = True
+                    break
+            if not stalled:
+                p, tr = RJ.beside(world, cost, X, cancel)
     except Exception:       # noqa: BLE001 - called off, or no plan from there: the hand-over plans as before
-        return None, None
+        p, tr = None, None
+    return p, tr, X, time.perf_counter()
+
+
+def _distance_to_path(p, X: np.ndarray) -> float:
+    """How far [m] the planner state X is from the path of plan ``p`` (its controller-rate
+    replay's samples)."""
+    tr = p.trajectory
+    return float(np.min(np.hypot(np.asarray(tr["x"]) - X[K.S_X], np.asarray(tr["y"]) - X[K.S_Y])))
+
+
+def _low() -> None:
+    """The calling worker thread at the lowest CPU priority (nice 19), where the system
+    allows it (Linux: a thread's own niceness)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+    except (AttributeError, OSError):      # not Linux, or not allowed: the default priority
+        pass
 
 
 __all__ = ["Controller", "PERIOD_RANGE", "STATUSES"]
