@@ -135,20 +135,26 @@ def test_a_vehicle_on_the_plan_joins_it_where_it_is_and_one_off_it_does_not(flat
     assert RJ.join(route, X, *args) is None
 
 
-def test_the_controller_hands_over_to_the_plan_made_beside_without_waiting_for_a_new_one(flat, monkeypatch):
-    """Horizon plans stubbed to find no way on after t = 3 s: the controller hands over
-    to the whole-route plan it made beside from the start (joined where the vehicle is,
-    or led onto by a tracker's horizon plans), plans no whole-route plan from where the
-    vehicle stands, and reaches the goal (``run.beside``)."""
+def _blind_after(flat, monkeypatch, t_blind: float):
+    """``sbmpc run`` of flat with ``run.beside``, the plain horizon plans stubbed to find
+    no way on from t_blind [s] on (a tracker's plans are left alone)."""
     real = HZ.HorizonPlanner.plan
 
     def blind(self, start, previous=None, budget_s=None):
-        if self.tracks is None and start[K.S_T] > 3.0:
+        if self.tracks is None and start[K.S_T] > t_blind:
             return HZ.HorizonPlan(start, [], np.inf, np.inf, False, "", 0, 0.0, reason="stubbed: no way on")
         return real(self, start, previous, budget_s)
     monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
     world = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, beside=True)))
-    out = R.run(world, "time")
+    return R.run(world, "time")
+
+
+def test_the_controller_hands_over_to_the_plan_made_beside_without_waiting_for_a_new_one(flat, monkeypatch):
+    """Horizon plans stubbed to find no way on after t = 3 s: the controller hands over
+    to a whole-route plan it made beside (horizon plans led onto its path and along it),
+    plans no whole-route plan from where the vehicle stands, and reaches the goal
+    (``run.beside``)."""
+    out = _blind_after(flat, monkeypatch, 3.0)
     assert out.status == "reached", out.reason
     assert out.horizon.rejoined == 1 and out.horizon.fallbacks == 0
     assert any("made beside" in p.why for p in out.plans)
@@ -160,15 +166,7 @@ def test_a_hand_over_takes_a_plan_made_beside_from_ahead_of_the_vehicle_not_the_
     stubbed blind after t = 8 s, the hand-over takes one made from beyond t = 2 s
     (the first, from the start at t = 0, is 8 s stale by then), with no whole-route plan
     from where the vehicle stood, and the vehicle reaches the goal."""
-    real = HZ.HorizonPlanner.plan
-
-    def blind(self, start, previous=None, budget_s=None):
-        if self.tracks is None and start[K.S_T] > 8.0:
-            return HZ.HorizonPlan(start, [], np.inf, np.inf, False, "", 0, 0.0, reason="stubbed: no way on")
-        return real(self, start, previous, budget_s)
-    monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
-    world = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, beside=True)))
-    out = R.run(world, "time")
+    out = _blind_after(flat, monkeypatch, 8.0)
     assert out.status == "reached", out.reason
     assert out.horizon.rejoined >= 1 and out.horizon.fallbacks == 0
     assert len(out.horizon.beside_s) >= 2
