@@ -185,17 +185,24 @@ def key(fitted: dict) -> tuple:
     return tuple(round(fitted[k], 2) for k in FIT)
 
 
-@functools.lru_cache(maxsize=16)
 def as_measured(world: WO.World, factors: tuple, margin: float | None = None) -> WO.World:
     """The planning world scaled by the online fit's factors (:data:`FIT`, :func:`scaled`),
-    named by those beyond 2 %, its ``planner.margin`` ``margin`` where given
-    (:func:`firmed_margin`). Cached per world, factors (rounded to 0.01: re-plans share its
-    grids and value) and margin."""
+    named by those beyond 2 %, its ``planner.margin`` ``margin`` where given and not the
+    file's (:func:`firmed_margin`). Cached per world, factors (rounded to 0.01: re-plans
+    share its grids and value) and margin (the file's margin given is none given: one
+    world)."""
+    if margin is not None and margin == world.scenario.planner.margin:
+        margin = None
+    return _as_measured(world, tuple(factors), margin)
+
+
+@functools.lru_cache(maxsize=16)
+def _as_measured(world: WO.World, factors: tuple, margin: float | None) -> WO.World:
     f = dict(zip(FIT, factors))
     w = scaled(world, f)
     said = [f"{k} x{x:.2f}" for k, x in f.items() if abs(x - 1.0) > 0.02]
     ps = world.scenario.planner
-    if margin is not None and margin != ps.margin:
+    if margin is not None:
         w = replace(w, scenario=replace(w.scenario, planner=replace(ps, margin=float(margin))))
         said.append(f"margin {margin:.2f}")
     return replace(w, vehicle=w.vehicle.replace(
@@ -235,6 +242,16 @@ def adapts(world: WO.World, f: dict | None, planned: tuple, firm: bool) -> WO.Wo
     if max(abs(a - b) for a, b in zip(key(f), factors)) <= 0.03 and abs(margin - was) < 0.005:
         return None
     return as_measured(world, key(f), margin)
+
+
+def at_stall(world: WO.World, base: WO.World, factors: tuple) -> WO.World:
+    """The vehicle whose margin's twin a stall's plans are made for: ``base`` (``world``
+    itself, or as measured with ``factors``, :func:`key`) with the file's margin. A stall
+    shows the model wrong where the plans drove it: a margin an adaptation firmed
+    (:func:`adapts`) goes back to the file's, and the twin scales by 1 + that."""
+    if base is world or base.scenario.planner.margin == world.scenario.planner.margin:
+        return base
+    return as_measured(world, factors)
 
 
 def confident(f: dict, tol: float = 0.05) -> bool:

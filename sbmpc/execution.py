@@ -62,7 +62,7 @@ class HorizonStats:
     fallback_s: list = field(default_factory=list)
     settled: int = 0
     rejoined: int = 0        # hand-overs onto the whole-route plan made beside (planning.rejoin)
-    beside_s: list = field(default_factory=list)    # per plan made beside: robot time [s] it took to be ready
+    beside_s: list = field(default_factory=list)    # per plan made beside taken up: robot time [s] from asking to taking it up
 
     def to_json(self) -> dict:
         s = np.array(self.seconds) if self.seconds else np.zeros(1)

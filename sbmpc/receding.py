@@ -182,20 +182,21 @@ def _aim(world: WO.World) -> WO.World:
 
 
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None,
-                  base: WO.World | None = None) -> tuple:
+                  base: WO.World | None = None, key: tuple | None = None) -> tuple:
     """(planning world, its executor, the world it is the twin of) once the run has seen
     the vehicle weaker than the planning one (a stall where its plans drove it, or a
     fresh plan whose first period the twin's guard holds back): the margin's pessimistic
     twin (:func:`sbmpc.planning.world.pessimistic`, :func:`sbmpc.execution.twin_planner`) of the vehicle
     as the periods before a stall measured it (``fitted``: :func:`sbmpc.estimate.fit`;
-    without, ``base``: the vehicle as last measured, or the planning vehicle) plans from
-    the measured state X on, and the run records when (``RunResult.weaker_from``) and as
+    without, ``base``: the vehicle as last measured (its factors ``key``), or the planning
+    vehicle; with the file's margin, :func:`sbmpc.estimate.at_stall`) plans from the
+    measured state X on, and the run records when (``RunResult.weaker_from``) and as
     what (``planned_as``)."""
     if out.weaker_from is None:
         out.weaker_from = float(X[K.S_T])
     if fitted is not None:
         base = ES.as_measured(world, ES.key(fitted))
-    base = base or world
+    base = ES.at_stall(world, base or world, key or (1.0,) * len(FIT))
     tw = EX.twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
@@ -584,7 +585,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 if guarded and since == 0 and not as_twin and ps.margin > 0.0 and who != 3:
                     # the fresh plan's first period is held back too: its model is wrong here
                     # (the guard's twin predicts what the plan does not); plan with the twin
-                    planner, model, base = _weaker_model(world, cost, out, X, None, base)
+                    planner, model, base = _weaker_model(world, cost, out, X, None, base, base_key)
                     as_twin = True
                 elif guarded and since == 0:
                     if retrace():
@@ -623,7 +624,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # vehicle measured lighter or stronger gets a twin no heavier than it needs);
                 # without periods to fit (a stall in a fresh plan's first periods), of the
                 # planning vehicle, unless the run has already measured it
-                planner, model, base = _weaker_model(world, cost, out, X, fitted, base)
+                planner, model, base = _weaker_model(world, cost, out, X, fitted, base, base_key)
                 as_twin = True
                 if fitted is not None:
                     base_key = ES.key(fitted)
@@ -665,7 +666,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # confident and says another vehicle than the one planned for, re-plan as it
                 since_fit = 0
                 f = fit_vehicle(evidence, world, cost)
-                now = ES.adapts(world, f, (base_key, base.scenario.planner.margin), rs.firm_margin and not as_twin)
+                now = ES.adapts(world, f, (base_key, base.scenario.planner.margin), rs.firm_margin and not stalls and not as_twin)
                 if now is not None:         # another vehicle, or margin, than planned for
                     base, base_key = now, ES.key(f)
                     planner = EX.twin_planner(base) if as_twin else base

@@ -337,3 +337,23 @@ def test_a_firm_fit_of_the_files_own_vehicle_plans_with_the_smaller_margin_but_n
     assert E.adapts(flat, fit, (ones, E.MARGIN_FLOOR), True) is None
     assert E.adapts(flat, fit, (ones, flat.scenario.planner.margin), False) is None
     assert E.adapts(flat, {**fit, "se": {k: 0.2 for k in E.FIT}} | {"mass": 1.1}, (ones, 0.1), True) is None
+
+
+def test_a_stall_puts_back_the_files_margin_that_an_adaptation_firmed(flat):
+    """After a stall the plans are made for the margin's twin with the file's margin
+    (estimate.at_stall): a world an adaptation firmed to 0.05 goes back to 0.10 with the
+    same factors, its twin 10 % heavier; the file's own world and one already at the
+    file's margin are returned as they are; asked with the file's margin, as_measured
+    gives the one cached world (its grids shared)."""
+    from sbmpc import estimate as E
+    from sbmpc import execution as EX
+    fit = {k: 1.0 for k in E.FIT} | {"mass": 1.1} | {"se": {k: 0.01 for k in E.FIT}}
+    ones = (1.0,) * len(E.FIT)
+    firmed = E.adapts(flat, fit, (ones, flat.scenario.planner.margin), True)
+    assert firmed.scenario.planner.margin == E.MARGIN_FLOOR
+    back = E.at_stall(flat, firmed, E.key(fit))
+    assert back.scenario.planner.margin == flat.scenario.planner.margin
+    assert back is E.as_measured(flat, E.key(fit)) is E.as_measured(flat, E.key(fit), flat.scenario.planner.margin)
+    assert back.vehicle.mass == pytest.approx(1.1 * flat.vehicle.mass)
+    assert EX.twin_planner(back).vehicle.mass == pytest.approx(1.1 * 1.1 * flat.vehicle.mass)
+    assert E.at_stall(flat, flat, ones) is flat and E.at_stall(flat, back, E.key(fit)) is back

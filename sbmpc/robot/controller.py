@@ -23,7 +23,7 @@ default, and gets the same wheel speeds until the period ends):
    the vehicle at rest and follows it, re-planning the whole route where the vehicle
    leaves it; with ``beside`` (``run.beside``), the hand-over waits for no new plan:
    whole-route plans made in a third worker at the lowest CPU priority, kept fresh (each
-   from where the horizon plan predicts the vehicle a little later than the last took to
+   from where the horizon plan predicts the vehicle a period later than the last took to
    make), are offered (:mod:`sbmpc.planning.rejoin`), and the hand-over makes the newest
    that passes within reach the horizon plans' guide: their terminal cost runs onto its
    path and along it (status 'tracking'), every period planned and guarded as before.
@@ -157,6 +157,7 @@ class Controller:
         self.beside = self.settings.beside if beside is None else bool(beside)
         self._beside = None           # (world, future of _beside, cancel, robot time, wall time): being made
         self._offers: list = []       # [(world, plan, tracker, start)]: plans made beside, ready, newest last
+        self._beside_took = 0.0       # wall time [s] the last plan made beside took
         # the record
         self.plans: list = []
         self.horizon = EX.HorizonStats(ps.horizon_s)
@@ -438,6 +439,7 @@ class Controller:
         if self.lockstep and t - t0 < ended - wall0:
             return
         self._beside = None
+        self._beside_took = ended - wall0
         self.horizon.beside_s.append(round(t - t0, 3))
         if tr is not None and world is self.plan_world:
             self._offers = (self._offers + [(world, p, tr, X0)])[-BESIDE_OFFERS:]
@@ -445,13 +447,13 @@ class Controller:
     def _refresh_beside(self, X: np.ndarray, h) -> None:
         """Keeps the plans made beside fresh while horizon plans drive: once the last is
         taken up, the next is made from where the horizon plan ``h`` (from X) predicts the
-        vehicle a little longer ahead than the last one took to make (at most the plan's
-        last period): so the vehicle is on it, or near, when it is ready."""
+        vehicle a period later than the last one took to make on the wall clock (a robot's
+        clock; short of the plan's end): so the vehicle is near it when it is ready."""
         self._poll_beside(self._last_t)
         if not self.beside or self._beside is not None or not h.found or h.goal:
             return
         steps = periods(h.controls, self.world.scenario.planner.period_s)
-        lag = self.horizon.beside_s[-1] if self.horizon.beside_s else 0.0
+        lag = self._beside_took
         k = min(len(steps) - 1, int(math.ceil(lag / self.world.scenario.planner.period_s)) + 1)
         if k >= 1:
             self._start_beside(X, steps[:k])
@@ -531,7 +533,10 @@ class Controller:
         marks = self._marks
         if EX.marks_wall(self.stall_at, X, self._stall_currents, self.world.vehicle):
             marks = marks + (EX.ahead(self.world, X, control),)
-        base, twin = self._base, self._as_twin
+        # (the file's margin again where an adaptation firmed it; an adaptation's fit still
+        # being made is of the model the stall just proved wrong: dropped)
+        base, twin = ES.at_stall(self.world, self._base, self._base_key), self._as_twin
+        self._fitting = None
         if fitted is not None:
             base, twin = ES.as_measured(self.world, ES.key(fitted)), True
             self._base_key = ES.key(fitted)
@@ -557,7 +562,8 @@ class Controller:
                 snap.periods.extend(self.evidence.periods)
                 planned = (self._base_key, self._base.scenario.planner.margin)
                 self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, planned,
-                                                        self._as_twin, self._marks, self.settings.firm_margin)
+                                                        self._as_twin, self._marks,
+                                                        self.settings.firm_margin and not self.stalls)
             return False
         if not (self.lockstep or self._fitting.done()):
             return False
@@ -743,11 +749,11 @@ class Controller:
             if guide is not None:
                 guide.pop(0)
             control = self._on_ticks(control)
-            if guide is None:
-                self._refresh_beside(X, h)
             _, _, P = self.model.step(X, control, record=False)
             nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
                    if guide is None else None)           # made while the period is driven
+            if guide is None:
+                self._refresh_beside(X, h)
             X, stalled = yield from self._drive(control, status)
             dxy, dyaw, dv = EX.deviation(X, P)
             off = dxy > rs.tol_xy or dyaw > tol_yaw or dv > rs.tol_v
