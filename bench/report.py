@@ -63,7 +63,7 @@ def closed_loop_table() -> str:
     """Per scenario, cost and mode: runs, ends, p_reach, the cost ratios (closed_loop.json)."""
     d = _load("closed_loop.json")
     lines = [f"*`python bench/bench_closed_loop.py --samples {d['samples']} --workers {d['workers']}` "
-             f"({d['date']}; {d.get('label') or 'no label'}): {d['samples']} truths per row, vehicle "
+             f"({_when(d)}; {d.get('label') or 'no label'}): {d['samples']} truths per row, vehicle "
              f"{', '.join(sorted(d['vary']))} at {100 * max(d['vary'].values()):.0f} % relative sd, map heights off by "
              f"{100 * d['faults']['map']['noise_sd_m']:.0f} cm at {d['faults']['map']['corr_m']:g} m correlation, "
              f"{1000 * d['faults']['delay_s']:.0f} ms delay"
@@ -88,7 +88,7 @@ def closed_loop_totals(name: str = "closed_loop.json") -> str:
     t = d["totals"]
     e = t["ends"]
     bad = {k: e.get(k, 0) for k in ("tipped", "off_map", "timeout", "error")}
-    return (f"{t['runs']} runs ({d['date']}; {d.get('label') or 'no label'}): {e.get('reached', 0)} reached, {e.get('stopped', 0)} stopped rather "
+    return (f"{t['runs']} runs ({_when(d)}; {d.get('label') or 'no label'}): {e.get('reached', 0)} reached, {e.get('stopped', 0)} stopped rather "
             f"than tip over, {e.get('no_path', 0)} found no way on and said why, {e.get('failed', 0)} failed "
             f"(stalls, the time or re-plan limit); tipped over {bad['tipped']}, off the map {bad['off_map']}, "
             f"timeouts {bad['timeout']}, tracebacks {bad['error']}. p_reach {t['p_reach_crossable']:.2f} over the "
