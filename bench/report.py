@@ -138,6 +138,22 @@ def closed_loop_adapt() -> str:
     return "\n".join(lines)
 
 
+def diagnose_speed() -> str:
+    """validation.md: how long a 10-minute run's diagnosis takes (diagnose.json)."""
+    d = _load("diagnose.json")
+    runs = {r["effect"]: r for r in d["runs"]}
+    times = [r["diagnosis_time_s"] for r in d["runs"]]
+    delay, tyre = runs["command_delay"], runs["wheel_radius"]
+    side = min(tyre["hidden"], key=tyre["hidden"].get)
+    return (f"`python bench/bench_diagnose.py` (results in `bench/results/diagnose.json`; {_when(d)}) diagnoses "
+            f"{d['minutes']:g}-minute runs at 100 Hz in {_range(times, '.0f')} s on one core (the bar: well under a "
+            f"minute; one run each). The delay and the tyre were named "
+            + ("correctly" if delay["cause"] == "command_delay" and tyre["cause"] == "wheel_radius" else "WRONG")
+            + f" ({delay['hidden']['delay_s']:.3f} -> {delay['fitted']['delay_s']:.3f} s; "
+            f"{tyre['hidden'][side]:.4f} -> {tyre['fitted'][side]:.4f}, the tyre fitted to the pose) and a clean run "
+            f"was named `{runs['none']['cause']}`.")
+
+
 def hand_over_beside() -> str:
     """The hand-over with and without the plans made beside, on a robot's clock
     (controller_beside_{off,on}.json and _hf for hills_field's longer cap)."""
@@ -882,6 +898,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "closed-loop-hills": closed_loop_hills, "hand-over-beside": hand_over_beside,
+          "diagnose-speed": diagnose_speed,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
