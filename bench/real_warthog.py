@@ -74,7 +74,7 @@ def main(argv=None) -> int:
                                       "extended": rms(ext, held)},
                "candidates": [{"effect": c.effect, "params": c.params, "gain": c.gain, "bic_delta": c.bic_delta}
                               for c in d.candidates],
-               "cause": d.cause, "gain": d.gain, "where": d.where, "xcorr": d.xcorr,
+               "cause": d.cause, "gain": d.gain, "share": d.share, "hint": d.hint, "where": d.where, "xcorr": d.xcorr,
                "time_s": time.perf_counter() - t0}
         out[name] = res
         print(name, json.dumps({k: res[k] for k in ("calibrated", "calibration_optima", "kinematics", "heldout_rmse_rad_s",

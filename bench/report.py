@@ -138,6 +138,40 @@ def closed_loop_adapt() -> str:
     return "\n".join(lines)
 
 
+def warthog() -> str:
+    """validation.md: the Warthog's held-out errors, calibration and named cause per
+    terrain (warthog.json, bench/real_warthog.py)."""
+    d = _load("warthog.json")
+    lines = [f"*`python bench/real_warthog.py` ({_when(d)}; held-out wheel-speed RMSE, left / right, rad/s, on "
+             "the last 30 %)*", "",
+             "| terrain | nominal | calibrated | + the named cause | named cause (gain; share of the excess) | "
+             "calibrated k, I_max, ref. accel. | alpha: assumed → fitted |", "|---|---|---|---|---|---|---|"]
+    for t in ("asphalt", "gravel", "sand"):
+        r = d[t]
+        e = r["heldout_rmse_rad_s"]
+        pair = lambda k, e=e: f"{e[k]['wl']:.2f} / {e[k]['wr']:.2f}"
+        best = r["candidates"][0]
+        scale = "".join(f" ×{v:.2f}" for v in best["params"].values())
+        share = "" if r.get("share") is None else f"; {100 * r['share']:.0f} %"
+        cause = (f"`{r['cause']}`{scale} ({r['gain']:.2f}{share})" if r["cause"] == best["effect"] else
+                 f"{r['cause']} (best `{best['effect']}`{scale}, gain {best['gain']:.2f}{share})")
+        cal = r["calibrated"]
+        lines.append(f"| {t} | {pair('nominal')} | {pair('calibrated')} | "
+                     + (pair("extended") if r["cause"] == best["effect"] else "-") + f" | {cause} | "
+                     f"{cal['torque_constant'][0]:.2f} N m/A, {cal['current_limit'][0]:.0f} A, "
+                     f"{cal['ref_accel'][0]:.1f} m/s² | {r['assumed_alpha']:g} → {r['kinematics']['alpha']:.2f} |")
+    pose = []
+    for t in ("asphalt", "gravel", "sand"):
+        p = d[t]["heldout_pose_error"]
+        steps = [p[k]["rot_rmse_rad"] for k in ("nominal", "calibrated", "calibrated_alpha")]
+        if d[t]["cause"] == d[t]["candidates"][0]["effect"] and p.get("extended"):
+            steps.append(p["extended"]["rot_rmse_rad"])
+        pose.append(f"{t} " + " → ".join(f"{x:.2f}" for x in steps))
+    lines += ["", "Held-out relative pose error over 2 s windows (heading, rad), nominal → calibrated → with the "
+              "fitted alpha → with the named cause: " + "; ".join(pose) + "."]
+    return "\n".join(lines)
+
+
 def diagnose_speed() -> str:
     """validation.md: how long a 10-minute run's diagnosis takes (diagnose.json)."""
     d = _load("diagnose.json")
@@ -898,7 +932,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "closed-loop-hills": closed_loop_hills, "hand-over-beside": hand_over_beside,
-          "diagnose-speed": diagnose_speed,
+          "diagnose-speed": diagnose_speed, "warthog": warthog,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
