@@ -180,12 +180,15 @@ def test_in_a_lockstep_run_a_plan_made_beside_is_ready_when_a_robots_would_be(fl
     of robot time after it was asked for, at the first period's end after that, never
     earlier (a run whose first horizon plan took longer would see it at t = 0) and not
     much later (the run waits for it as a robot would, instead of meeting it many
-    seconds of driving later)."""
+    seconds of driving later). Each next one is asked for from where the horizon plan
+    predicts the vehicle a period beyond that wall time ahead."""
     import time as _time
     from sbmpc.robot import controller as CT
     W = 0.6
+    asks = []       # periods ahead of the vehicle each plan made beside starts
 
     def slow(world, cost, X, cancel, ahead=()):
+        asks.append(len(ahead))
         _time.sleep(W)
         return None, None, X, _time.perf_counter()
     monkeypatch.setattr(CT, "_beside", slow)
@@ -206,6 +209,9 @@ def test_in_a_lockstep_run_a_plan_made_beside_is_ready_when_a_robots_would_be(fl
     assert len(lag) >= 2, lag
     period = flat.scenario.planner.period_s
     assert all(W - 1e-6 <= x <= W + period + 0.3 for x in lag), lag
+    # the first from where the vehicle stands, each later one a period beyond the last
+    # one's wall time ahead along the horizon plan (0.6 s: two periods of 1 s)
+    assert asks[0] == 0 and asks[1:] and all(a == 2 for a in asks[1:]), asks
 
 
 def test_a_tracker_is_offered_only_where_its_horizon_plans_can_reach_the_path(flat):
