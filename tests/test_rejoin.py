@@ -229,7 +229,7 @@ def test_a_tracker_is_offered_only_where_its_horizon_plans_can_reach_the_path(fl
         reach = 0.5 * ps.horizon_s * WO.wheel_speed_range(flat)[1] * flat.vehicle.wheel_radius
         X = WO.start_state(flat)
         X[K.S_X], X[K.S_Y], X[K.S_YAW] = 8.0, 2.0 + reach + 0.5, math.pi   # beyond reach, facing away
-        ctrl._offers = [(ctrl.plan_world, plan, "tracker", X.copy())]
+        ctrl._offers = [(plan, "tracker", X.copy())]
         assert ctrl._rejoin(X, "test") is None
         X[K.S_Y] = 2.0 + reach - 0.5
         got = ctrl._rejoin(X, "test")

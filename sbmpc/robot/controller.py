@@ -155,8 +155,8 @@ class Controller:
         self._route_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-route")
         self._beside_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sbmpc-beside", initializer=_low)
         self.beside = self.settings.beside if beside is None else bool(beside)
-        self._beside = None           # (world, future of _beside, cancel, robot time, wall time): being made
-        self._offers: list = []       # [(world, plan, tracker, start)]: plans made beside, ready, newest last
+        self._beside = None           # (future of _beside, cancel, robot time, wall time): being made
+        self._offers: list = []       # [(plan, tracker, start)]: plans made beside for plan_world, newest last
         self._beside_took = 0.0       # wall time [s] the last plan made beside took
         # the record
         self.plans: list = []
@@ -280,7 +280,7 @@ class Controller:
         :meth:`step` holds the wheels at rest ('stopped')."""
         self.closed = True
         if self._beside is not None:
-            self._beside[2].set()           # the plan made beside is called off
+            self._beside[1].set()           # the plan made beside is called off
         self._horizon_pool.shutdown(wait=True, cancel_futures=True)
         self._route_pool.shutdown(wait=True, cancel_futures=True)
         self._beside_pool.shutdown(wait=True, cancel_futures=True)
@@ -414,10 +414,10 @@ class Controller:
         if not self.beside:
             return
         if self._beside is not None:
-            self._beside[2].set()
+            self._beside[1].set()
         cancel = threading.Event()
         fut = self._beside_pool.submit(_beside, self.plan_world, self.cost, X.copy(), cancel, tuple(ahead))
-        self._beside = (self.plan_world, fut, cancel, float(self._last_t), time.perf_counter())
+        self._beside = (fut, cancel, float(self._last_t), time.perf_counter())
 
     def _poll_beside(self, t: float) -> None:
         """The plan being made beside taken up where it is ready at robot time ``t`` [s]:
@@ -428,7 +428,7 @@ class Controller:
         (the run clock: the vehicle meets the plans made beside when a robot would)."""
         if self._beside is None:
             return
-        world, fut, _, t0, wall0 = self._beside
+        fut, _, t0, wall0 = self._beside
         if self.lockstep and not fut.done():
             left = (t - t0) - (time.perf_counter() - wall0)
             if left > 0.0:
@@ -441,8 +441,8 @@ class Controller:
         self._beside = None
         self._beside_took = ended - wall0
         self.horizon.beside_s.append(round(t - t0, 3))
-        if tr is not None and world is self.plan_world:
-            self._offers = (self._offers + [(world, p, tr, X0)])[-BESIDE_OFFERS:]
+        if tr is not None:
+            self._offers = (self._offers + [(p, tr, X0)])[-BESIDE_OFFERS:]
 
     def _refresh_beside(self, X: np.ndarray, h) -> None:
         """Keeps the plans made beside fresh while horizon plans drive: once the last is
@@ -463,24 +463,21 @@ class Controller:
         (:mod:`sbmpc.planning.rejoin`) that is ready now, never waited for: the newest
         offer that X joins (:meth:`_join`), else the newest offer other than ``tracked``
         (the plan the horizon plans track now) whose path passes within reach of the
-        tracker's horizon plans, which lead onto it; None where there is none for the world
-        planned."""
+        tracker's horizon plans, which lead onto it; None where there is none."""
         self._poll_beside(self._last_t)
-        offers = [o for o in self._offers if o[0] is self.plan_world]
-        if not offers:
-            return None
-        got = next((o for o in reversed(offers) if self._join(o[1], X) is not None), None)
+        offers = self._offers
+        got = next((o for o in reversed(offers) if self._join(o[0], X) is not None), None)
         if got is None:
             # a tracker leads onto a path its horizon plans can reach (half the look-ahead
             # at the top speed): one made where the vehicle no longer is would lead it back
             ps = self.world.scenario.planner
             reach = 0.5 * ps.horizon_s * WO.wheel_speed_range(self.world)[1] * self.world.vehicle.wheel_radius
-            got = next((o for o in reversed(offers) if o[1] is not tracked
-                        and _distance_to_path(o[1], X) <= reach), None)
+            got = next((o for o in reversed(offers) if o[0] is not tracked
+                        and _distance_to_path(o[0], X) <= reach), None)
             if got is None:
                 return None
-        _, p, tr, X0 = got
-        self._offers = [o for o in self._offers if o is not got]
+        p, tr, X0 = got
+        offers.remove(got)
         self.horizon.rejoined += 1
         self._record(p, X0, f"{why}: the whole-route plan made beside from t = {X0[K.S_T]:.1f} s", False, X0)
         return p, tr
@@ -561,9 +558,9 @@ class Controller:
                 snap = ES.Evidence()
                 snap.periods.extend(self.evidence.periods)
                 planned = (self._base_key, self._base.scenario.planner.margin)
+                firm = self.settings.firm_margin and not self.stalls and not self._as_twin
                 self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, planned,
-                                                        self._as_twin, self._marks,
-                                                        self.settings.firm_margin and not self.stalls)
+                                                        self._as_twin, self._marks, firm)
             return False
         if not (self.lockstep or self._fitting.done()):
             return False
@@ -773,6 +770,7 @@ class Controller:
             if rebuilt:
                 togo.clear()            # the terminal cost of another model
                 tracking = None         # (the tracker was of the model replaced)
+                self._offers.clear()    # (and so were the plans made beside)
                 self._start_beside(X)
             if guide is not None and tracking is not None and (off or not guide):
                 # off a whole-route plan made from where the vehicle stood (the tracker had
@@ -829,9 +827,9 @@ def _refit(evidence, world: WO.World, cost: str, planned: tuple, twin: bool, mar
     """(fit, vehicle as measured, planning world, horizon planner) of the controller's
     adaptation (:meth:`Controller._adapt`); the last three None where the fit failed, is
     not confident or says the vehicle planned for (``planned``: its factors and margin;
-    ``firm``: ``run.firm_margin``, :func:`sbmpc.estimate.adapts`)."""
+    ``firm``: the margin firms, :func:`sbmpc.estimate.adapts`)."""
     f = _fit(evidence, world, cost)
-    now = ES.adapts(world, f, planned, firm and not twin)
+    now = ES.adapts(world, f, planned, firm)
     if now is None:
         return f, None, None, None
     w = _planning_world(now, twin, marks)
@@ -848,16 +846,13 @@ def _beside(world: WO.World, cost: str, X: np.ndarray, cancel, ahead: tuple = ()
     come first."""
     p = tr = None
     try:
-        if not cancel.is_set():
-            ex = EX.Executor(world, cost)
-            stalled = False
-            for c in ahead:
-                _, end, X = ex.step(X, c, record=False)
-                if end < 0:
-                    stalled = True
-                    break
-            if not stalled:
-                p, tr = RJ.beside(world, cost, X, cancel)
+        ex = EX.Executor(world, cost)
+        for c in ahead:
+            _, end, X = ex.step(X, c, record=False)
+            if end < 0:
+                break
+        else:
+            p, tr = RJ.beside(world, cost, X, cancel)
     except Exception:       # noqa: BLE001 - called off, or no plan from there: the hand-over plans as before
         p, tr = None, None
     return p, tr, X, time.perf_counter()
