@@ -160,6 +160,7 @@ class RunResult:
 
 
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
+MISSES = 3         # re-plans in a row that find no way on while the vehicle drives on: then it brakes to rest
 
 
 @functools.lru_cache(maxsize=8)
@@ -392,6 +393,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     driven: list = []                  # the periods driven, in order
     retraced = 0                       # retraces made (EX.RETRACE_PERIODS)
     backing: list = []                 # periods of a retrace still to drive
+    misses = 0                         # re-plans in a row that found no way on while the vehicle drove on
 
     def finish(status, reason, end=None):
         out.dropped = drop.count
@@ -541,12 +543,27 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     # time limit as for a first plan of it, from here
                     t_limit = max(t_limit, X[K.S_T] - out.plans[0].t + rs.max_time_factor * p.travel_time_s + 30.0)
                 limit_for = (base, as_twin)
-                current, k, P, since, why = p, 0, X.copy(), 0, None
+                current, k, P, since, why, misses = p, 0, X.copy(), 0, None, 0
                 steps = periods(p.controls, ps.period_s)
-            elif not stranded and not held:
+            elif not stranded and not held and misses + 1 < MISSES:
                 # like any MPC: when a re-plan fails, keep driving the previous plan and try
                 # again after the next period (not a period the guard held back)
+                misses += 1
                 why = None
+            elif not stranded and not held:
+                # MISSES re-plans in a row found no way on from the moving vehicle while it
+                # drove on a plan it is off: it brakes to rest and plans from there, as a
+                # vehicle with no plan left (with the search without the margin after the
+                # margin's, and a stop that says why where neither finds a way). Driving
+                # on, a hills_field run drifted 7 m and 40 deg off its plan through 25
+                # failed re-plans of 10 s each and ran out of its wall-clock limit (2026-12-07)
+                result = brake()
+                if result is not None:
+                    return result
+                current, misses = None, 0
+                why = (f"{MISSES} re-plans in a row found no way on from the moving vehicle: braked to rest at "
+                       f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
+                continue
             elif held:
                 if retrace():
                     continue

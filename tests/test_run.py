@@ -693,3 +693,24 @@ def test_the_guard_keeps_a_clearance_where_a_period_closes_in_on_the_map_edge():
         guards[0].world.margin
     assert EX.holder(guards, at(x_lo + 0.05, y_lo + max(runs) + 0.5 * EX.EDGE_CLEARANCE, -0.5 * math.pi), control,
                      True) > 0
+
+
+def test_after_three_re_plans_in_a_row_find_nothing_the_vehicle_brakes_and_plans_from_rest(flat, monkeypatch):
+    """A re-plan that finds nothing keeps the previous plan for one more period, but not
+    without end: a P3-AT with 20 % less battery voltage drifts off its plan, every re-plan
+    finds nothing, and after R.MISSES in a row the vehicle brakes to rest and plans from
+    there (the search without the margin too); where that finds nothing either, the run
+    stops at rest and says why, within seconds, not at the re-plan limit or the wall
+    clock's (a hills_field run drove 25 periods 7 m off its plan, 10 s a re-plan)."""
+    seen = _searches(monkeypatch, fail_after=0)
+    slow = flat.vehicle.replace(v_max=0.8 * flat.vehicle.v_max)
+    res = R.run(flat, "time", slow)
+    moving = [p for p in res.plans[1:] if not p.why.startswith(f"{R.MISSES} re-plans")]
+    assert len(moving) == R.MISSES and all(p.why.startswith("position off") for p in moving)
+    last = res.plans[-1]
+    assert last.why.startswith(f"{R.MISSES} re-plans in a row found no way on from the moving vehicle: braked to rest")
+    assert len(res.plans) == 1 + R.MISSES + 1 and res.end == "no_path"
+    assert "no way (the test's)" in res.reason
+    # the search without the margin only from rest, not from the moving vehicle
+    assert any(tip == 0.0 for _, tip, _ in seen[-3:]) and all(tip > 0.0 for _, tip, _ in seen[:-3])
+    assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING   # at rest
