@@ -40,9 +40,11 @@ VARY = {"mass": 0.1, "inertia": 0.1, "mu_sa": 0.1, "mu_op": 0.1, "mu_roll": 0.1,
 FAULTS = {"delay_s": 0.05, "map": {"noise_sd_m": 0.05, "corr_m": 2.0}}
 
 
-def spec_text(samples: int, modes: list, families: list, scenarios: list, adapt: int = 0, firm: bool = False) -> str:
+def spec_text(samples: int, modes: list, families: list, scenarios: list, adapt: int = 0, firm: bool = False,
+              planner: dict | None = None) -> str:
     run = {**({"adapt_periods": adapt} if adapt else {}), **({"firm_margin": True} if firm else {})}
     return json.dumps({
+        **({"planner": {k: [v] for k, v in planner.items()}} if planner else {}),
         "scenarios": [str(ROOT / "scenarios" / f"{s}.yaml") for s in scenarios],
         "families": [{"scenario": str(ROOT / "scenarios" / "hills_field.yaml"), "seeds": families}] if families else [],
         "costs": ["time", "energy"],
@@ -109,14 +111,20 @@ def main() -> int:
     ap.add_argument("--label", default="", help="a note kept in the results (which code, which machine load)")
     ap.add_argument("--adapt", type=int, default=0, help="run.adapt_periods of every run (0: the scenarios')")
     ap.add_argument("--firm-margin", dest="firm", action="store_true", help="run.firm_margin of every run")
+    ap.add_argument("--planner", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="planner settings of every plan (numbers), e.g. margin_grade_deg=1.4 (the truths are the same)")
     ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
     ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
+    try:
+        planner = {k: float(v) for k, v in (p.split("=", 1) for p in a.planner)}
+    except ValueError:
+        ap.error(f"--planner: expected KEY=NUMBER pairs, found {' '.join(a.planner)}")
     started = stamp.commit()    # the code this run loaded (a resumed sweep: the code it resumed with)
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
     spec = a.out / "spec.yaml"
-    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios, a.adapt, a.firm))
+    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios, a.adapt, a.firm, planner))
     tasks = SW.tasks(SW.load_spec(spec))
     t0 = time.perf_counter()
 
@@ -137,6 +145,7 @@ def main() -> int:
            "machine": platform.machine(),
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
            "scenarios": a.scenarios, "adapt_periods": a.adapt, "firm_margin": a.firm,
+           "planner": planner,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),
            "ran": res["ran"], "skipped": res["skipped"], **summarise(rows),
            "not_reached": [{"scenario": r["scenario"], "family_seed": r["family_seed"], "cost": r["cost"],

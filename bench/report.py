@@ -138,6 +138,37 @@ def closed_loop_adapt() -> str:
     return "\n".join(lines)
 
 
+GRADE = (("0 (the default)", "closed_loop_grade0.json"), ("1.4", "closed_loop_grade.json"))
+
+
+def closed_loop_grade() -> str:
+    """robustness.md: the twin's grade allowance off and at the map error's slope (1.4 deg
+    for 5 cm at 2 m), on the same truths, per scenario, cost and mode (GRADE's files)."""
+    (na, a), (nb, b) = [(n, _load(f)) for n, f in GRADE]
+    lines = [f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
+             f"{' '.join(b['scenarios'])} --families --workers {b['workers']} --planner margin_grade_deg=G` "
+             f"({_when(a, b)}; the same truths in both: the draw does not depend on the planner settings). "
+             f"Each cell: margin_grade_deg {na.split()[0]} → {nb}; failed counts the runs out of their "
+             "wall-clock limit.*", "",
+             "| scenario, cost, mode | reached of 10 | stopped / no way on / failed | stalls | "
+             "executed / own plan, median (p90) |", "|---|---|---|---|---|"]
+
+    def ends(g):
+        e = g["ends"]
+        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)}"
+    for key, gb in b["groups"].items():
+        ga = a["groups"][key]
+        lines.append(f"| {key.replace('/', ', ')} | {ga['ends'].get('reached', 0)} → {gb['ends'].get('reached', 0)} | "
+                     f"{ends(ga)} → {ends(gb)} | {ga['stalls']} → {gb['stalls']} | "
+                     f"{_ratio(ga['over_own_plan'])} → {_ratio(gb['over_own_plan'])} |")
+    ta, tb = a["totals"], b["totals"]
+    lines.append(f"| **all {tb['runs']}** | {ta['ends']['reached']} → {tb['ends']['reached']} | "
+                 f"{ends(ta)} → {ends(tb)} | "
+                 f"{sum(g['stalls'] for g in a['groups'].values())} → {sum(g['stalls'] for g in b['groups'].values())} | "
+                 f"{_ratio(ta['over_own_plan'])} → {_ratio(tb['over_own_plan'])} |")
+    return "\n".join(lines)
+
+
 def warthog() -> str:
     """validation.md: the Warthog's held-out errors, calibration and named cause per
     terrain (warthog.json, bench/real_warthog.py)."""
@@ -931,7 +962,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
-          "closed-loop-hills": closed_loop_hills, "hand-over-beside": hand_over_beside,
+          "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade, "hand-over-beside": hand_over_beside,
           "diagnose-speed": diagnose_speed, "warthog": warthog,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,

@@ -93,7 +93,9 @@ class PlannerSettings:
     share of its reach (eq. 27's window at the wheel's speed) unused, except for
     ``MARGIN_TIME`` at a time (0: none); margin_tip_deg: edges keep pitch and roll this
     far below tip_over_deg; margin_heading_deg: the twin meets the steeper of the grades
-    along headings this far either side; horizon_s: ``sbmpc run`` (and ``plan``/``compare``
+    along headings this far either side; margin_grade_deg: the twin meets every grade
+    this much steeper uphill (the map's slopes that far off: about atan(sd / correlation
+    length) of its heights' error, 1.4 deg for 5 cm at 2 m); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
     with ``--horizon``) plans receding-horizon, each plan a search this many seconds
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
     the period before (:mod:`sbmpc.planning.horizon`; 0: whole-route plans); horizon_budget_s,
@@ -147,6 +149,7 @@ class PlannerSettings:
     margin_turn: float = 0.0
     margin_tip_deg: float = 5.0
     margin_heading_deg: float = 0.0
+    margin_grade_deg: float = 0.0
     horizon_s: float = 0.0
     horizon_budget_s: float = 0.09
     horizon_first_budget_s: float = 0.5
@@ -257,6 +260,7 @@ _SETTING_RANGES = {
     "margin_turn": (float, 0.0, 0.5),
     "margin_tip_deg": (float, 0.0, 30.0),
     "margin_heading_deg": (float, 0.0, 45.0),
+    "margin_grade_deg": (float, 0.0, 10.0),
     "value_cell": (float, 0.05, 10.0),
     "value_w2": (float, 1.0, 100.0),
     "value_energy_w2": (float, 1.0, 100.0),

@@ -56,7 +56,7 @@ def _margin() -> dict:
     """The plan JSON's ``margin`` (sbmpc.planning.margin.report, plan.search_plan)."""
     where = {"t": NUM, "x": NUM, "y": NUM}
     return _obj({"margin": NUM, "margin_turn": NUM, "tip_margin_deg": NUM, "heading_deg": NUM,
-                 "drive_headroom": _obj({"least": NUM, **where}, ("least", "t", "x", "y")),
+                 "grade_deg": NUM, "drive_headroom": _obj({"least": NUM, **where}, ("least", "t", "x", "y")),
                  "turn_headroom": {"oneOf": [_obj({"least": NUM, **where}, ("least", "t", "x", "y")), {"type": "null"}]},
                  "tip": _obj({"least_deg": NUM, **where}, ("least_deg", "t", "x", "y")),
                  "kept": {"type": "boolean"}, "note": STR_OR_NULL,

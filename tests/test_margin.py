@@ -130,6 +130,50 @@ def test_a_gentler_climb_keeps_the_margin(ramp):
     assert S[SS.X_TW + K.S_WL] < S[K.S_WL]             # the twin, heavier, lags on the climb
 
 
+def test_a_grade_allowance_fails_a_climb_only_the_steeper_slope_would_stall():
+    """margin_grade_deg (the map's slopes that far off): on 9 deg of grass the 10 %
+    heavier twin climbs (it holds about 10.5 deg), so the edge keeps the margin; with
+    2.5 deg more it meets 11.5 deg, which it cannot hold (the ramp test above: the
+    heavier vehicle's own 1 kHz drive stalls there), and the edge fails on the margin;
+    with 1 deg (10 deg) it still climbs."""
+    costs = {}
+    for a in (0.0, 1.0, 2.5):
+        w = _plane(9.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, margin_grade_deg=a)
+        _, end, X1, _ = CK.replay(w, "time", [(4.0, 4.0, 2.0)], every=1 << 30, start=WO.start_state(w))
+        assert end == 0
+        costs[a] = _edge(w, X1, (4.0, 4.0, 4.0))[0]
+    assert costs[0.0] > 0.0 and costs[1.0] == costs[0.0]
+    assert costs[2.5] == -SS.MARGIN
+
+
+def test_the_twin_with_an_allowance_meets_a_descent_of_that_grade_as_level_ground():
+    """The allowance is added to the grade the twin meets (the tangent of the sum), and
+    nothing else: on a 2 deg descent with 2 deg of allowance the twin's drive (wheel
+    speeds, currents, energy) is the twin's on level ground from the same state, while
+    the vehicle itself drives downhill on less energy."""
+    lvl = _plane(0.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0)
+    down = _plane(-2.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, margin_grade_deg=2.0)
+    X = WO.start_state(lvl)
+    _, S0 = _edge(lvl, X, (4.0, 4.0, 3.0))
+    _, S1 = _edge(down, X, (4.0, 4.0, 3.0))
+    tw = [SS.X_TW + k for k in (K.S_WL, K.S_WR, K.S_E, K.S_STALLT)]
+    assert np.allclose(S1[tw], S0[tw], rtol=1e-9, atol=1e-9)
+    assert S1[K.S_E] < 0.8 * S0[K.S_E]
+
+
+def test_the_value_tables_give_the_twin_the_same_allowance():
+    """The value's motion tables judge the twin's manoeuvres on grades shifted by the
+    allowance: with 2.5 deg (two of the tables' 1.25 deg steps) the twin holds at grade
+    g what it holds at g + 2.5 deg without; the planning vehicle's own rows unchanged."""
+    from sbmpc.planning import motions as MO
+    t0 = MO.tables(_plane(0.0, margin=0.1))
+    t1 = MO.tables(_plane(0.0, margin=0.1, margin_grade_deg=2.5))
+    assert MO.GRADE_STEP * 2 == 2.5
+    assert np.array_equal(t1["ok_twin"][:, :-2], t0["ok_twin"][:, 2:])
+    assert np.array_equal(t1["ok"], t0["ok"]) and np.array_equal(t1["p"], t0["p"])
+    assert t1["ok_twin"].sum() < t0["ok_twin"].sum()
+
+
 # ---- the tip-over margin -----------------------------------------------------------------------
 def test_a_side_slope_inside_the_tip_margin_fails_on_the_margin_and_passes_without():
     """Driving along the contour of a 27 deg side slope: 3 deg from the 30 deg tip-over

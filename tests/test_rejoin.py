@@ -237,3 +237,31 @@ def test_a_tracker_is_offered_only_where_its_horizon_plans_can_reach_the_path(fl
         assert ctrl._offers == []           # used once
     finally:
         ctrl.close()
+
+
+def test_offers_made_for_a_model_an_adaptation_replaced_are_dropped(flat, monkeypatch):
+    """A P3-AT with 20 % less battery voltage, refitted every 3 periods with run.beside:
+    once the plans are made for the vehicle as measured, no plan made beside for the
+    file's vehicle is offered any more (the offers are cleared where the planning model
+    is rebuilt, and the next are made for the new one). The plans made beside are stubbed
+    to return at once, tagged with the world they were asked for."""
+    import time as _time
+    from sbmpc.robot import controller as CT
+
+    def tagged(world, cost, X, cancel, ahead=()):
+        return SimpleNamespace(world=world), "tracker", X, _time.perf_counter()
+    monkeypatch.setattr(CT, "_beside", tagged)
+    monkeypatch.setattr(CT.Controller, "_rejoin", lambda self, X, why, tracked=None: None)   # (never taken up)
+    seen = []            # (offer's world is the planning world, planning world is the file's) at every poll
+    real = CT.Controller._poll_beside
+
+    def poll(self, t):
+        real(self, t)
+        seen.extend((o[0].world is self.plan_world, self.plan_world is self.world) for o in self._offers)
+    monkeypatch.setattr(CT.Controller, "_poll_beside", poll)
+    slow = flat.vehicle.replace(v_max=0.8 * flat.vehicle.v_max)
+    world = replace(flat, scenario=replace(flat.scenario, run=replace(flat.scenario.run, beside=True)))
+    res = R.run(world, "time", slow, replace(world.scenario.run, adapt_periods=3))
+    assert res.adapted and res.planned_as.startswith("p3at as measured")
+    assert any(own and not files for own, files in seen)     # offers for the vehicle as measured were made ...
+    assert all(own for own, _ in seen)                       # ... and none for a model replaced was kept

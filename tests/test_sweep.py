@@ -291,17 +291,20 @@ def test_a_closed_loop_spec_is_checked_before_any_task(tmp_path, capsys):
 
 
 def test_specs_that_differ_only_in_how_they_run_meet_the_same_truths(tmp_path):
-    """A closed-loop A/B (adaptation on and off, one mode or two, more samples): sample k
-    of a scenario and cost draws the same truth in both."""
+    """A closed-loop A/B (adaptation on and off, planner settings, one mode or two, more
+    samples): sample k of a scenario and cost draws the same truth in both, and in each
+    setting of a planner grid."""
     a, b = tmp_path / "a.yaml", tmp_path / "b.yaml"
     a.write_text(CLOSED)
     b.write_text(CLOSED.replace("samples: 3", "samples: 5").replace("modes: [whole_route, horizon]",
-                                                                    "modes: [whole_route]\n  run: {adapt_periods: 5}"))
+                                                                    "modes: [whole_route]\n  run: {adapt_periods: 5}")
+                 .replace("costs: [time]", "costs: [time]\nplanner: {margin_grade_deg: [0.0, 1.4]}"))
     key = {}
     for t in SW.tasks(SW.load_spec(a)):
         key[(t["scenario"], t["sample"])] = t["draw_key"]
     tb = SW.tasks(SW.load_spec(b))
-    assert len(tb) == 2 * 5 and {t["task_id"] for t in tb}.isdisjoint({t["task_id"] for t in SW.tasks(SW.load_spec(a))})
+    assert {t["settings"]["margin_grade_deg"] for t in tb} == {0.0, 1.4}
+    assert len(tb) == 2 * 5 * 2 and {t["task_id"] for t in tb}.isdisjoint({t["task_id"] for t in SW.tasks(SW.load_spec(a))})
     for t in tb:
         if t["sample"] < 3:
             assert t["draw_key"] == key[(t["scenario"], t["sample"])]

@@ -8,7 +8,8 @@ The search keeps the margin on every edge (:mod:`sbmpc.problems.skidsteer`, docs
   vehicle that needs up to 1 / (1 - m) times the torque, which then turns on the same path;
 * **pessimistic twin**: a vehicle with mass, inertia, mu_sa and mu_op raised by m steps
   along every edge from its own drive state, on the steeper of the grades it meets with
-  its heading ``margin_heading_deg`` off, and must not stall;
+  its heading ``margin_heading_deg`` off, each grade ``margin_grade_deg`` steeper
+  uphill (the map's slopes that far off), and must not stall;
 * **tip margin**: pitch and roll stay ``margin_tip_deg`` below ``tip_over_deg``.
 
 :func:`report` reads from a plan's controller-rate trajectory where it comes closest to
@@ -73,7 +74,7 @@ def drive_shares(vehicle, traj: dict) -> np.ndarray:
 
 def report(world, traj: dict) -> dict | None:
     """Where a plan's controller-rate trajectory comes closest to the limits (module doc):
-    {"margin", "margin_turn", "tip_margin_deg", "heading_deg", "drive_headroom": {"least",
+    {"margin", "margin_turn", "tip_margin_deg", "heading_deg", "grade_deg", "drive_headroom": {"least",
     "t", "x", "y"}, "turn_headroom": the same while the wheel-speed references turn (None:
     no turn), "tip": {"least_deg", "t", "x", "y"}}; None for an empty trajectory. A share of
     0 held for MARGIN_TIME is the drive at its limit: at top speed (the voltage bound) or
@@ -95,7 +96,7 @@ def report(world, traj: dict) -> dict | None:
                      for x, y, yaw in zip(traj["x"], traj["y"], traj["yaw"])])
     j = int(np.argmax(tilt))
     return {"margin": ps.margin, "margin_turn": ps.margin_turn, "tip_margin_deg": ps.margin_tip_deg,
-            "heading_deg": ps.margin_heading_deg,
+            "heading_deg": ps.margin_heading_deg, "grade_deg": ps.margin_grade_deg,
             "drive_headroom": {"least": round(1.0 - level, 4), "t": round(float(t[k]), 3),
                                "x": round(float(traj["x"][k]), 3), "y": round(float(traj["y"][k]), 3)},
             "turn_headroom": turn,
@@ -109,7 +110,8 @@ def summary_line(rep: dict | None, kept: bool = True) -> str:
     if rep is None:
         return ""
     d, tp, tu = rep["drive_headroom"], rep["tip"], rep.get("turn_headroom")
-    head = (f"margin {rep['margin']:g} (turns {rep.get('margin_turn', 0):g}, tip {rep['tip_margin_deg']:g} deg)"
+    grade = f", grades +{rep['grade_deg']:g} deg" if rep.get("grade_deg") else ""
+    head = (f"margin {rep['margin']:g} (turns {rep.get('margin_turn', 0):g}, tip {rep['tip_margin_deg']:g} deg{grade})"
             if kept else "no margin kept")
     turn = (f", in turns {100 * tu['least']:.0f} % (t = {tu['t']:.1f} s)" if tu else "")
     return (f"{head}: least drive headroom held {MARGIN_TIME:g} s {100 * d['least']:.0f} % (t = {d['t']:.1f} s, "

@@ -11,7 +11,8 @@ is driven on a constant grade from the model's steady state at its commands
 rate [rad/s], its battery power [W] (no regeneration where the vehicle has none), and
 whether the drive holds it (no stall, its wheel speeds no longer drifting, eq. 27's window kept within ``planner.margin_turn``
 of its reach on turns, as the search's edges judge it) for the planning vehicle and for
-the margin's pessimistic twin (:func:`sbmpc.planning.world.pessimistic`). The model
+the margin's pessimistic twin (:func:`sbmpc.planning.world.pessimistic`), which meets
+each grade ``planner.margin_grade_deg`` steeper, as on the edges. The model
 takes the grade along the heading only (cross-slope enters its tip-over check, which the
 value makes per lattice state), so the tables run over one grade: -GRADE_MAX to
 +GRADE_MAX [deg] in GRADE_STEP steps.
@@ -168,7 +169,8 @@ def tables(world: World) -> dict:
     ``v`` [m/s], ``w`` [rad/s], ``p`` [W], ``ok`` and ``ok_twin`` (1 where the planning
     vehicle, and the margin's twin, hold the manoeuvre)."""
     ps = world.scenario.planner
-    key = (world.vehicle, world.terrains, ps.margin, ps.margin_turn, wheel_speed_range(world), ps.dt)
+    key = (world.vehicle, world.terrains, ps.margin, ps.margin_turn, ps.margin_grade_deg, wheel_speed_range(world),
+           ps.dt)
     if key not in _TABLES:
         if len(_TABLES) >= 16:
             _TABLES.pop(next(iter(_TABLES)))
@@ -188,6 +190,7 @@ def _make_tables(world: World) -> dict:
     P = np.ascontiguousarray(np.array([b[:K.NP] for b in blocks]))
     T = np.ascontiguousarray(np.array([b[K.NP:] for b in blocks]))
     rows_which, rows_S, rows_cmd, rows_pitch = [], [], [], []
+    allow = math.radians(ps.margin_grade_deg)   # the twin meets each grade this much steeper (as the edges)
     for wi, w in enumerate(worlds):
         for ti, terr in enumerate(w.terrains):
             m = Model(w.vehicle, terr, ps.dt)
@@ -199,7 +202,7 @@ def _make_tables(world: World) -> dict:
                     rows_which.append(wi * nt + ti)
                     rows_S.append(starts[ci])
                     rows_cmd.append(tuple(cmds[ci]))
-                    rows_pitch.append(pitch)
+                    rows_pitch.append(pitch + allow if wi else pitch)
     out = np.zeros((len(rows_S), 4))
     dt = ps.dt
     _steady(P, T, np.ascontiguousarray(np.array(rows_S)), np.array(rows_which, np.int64),

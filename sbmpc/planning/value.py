@@ -416,7 +416,7 @@ def _content_key(world: World, cost: str, cell: float) -> str:
     if e.terrain_layer is not None:
         h.update(np.ascontiguousarray(e.terrain_layer).tobytes())
     h.update(repr((e.resolution, tuple(e.origin), world.vehicle, world.terrains, ps.margin, ps.margin_turn,
-                   ps.margin_tip_deg, ps.tip_over_deg, ps.dt, wheel_speed_range(world), cost, cell,
+                   ps.margin_grade_deg, ps.margin_tip_deg, ps.tip_over_deg, ps.dt, wheel_speed_range(world), cost, cell,
                    (scn.goal["x"], scn.goal["y"], scn.goal["radius"]), (scn.start["x"], scn.start["y"]),
                    ctg_window(world), REACH,
                    _code_hash())).encode())

@@ -90,8 +90,8 @@ NO_ROWS = np.int64(0)   # no record rows written yet, as an int64: a literal 0 m
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
  Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG,
- Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2) = range(42)
-NQ = 42
+ Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2, Q_TWGRADE) = range(43)
+NQ = 43
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
@@ -132,6 +132,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     Pw = data[max(offw, 0):max(offw, 0) + K.NP]
     c_head = math.cos(params[Q_TWHEAD])     # the twin's heading error (margin_heading_deg)
     s_head = math.sin(params[Q_TWHEAD])
+    t_grade = params[Q_TWGRADE]             # the twin's grade allowance (margin_grade_deg), as a tangent
     prev_w = 0.0
     lag_cap = params[Q_TWLAG]
     v_end = 0.0
@@ -224,7 +225,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             # topped); it falls at most Q_TWLAG behind (a run re-plans beyond its
             # position tolerance). Its heading may be off by up to the margin's heading
             # error, and it takes the steeper of the two grades it would then meet (a
-            # plane: along cos e +- across sin e). The edge fails where it stalls
+            # plane: along cos e +- across sin e); with a grade allowance (the map's
+            # slopes that far off) it meets each grade that much steeper uphill (the
+            # tangent of the sum). The edge fails where it stalls
             tx = T[K.S_X]
             ty = T[K.S_Y]
             if x_lo <= tx <= x_hi and y_lo <= ty <= y_hi:
@@ -233,6 +236,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
                 al_t = along
                 ac_t = across
             gw = al_t * c_head + (s_head * abs(ac_t) if al_t >= 0.0 else -s_head * abs(ac_t))
+            if t_grade > 0.0:
+                gw = (gw + t_grade) / (1.0 - gw * t_grade)
             gm = gw + 0.5 * (gw - prev_w) if i > 0 else gw
             prev_w = gw
             cw = 1.0 / math.sqrt(1.0 + gm * gm)

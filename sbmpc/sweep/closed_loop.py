@@ -84,10 +84,11 @@ def digest(doc: dict) -> str:
 
 def expand(task: dict, rob: dict) -> list:
     """The run tasks of a task: one per sample and mode. ``draw_key`` (with the sample,
-    the seed of its truth) hashes the task without what only the runs read (the modes,
-    their settings, the sample count): two specs that differ only there meet the same
-    truths, sample for sample."""
-    drawn = dict(task, robustness={k: rob.get(k) for k in DRAWN_BY})
+    the seed of its truth) hashes the task without what only the plans and runs read
+    (the planner settings, the modes, their settings, the sample count): two specs, or
+    two settings of one, that differ only there meet the same truths, sample for
+    sample."""
+    drawn = dict(task, settings={}, robustness={k: rob.get(k) for k in DRAWN_BY})
     key = digest(drawn)
     return [dict(task, sample=k, run_mode=m, draw_key=key)
             for k in range(int(rob["samples"])) for m in rob.get("modes", ["whole_route"])]
