@@ -141,16 +141,9 @@ def closed_loop_adapt() -> str:
 GRADE = (("0 (the default)", "closed_loop_grade0.json"), ("1.4", "closed_loop_grade.json"))
 
 
-def closed_loop_grade() -> str:
-    """robustness.md: the twin's grade allowance off and at the map error's slope (1.4 deg
-    for 5 cm at 2 m), on the same truths, per scenario, cost and mode (GRADE's files)."""
-    (na, a), (nb, b) = [(n, _load(f)) for n, f in GRADE]
-    lines = [f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
-             f"{' '.join(b['scenarios'])} --families --workers {b['workers']} --planner margin_grade_deg=G` "
-             f"({_when(a, b)}; the same truths in both: the draw does not depend on the planner settings). "
-             f"Each cell: margin_grade_deg {na.split()[0]} → {nb}; failed counts the runs out of their "
-             "wall-clock limit.*", "",
-             "| scenario, cost, mode | reached of 10 | stopped / no way on / failed | stalls | "
+def _ab(a: dict, b: dict, caption: str) -> str:
+    """Two closed-loop results on the same truths, row by row (b's groups): each cell 'a → b'."""
+    lines = [caption, "", "| scenario, cost, mode | reached of 10 | stopped / no way on / failed | stalls | "
              "executed / own plan, median (p90) |", "|---|---|---|---|---|"]
 
     def ends(g):
@@ -161,12 +154,37 @@ def closed_loop_grade() -> str:
         lines.append(f"| {key.replace('/', ', ')} | {ga['ends'].get('reached', 0)} → {gb['ends'].get('reached', 0)} | "
                      f"{ends(ga)} → {ends(gb)} | {ga['stalls']} → {gb['stalls']} | "
                      f"{_ratio(ga['over_own_plan'])} → {_ratio(gb['over_own_plan'])} |")
-    ta, tb = a["totals"], b["totals"]
-    lines.append(f"| **all {tb['runs']}** | {ta['ends']['reached']} → {tb['ends']['reached']} | "
-                 f"{ends(ta)} → {ends(tb)} | "
-                 f"{sum(g['stalls'] for g in a['groups'].values())} → {sum(g['stalls'] for g in b['groups'].values())} | "
-                 f"{_ratio(ta['over_own_plan'])} → {_ratio(tb['over_own_plan'])} |")
+    keys = list(b["groups"])
+    ta = {"ends": {e: sum(a["groups"][k]["ends"].get(e, 0) for k in keys) for e in
+                   ("reached", "stopped", "no_path", "failed", "timeout")}}
+    tb = {"ends": {e: sum(b["groups"][k]["ends"].get(e, 0) for k in keys) for e in ta["ends"]}}
+    lines.append(f"| **all {sum(b['groups'][k]['runs'] for k in keys)}** | {ta['ends']['reached']} → "
+                 f"{tb['ends']['reached']} | {ends(ta)} → {ends(tb)} | "
+                 f"{sum(a['groups'][k]['stalls'] for k in keys)} → {sum(b['groups'][k]['stalls'] for k in keys)} | "
+                 f"{_ratio(a['totals']['over_own_plan']) if len(keys) == len(a['groups']) else '-'} → "
+                 f"{_ratio(b['totals']['over_own_plan'])} |")
     return "\n".join(lines)
+
+
+def closed_loop_grade() -> str:
+    """robustness.md: the twin's grade allowance off and at the map error's slope (1.4 deg
+    for 5 cm at 2 m), on the same truths, per scenario, cost and mode (GRADE's files)."""
+    (na, a), (nb, b) = [(n, _load(f)) for n, f in GRADE]
+    return _ab(a, b, f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
+                     f"{' '.join(b['scenarios'])} --families --workers {b['workers']} --planner margin_grade_deg=G` "
+                     f"({_when(a, b)}; the same truths in both: the draw does not depend on the planner settings). "
+                     f"Each cell: margin_grade_deg {na.split()[0]} → {nb}; failed counts the runs out of their "
+                     "wall-clock limit.*")
+
+
+def closed_loop_backoff() -> str:
+    """robustness.md: the horizon rows of runup_ramp and hills_field before and after the
+    controller's back-off without a stall (closed_loop_grade0.json's rows, closed_loop_backoff.json)."""
+    a, b = _load("closed_loop_grade0.json"), _load("closed_loop_backoff.json")
+    return _ab(a, b, f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
+                     f"{' '.join(b['scenarios'])} --families --modes horizon --workers {b['workers']}` "
+                     f"({_when(a, b)}; the same truths as the rows before, from closed_loop_grade0.json). "
+                     "Each cell: before → after.*")
 
 
 def warthog() -> str:
@@ -962,7 +980,8 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
-          "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade, "hand-over-beside": hand_over_beside,
+          "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade,
+          "closed-loop-backoff": closed_loop_backoff, "hand-over-beside": hand_over_beside,
           "diagnose-speed": diagnose_speed, "warthog": warthog,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,

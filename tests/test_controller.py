@@ -437,3 +437,33 @@ def test_the_controller_adapts_to_the_vehicle_its_measurements_show(flat):
     assert res.planned_as.startswith("p3at as measured (v_max x0.8")
     assert res.horizon.kept_previous > plain.horizon.kept_previous + 3, (res.horizon.kept_previous,
                                                                          plain.horizon.kept_previous)
+
+
+def test_a_vehicle_with_no_way_on_and_no_stall_backs_off_and_plans_from_lower_down(flat, monkeypatch):
+    """A vehicle that lost its run-up part way up a ramp it cannot hold has no plan from
+    there (every control stalls) though it has not stalled yet: the horizon plans
+    stubbed to find no way on from t = 5 s to 8 s, and the whole-route plan from there
+    too. The controller settles, hands over, finds no whole-route plan, and backs off
+    along the way it came, as after a stall (before, it stopped there: 4 of 20
+    runup_ramp horizon runs ended 3 m short on the ramp, 2026-12-07); the horizon plans
+    from lower down lead on and the run reaches the goal, with no stall."""
+    from sbmpc.planning import plan as PL
+    real = HZ.HorizonPlanner.plan
+
+    def blind(self, start, previous=None, budget_s=None):
+        if 5.0 < start[K.S_T] < 8.0:
+            return HZ.HorizonPlan(start, [], np.inf, np.inf, False, "", 0, 0.0, reason="stubbed: no way on")
+        return real(self, start, previous, budget_s)
+    monkeypatch.setattr(HZ.HorizonPlanner, "plan", blind)
+    route = PL.plan
+
+    def no_route(world, cost, *args, start=None, **kw):
+        p = route(world, cost, *args, start=start, **kw)
+        if start is not None and start[K.S_T] > 4.0:
+            return replace(p, status="no_path", reason="no way (the test's)")
+        return p
+    monkeypatch.setattr(PL, "plan", no_route)
+    res = R.run(flat, "time")
+    assert res.end == "reached", res.reason
+    assert res.stalls == 0
+    assert any(p.why.startswith("backed off: no way on from") for p in res.plans), [p.why for p in res.plans]

@@ -597,16 +597,18 @@ class Controller:
         return True
 
     def _back_off(self, X: np.ndarray):
-        """Where no plan finds a way on after a stall: back along the way it came (the last
-        of ``execution.RETRACE_PERIODS`` periods driven, reversed, each predicted by the
-        guards first: :func:`sbmpc.execution.retrace`), as whole-route runs do; a vehicle
-        stalled on a flank has no plan from there, and has one from lower down. The
-        estimate at the end, or None (no stall yet, every retrace used, or held back). Each
+        """Where no plan finds a way on: back along the way it came (the last of
+        ``execution.RETRACE_PERIODS`` periods driven, reversed, each predicted by the
+        guards first: :func:`sbmpc.execution.retrace`), as whole-route runs do after a
+        stall; a vehicle stalled on a flank, or one that lost its run-up part way up a
+        ramp steeper than it holds (no stall yet: every control from there stalls), has no
+        plan from there, and has one from lower down (4 of 20 ``runup_ramp`` horizon runs
+        stopped 3 m short on the ramp, their whole-route runs on the same truths reached,
+        2026-12-07). The estimate at the end, or None (nothing driven yet, every retrace
+        used, or held back). Each
         period is guarded again from the measured state before it is driven; one held back
         ends the backing there. A second back-off goes further back along the way, never
         forward again over the periods driven back (:func:`sbmpc.execution.back_along`)."""
-        if not self.stall_at:
-            return None
         back, self._retraced = EX.back_along(self.guards, X, self._way, self._retraced, self._tilt)
         if back is None:
             return None
