@@ -231,7 +231,10 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     where the heavier twin's prediction did, while the planning vehicle's stopped 6 mm
     short, 2026-12-06): a run never drives off its map (a horizon run with 10 % less grip left
     `hills_field` at (48.4, 59.7), 2026-12-06); and where its braking comes to rest closer
-    to the edge than EDGE_CLEARANCE, having closed in on it (:func:`_approaches_edge`). ``tilt_error`` [rad]: how
+    to the edge than EDGE_CLEARANCE, having closed in on it (:func:`_approaches_edge`), or stalls
+    there (a `hills_field` horizon run reversing towards its north edge left the map 0.4 s
+    into a period whose four predictions all stalled within 1 cm of the edge, the
+    truth's drive stronger than theirs, 2026-12-07). ``tilt_error`` [rad]: how
     far the map's tilt is off where the vehicle stands (:func:`tilt_error`): the limits
     are taken that much lower (the map's heights off by 5 cm at 2 m correlation put
     `narrow_pass`'s flank 1.6 deg steeper than it says). A vehicle that already stands
@@ -262,6 +265,8 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
             _, end, S = g.step(S, c, record=False, **limits)
             if end == -SS.OFF_MAP or (not edge and (end == -SS.TIP or (end == -SS.MARGIN and (kept or j > 0)))):
                 return j + 1
+            if end == -SS.STALL and _approaches_edge(g.world, X, S):
+                return j + 1           # stalled closing in on the edge: a truth that does not stall drives on
             if end != 0:
                 break                  # (in the goal, or stalled: the stall test's)
         else:

@@ -695,6 +695,34 @@ def test_the_guard_keeps_a_clearance_where_a_period_closes_in_on_the_map_edge():
                      True) > 0
 
 
+def test_a_prediction_that_stalls_closing_in_on_the_map_edge_holds_the_period():
+    """A period whose predictions stall (the stall test's end) within EDGE_CLEARANCE of the
+    map's edge, closer than they started, is held back: a truth whose drive does not stall
+    drives on (a `hills_field` horizon run reversing towards its north edge left the map
+    0.4 s into such a period, every prediction stalled 8 mm inside, 2026-12-07). A stall
+    farther inside, or one moving away from the edge, holds nothing (the stall is the
+    run's to handle)."""
+    from dynamics import kernels as K
+    from sbmpc import execution as EX
+    world, top, x_hi, _, at = _towards_east_edge()
+
+    class Stalls:
+        """A guard whose prediction of the period stalls dx [m] east of where it starts."""
+        def __init__(self, dx):
+            self.world, self.dx = world, dx
+
+        def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
+            S = X.copy()
+            S[K.S_X] += self.dx
+            return None, -SS.STALL, S
+    X = at(x_hi - 0.2)
+    assert EX.holder([Stalls(0.19)], X, (top, top, 1.0), True) == 1          # stalled 1 cm from the edge
+    assert EX.holder([Stalls(0.19), Stalls(0.0)], X, (top, top, 1.0), True) == 1
+    assert EX.holder([Stalls(0.0), Stalls(0.19)], X, (top, top, 1.0), True) == 2
+    assert EX.holder([Stalls(-0.05)], at(x_hi - 0.05), (-top, -top, 1.0), True) == 0   # backing away
+    assert EX.holder([Stalls(0.19)], at(x_hi - 2.0), (top, top, 1.0), True) == 0     # far inside
+
+
 def test_after_three_re_plans_in_a_row_find_nothing_the_vehicle_brakes_and_plans_from_rest(flat, monkeypatch):
     """A re-plan that finds nothing keeps the previous plan for one more period, but not
     without end: a P3-AT with 20 % less battery voltage drifts off its plan, every re-plan
