@@ -244,6 +244,13 @@ def adapts(world: WO.World, f: dict | None, planned: tuple, firm: bool) -> WO.Wo
     return as_measured(world, key(f), margin)
 
 
+def firms(settings, stalled: bool, twin: bool) -> bool:
+    """Whether an adaptation's margin firms with its estimate (:func:`adapts`' ``firm``):
+    ``run.firm_margin`` (``settings``: the run settings) and before any stall of the run,
+    the plans not made for the margin's twin (after a stall the model proved wrong)."""
+    return bool(settings.firm_margin) and not stalled and not twin
+
+
 def at_stall(world: WO.World, base: WO.World, factors: tuple) -> WO.World:
     """The vehicle whose margin's twin a stall's plans are made for: ``base`` (``world``
     itself, or as measured with ``factors``, :func:`key`) with the file's margin. A stall

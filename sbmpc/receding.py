@@ -683,7 +683,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 # confident and says another vehicle than the one planned for, re-plan as it
                 since_fit = 0
                 f = fit_vehicle(evidence, world, cost)
-                now = ES.adapts(world, f, (base_key, base.scenario.planner.margin), rs.firm_margin and not stalls and not as_twin)
+                now = ES.adapts(world, f, (base_key, base.scenario.planner.margin), ES.firms(rs, bool(stalls), as_twin))
                 if now is not None:         # another vehicle, or margin, than planned for
                     base, base_key = now, ES.key(f)
                     planner = EX.twin_planner(base) if as_twin else base

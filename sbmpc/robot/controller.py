@@ -558,7 +558,7 @@ class Controller:
                 snap = ES.Evidence()
                 snap.periods.extend(self.evidence.periods)
                 planned = (self._base_key, self._base.scenario.planner.margin)
-                firm = self.settings.firm_margin and not self.stalls and not self._as_twin
+                firm = ES.firms(self.settings, bool(self.stalls), self._as_twin)
                 self._fitting = self._route_pool.submit(_refit, snap, self.world, self.cost, planned,
                                                         self._as_twin, self._marks, firm)
             return False
