@@ -691,6 +691,8 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                     out.planned_as = base.vehicle.name
                     out.adapted.append({"t": round(float(X[K.S_T]), 3), "fit": f, "margin": base.scenario.planner.margin})
                     why = (why + "; " if why else "") + f"adapted: {base.vehicle.name}"
+        if why is None:
+            misses = 0          # a period that asked for no re-plan: a next failed one starts a new row
 
 
 def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, deadline: float) -> RunResult:
