@@ -161,6 +161,7 @@ class RunResult:
 
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 MISSES = 3         # re-plans in a row that find no way on while the vehicle drives on: then it brakes to rest
+MISSED = f"{MISSES} re-plans in a row found no way on from the moving vehicle"    # the re-plan's why, from rest
 
 
 @functools.lru_cache(maxsize=8)
@@ -435,13 +436,14 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                           {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end, "failed"))
         return None
 
-    def brake():
+    def brake(after: str = "the guard held its period back"):
         """One period with the wheels commanded to rest, driven from X: the guard held
-        back a moving vehicle's period, and a robot that waits for a plan brakes (a run
-        that stopped the clock instead re-planned, and stopped, from a state the vehicle
-        could not hold). The run's result where the period ended it, else None."""
+        back a moving vehicle's period (or ``after`` says what else), and a robot that
+        waits for a plan brakes (a run that stopped the clock instead re-planned, and
+        stopped, from a state the vehicle could not hold). The run's result where the
+        period ended it, else None."""
         where = f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
-        return ended(drive((0.0, 0.0, ps.period_s)), f", braking after the guard held its period back at {where}")
+        return ended(drive((0.0, 0.0, ps.period_s)), f", braking after {after} at {where}")
 
     def retrace() -> bool:
         """Before a held run stops: the next of RETRACE_PERIODS that the guards let it
@@ -494,8 +496,8 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             held = why.startswith(HELD)
             # no plan to drive on while this one is made: stalled, or the plan ran out
             stranded = why.startswith("stalled") or not (current is not None and k < len(steps))
-            budget = (None if first else rs.stall_replan_time_budget_s if why.startswith("stalled") or held
-                      else rs.replan_time_budget_s)
+            budget = (None if first else rs.stall_replan_time_budget_s
+                      if why.startswith(("stalled", MISSED)) or held else rs.replan_time_budget_s)
             model_world = EX.twin_planner(base, tip=True) if held and as_twin else planner
             clear = world.margin + world.emap.resolution      # (a mark at the start leaves no plan)
             near = tuple(m for m in marks if math.hypot(m[0] - X[K.S_X], m[1] - X[K.S_Y]) > m[2] + clear)
@@ -553,15 +555,16 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             elif not stranded and not held:
                 # MISSES re-plans in a row found no way on from the moving vehicle while it
                 # drove on a plan it is off: it brakes to rest and plans from there, as a
-                # vehicle with no plan left (with the search without the margin after the
-                # margin's, and a stop that says why where neither finds a way). Driving
+                # vehicle with no plan left, with the budget of a re-plan the vehicle waits
+                # for (the search without the margin after the margin's, and a stop that
+                # says why where neither finds a way). Driving
                 # on, a hills_field run drifted 7 m and 40 deg off its plan through 25
                 # failed re-plans of 10 s each and ran out of its wall-clock limit (2026-12-07)
-                result = brake()
+                result = brake(f"{MISSES} re-plans in a row found no way on")
                 if result is not None:
                     return result
                 current, misses = None, 0
-                why = (f"{MISSES} re-plans in a row found no way on from the moving vehicle: braked to rest at "
+                why = (f"{MISSED}: braked to rest at "
                        f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
                 continue
             elif held:

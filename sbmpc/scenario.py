@@ -94,7 +94,7 @@ class PlannerSettings:
     ``MARGIN_TIME`` at a time (0: none); margin_tip_deg: edges keep pitch and roll this
     far below tip_over_deg; margin_heading_deg: the twin meets the steeper of the grades
     along headings this far either side; margin_grade_deg: the twin meets every grade
-    this much steeper uphill (the map's slopes that far off: about atan(sd / correlation
+    this much steeper in the direction it drives (the map's slopes that far off: about atan(sd / correlation
     length) of its heights' error, 1.4 deg for 5 cm at 2 m); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
     with ``--horizon``) plans receding-horizon, each plan a search this many seconds
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives

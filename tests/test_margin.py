@@ -146,6 +146,20 @@ def test_a_grade_allowance_fails_a_climb_only_the_steeper_slope_would_stall():
     assert costs[2.5] == -SS.MARGIN
 
 
+def test_a_grade_allowance_makes_a_reversing_climb_steeper_too():
+    """Reversing up 9 deg of grass (the nose downhill), the allowance is nose-down: with
+    2.5 deg the twin meets 11.5 deg and the edge fails on the margin, without it the edge
+    keeps the margin (an allowance added nose-up would have made the climb gentler)."""
+    costs = {}
+    for a in (0.0, 2.5):
+        w = _plane(-9.0, margin=0.1, margin_turn=0.0, margin_tip_deg=0.0, margin_grade_deg=a)
+        w = replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, x=30.0)))
+        _, end, X1, _ = CK.replay(w, "time", [(-4.0, -4.0, 2.0)], every=1 << 30, start=WO.start_state(w))
+        assert end == 0
+        costs[a] = _edge(w, X1, (-4.0, -4.0, 4.0))[0]
+    assert costs[0.0] > 0.0 and costs[2.5] == -SS.MARGIN
+
+
 def test_the_twin_with_an_allowance_meets_a_descent_of_that_grade_as_level_ground():
     """The allowance is added to the grade the twin meets (the tangent of the sum), and
     nothing else: on a 2 deg descent with 2 deg of allowance the twin's drive (wheel
@@ -164,12 +178,16 @@ def test_the_twin_with_an_allowance_meets_a_descent_of_that_grade_as_level_groun
 def test_the_value_tables_give_the_twin_the_same_allowance():
     """The value's motion tables judge the twin's manoeuvres on grades shifted by the
     allowance: with 2.5 deg (two of the tables' 1.25 deg steps) the twin holds at grade
-    g what it holds at g + 2.5 deg without; the planning vehicle's own rows unchanged."""
+    g what it holds at g + 2.5 deg without (reversing, g - 2.5 deg); the planning
+    vehicle's own rows unchanged."""
     from sbmpc.planning import motions as MO
     t0 = MO.tables(_plane(0.0, margin=0.1))
     t1 = MO.tables(_plane(0.0, margin=0.1, margin_grade_deg=2.5))
     assert MO.GRADE_STEP * 2 == 2.5
-    assert np.array_equal(t1["ok_twin"][:, :-2], t0["ok_twin"][:, 2:])
+    back = t0["cmds"].sum(axis=1) < 0.0        # reversing: the allowance nose-down
+    assert back.any() and (~back).any()
+    assert np.array_equal(t1["ok_twin"][:, :-2][..., ~back], t0["ok_twin"][:, 2:][..., ~back])
+    assert np.array_equal(t1["ok_twin"][:, 2:][..., back], t0["ok_twin"][:, :-2][..., back])
     assert np.array_equal(t1["ok"], t0["ok"]) and np.array_equal(t1["p"], t0["p"])
     assert t1["ok_twin"].sum() < t0["ok_twin"].sum()
 

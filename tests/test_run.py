@@ -727,7 +727,8 @@ def test_after_three_re_plans_in_a_row_find_nothing_the_vehicle_brakes_and_plans
     """A re-plan that finds nothing keeps the previous plan for one more period, but not
     without end: a P3-AT with 20 % less battery voltage drifts off its plan, every re-plan
     finds nothing, and after R.MISSES in a row the vehicle brakes to rest and plans from
-    there (the search without the margin too); where that finds nothing either, the run
+    there (with a waiting re-plan's budget, the search without the margin too); where
+    that finds nothing either, the run
     stops at rest and says why, within seconds, not at the re-plan limit or the wall
     clock's (a hills_field run drove 25 periods 7 m off its plan, 10 s a re-plan)."""
     seen = _searches(monkeypatch, fail_after=0)
@@ -739,6 +740,9 @@ def test_after_three_re_plans_in_a_row_find_nothing_the_vehicle_brakes_and_plans
     assert last.why.startswith(f"{R.MISSES} re-plans in a row found no way on from the moving vehicle: braked to rest")
     assert len(res.plans) == 1 + R.MISSES + 1 and res.end == "no_path"
     assert "no way (the test's)" in res.reason
+    # the re-plan from rest has the budget of one the vehicle waits for (half of it for its first search)
+    rs = flat.scenario.run
+    assert seen[0][2] == 0.5 * rs.replan_time_budget_s and seen[-3][2] == 0.5 * rs.stall_replan_time_budget_s
     # the search without the margin only from rest, not from the moving vehicle
     assert any(tip == 0.0 for _, tip, _ in seen[-3:]) and all(tip > 0.0 for _, tip, _ in seen[:-3])
     assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING   # at rest

@@ -9,7 +9,7 @@ The search keeps the margin on every edge (:mod:`sbmpc.problems.skidsteer`, docs
 * **pessimistic twin**: a vehicle with mass, inertia, mu_sa and mu_op raised by m steps
   along every edge from its own drive state, on the steeper of the grades it meets with
   its heading ``margin_heading_deg`` off, each grade ``margin_grade_deg`` steeper
-  uphill (the map's slopes that far off), and must not stall;
+  in the direction it drives (the map's slopes that far off), and must not stall;
 * **tip margin**: pitch and roll stay ``margin_tip_deg`` below ``tip_over_deg``.
 
 :func:`report` reads from a plan's controller-rate trajectory where it comes closest to

@@ -190,7 +190,8 @@ def _make_tables(world: World) -> dict:
     P = np.ascontiguousarray(np.array([b[:K.NP] for b in blocks]))
     T = np.ascontiguousarray(np.array([b[K.NP:] for b in blocks]))
     rows_which, rows_S, rows_cmd, rows_pitch = [], [], [], []
-    allow = math.radians(ps.margin_grade_deg)   # the twin meets each grade this much steeper (as the edges)
+    allow = math.radians(ps.margin_grade_deg)   # the twin meets each grade this much steeper (as the edges:
+    # in the direction it drives, nose-down reversing)
     for wi, w in enumerate(worlds):
         for ti, terr in enumerate(w.terrains):
             m = Model(w.vehicle, terr, ps.dt)
@@ -202,7 +203,7 @@ def _make_tables(world: World) -> dict:
                     rows_which.append(wi * nt + ti)
                     rows_S.append(starts[ci])
                     rows_cmd.append(tuple(cmds[ci]))
-                    rows_pitch.append(pitch + allow if wi else pitch)
+                    rows_pitch.append(pitch + (math.copysign(allow, cmds[ci][0] + cmds[ci][1] + 0.0) if wi else 0.0))
     out = np.zeros((len(rows_S), 4))
     dt = ps.dt
     _steady(P, T, np.ascontiguousarray(np.array(rows_S)), np.array(rows_which, np.int64),

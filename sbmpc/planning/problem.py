@@ -89,7 +89,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     Q[SS.Q_RESERVE] = ps.margin_turn if margin else 0.0
     Q[SS.Q_OFFTW] = offw if twins else -1
     Q[SS.Q_TWHEAD] = math.radians(ps.margin_heading_deg)
-    Q[SS.Q_TWGRADE] = math.tan(math.radians(ps.margin_grade_deg))
+    Q[SS.Q_TWGRADE] = math.radians(ps.margin_grade_deg)
     Q[SS.Q_TWLAG] = scn.run.tol_xy     # the most the twin falls behind: a run re-plans beyond it
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny

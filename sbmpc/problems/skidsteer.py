@@ -132,7 +132,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     Pw = data[max(offw, 0):max(offw, 0) + K.NP]
     c_head = math.cos(params[Q_TWHEAD])     # the twin's heading error (margin_heading_deg)
     s_head = math.sin(params[Q_TWHEAD])
-    t_grade = params[Q_TWGRADE]             # the twin's grade allowance (margin_grade_deg), as a tangent
+    a_grade = params[Q_TWGRADE]             # the twin's grade allowance (margin_grade_deg) [rad]
+    if cmd_l + cmd_r < 0.0:
+        a_grade = -a_grade                  # reversing: the climb is nose-down, steeper downwards
     prev_w = 0.0
     lag_cap = params[Q_TWLAG]
     v_end = 0.0
@@ -226,8 +228,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             # position tolerance). Its heading may be off by up to the margin's heading
             # error, and it takes the steeper of the two grades it would then meet (a
             # plane: along cos e +- across sin e); with a grade allowance (the map's
-            # slopes that far off) it meets each grade that much steeper uphill (the
-            # tangent of the sum). The edge fails where it stalls
+            # slopes that far off) it meets each grade that much steeper uphill in the
+            # direction it drives (forwards nose-up, reversing nose-down; the pitch
+            # kept within +-86 deg). The edge fails where it stalls
             tx = T[K.S_X]
             ty = T[K.S_Y]
             if x_lo <= tx <= x_hi and y_lo <= ty <= y_hi:
@@ -236,8 +239,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
                 al_t = along
                 ac_t = across
             gw = al_t * c_head + (s_head * abs(ac_t) if al_t >= 0.0 else -s_head * abs(ac_t))
-            if t_grade > 0.0:
-                gw = (gw + t_grade) / (1.0 - gw * t_grade)
+            if a_grade != 0.0:
+                gw = math.tan(max(-1.5, min(1.5, math.atan(gw) + a_grade)))
             gm = gw + 0.5 * (gw - prev_w) if i > 0 else gw
             prev_w = gw
             cw = 1.0 / math.sqrt(1.0 + gm * gm)
