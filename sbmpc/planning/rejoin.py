@@ -90,6 +90,13 @@ def tracker(world: World, cost: str, plan: PL.Plan) -> HorizonPlanner:
     return hp
 
 
+def path_distances(plan: PL.Plan, X: np.ndarray) -> np.ndarray:
+    """How far [m] the planner state X is from each sample of ``plan``'s trajectory
+    (its controller-rate replay), in the plane."""
+    tr = plan.trajectory
+    return np.hypot(np.asarray(tr["x"]) - X[K.S_X], np.asarray(tr["y"]) - X[K.S_Y])
+
+
 def join(plan: PL.Plan, X: np.ndarray, period_s: float, tick_s: float, tol_xy: float, tol_yaw: float,
          tol_v: float) -> list | None:
     """The rest of ``plan``'s controls [(wl, wr, duration_s)] in periods of ``period_s``
@@ -103,7 +110,7 @@ def join(plan: PL.Plan, X: np.ndarray, period_s: float, tick_s: float, tol_xy: f
     tr = plan.trajectory
     t = np.asarray(tr["t"], float) - tr["t"][0]
     on_tick = np.abs(t / tick_s - np.rint(t / tick_s)) < 1e-6
-    d = np.hypot(np.asarray(tr["x"]) - X[K.S_X], np.asarray(tr["y"]) - X[K.S_Y])
+    d = path_distances(plan, X)
     dyaw = np.abs(np.remainder(np.asarray(tr["yaw"]) - X[K.S_YAW] + np.pi, 2.0 * np.pi) - np.pi)
     ok = on_tick & (d <= tol_xy) & (dyaw <= tol_yaw) & (np.abs(np.asarray(tr["v"]) - X[SS.X_V]) <= tol_v)
     ok[-1] = False                       # (the end: nothing left to drive)
@@ -147,4 +154,4 @@ def beside(world: World, cost: str, start: np.ndarray, cancel=None) -> tuple:
     return p, (tracker(world, cost, p) if p.found else None)
 
 
-__all__ = ["KAPPA_MAX", "KAPPA_MIN", "Cancelled", "beside", "join", "tracker", "tube_to_go"]
+__all__ = ["KAPPA_MAX", "KAPPA_MIN", "Cancelled", "beside", "join", "path_distances", "tracker", "tube_to_go"]

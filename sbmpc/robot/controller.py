@@ -473,7 +473,7 @@ class Controller:
             ps = self.world.scenario.planner
             reach = 0.5 * ps.horizon_s * WO.wheel_speed_range(self.world)[1] * self.world.vehicle.wheel_radius
             got = next((o for o in reversed(offers) if o[0] is not tracked
-                        and _distance_to_path(o[0], X) <= reach), None)
+                        and RJ.path_distances(o[0], X).min() <= reach), None)
             if got is None:
                 return None
         p, tr, X0 = got
@@ -858,13 +858,6 @@ def _beside(world: WO.World, cost: str, X: np.ndarray, cancel, ahead: tuple = ()
     except Exception:       # noqa: BLE001 - called off, or no plan from there: the hand-over plans as before
         p, tr = None, None
     return p, tr, X, time.perf_counter()
-
-
-def _distance_to_path(p, X: np.ndarray) -> float:
-    """How far [m] the planner state X is from the path of plan ``p`` (its controller-rate
-    replay's samples)."""
-    tr = p.trajectory
-    return float(np.min(np.hypot(np.asarray(tr["x"]) - X[K.S_X], np.asarray(tr["y"]) - X[K.S_Y])))
 
 
 def _low() -> None:
