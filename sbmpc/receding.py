@@ -547,26 +547,26 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
                 limit_for = (base, as_twin)
                 current, k, P, since, why, misses = p, 0, X.copy(), 0, None, 0
                 steps = periods(p.controls, ps.period_s)
-            elif not stranded and not held and misses + 1 < MISSES:
-                # like any MPC: when a re-plan fails, keep driving the previous plan and try
-                # again after the next period (not a period the guard held back)
-                misses += 1
-                why = None
             elif not stranded and not held:
-                # MISSES re-plans in a row found no way on from the moving vehicle while it
-                # drove on a plan it is off: it brakes to rest and plans from there, as a
-                # vehicle with no plan left, with the budget of a re-plan the vehicle waits
-                # for (the search without the margin after the margin's, and a stop that
-                # says why where neither finds a way). Driving
-                # on, a hills_field run drifted 7 m and 40 deg off its plan through 25
-                # failed re-plans of 10 s each and ran out of its wall-clock limit (2026-12-07)
-                result = brake(f"{MISSES} re-plans in a row found no way on")
-                if result is not None:
-                    return result
-                current, misses = None, 0
-                why = (f"{MISSED}: braked to rest at "
-                       f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})")
-                continue
+                misses += 1
+                if misses < MISSES:
+                    # like any MPC: when a re-plan fails, keep driving the previous plan and
+                    # try again after the next period (not a period the guard held back)
+                    why = None
+                else:
+                    # MISSES re-plans in a row found no way on from the moving vehicle while
+                    # it drove on a plan it is off: it brakes to rest and plans from there, as
+                    # a vehicle with no plan left, with the budget of a re-plan the vehicle
+                    # waits for (the search without the margin after the margin's, and a stop
+                    # that says why where neither finds a way). Driving on, a hills_field run
+                    # drifted 7 m and 40 deg off its plan through 25 failed re-plans of 10 s
+                    # each and ran out of its wall-clock limit (2026-12-07)
+                    result = brake(MISSED)
+                    if result is not None:
+                        return result
+                    current, misses = None, 0
+                    why = f"{MISSED}: braked to rest at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
+                    continue
             elif held:
                 if retrace():
                     continue
