@@ -36,6 +36,7 @@ def test_a_window_stays_below_the_whole_maps_grid(name, cost):
     assert np.all(win[mask] == 0.0)
 
 
+@pytest.mark.slow      # a 4 M-cell map end to end (7 s); the window itself is tested above
 def test_a_large_map_plans_with_a_window(tmp_path):
     """A 2000 x 2000 map (4 M cells) with an 8 m plan: the cost-to-go covers a window."""
     H = np.zeros((2000, 2000))

@@ -62,6 +62,7 @@ def test_polish_of_controls_that_miss_the_goal_is_none(flat):
     assert PO.polish(prob.params, prob.data, prob.start, BASE[:5], lo, hi) is None
 
 
+@pytest.mark.slow      # 12 random detours, 9 s: CI runs it, the quick loop keeps the fixed cases
 @settings(max_examples=12, deadline=None)
 @given(st.lists(st.tuples(st.floats(-0.3, 0.3), st.floats(-0.3, 0.3)), min_size=3, max_size=3),
        st.sampled_from(["time", "energy"]))
@@ -104,6 +105,7 @@ def test_a_long_plans_polish_moves_its_head_and_tail_only(flat, monkeypatch):
     assert not np.array_equal(full[fmid, :2], base[fmid, :2])
 
 
+@pytest.mark.slow      # hills_field searched twice (10 s); test_plan's repair test keeps the repairs in the quick loop
 def test_a_long_plans_polish_moves_what_its_repairs_leave_standing(monkeypatch):
     """A plan of more than EXACT_UP_TO controls is checked at 1 kHz and repaired first,
     and then polished from where its last re-plan starts, from the 1 kHz state there
