@@ -282,7 +282,7 @@ def readme_caption() -> str:
             f"{e['energy_J']:.0f} J instead of\n  {t['energy_J']:.0f} J (planned in {e['planning_time_s']:.1f} s, the "
             f"time plan in {t['planning_time_s']:.2f} s).*\n"
             "- *Both are driven at the vehicle's 1 kHz controller rate, as every plan is before it is\n  reported.*\n"
-            "- *Seed 0 is shown. The spread over seeds is in [docs/status.md](docs/status.md).*")
+            "- *Halton seed 0 (`--seed`) is shown. The spread over seeds is in [docs/status.md](docs/status.md).*")
 
 
 def readme_table() -> str:
@@ -295,7 +295,7 @@ def readme_table() -> str:
     cheaper = ("always costs less than" if s["energy_plan_no_dearer"] == s["both_found"] else
                f"costs no more than on {s['energy_plan_no_dearer']} of them")
     rows.append(("[energy saved against time added](docs/status.md#shipped-scenarios)",
-                 f"on {s['both_found']} unseen hilly maps the energy plan {cheaper} the time plan: median "
+                 f"on {s['both_found']} hilly maps no setting was tuned for, the energy plan {cheaper} the time plan: median "
                  f"{sp['median']:.1f} % less energy for {s['time_cost_pct_median']:.1f} % more time "
                  f"({sp['min']:.1f}-{sp['max']:.0f} %); on `hill_tradeoff` "
                  f"{100 * (1 - ht['energy']['energy_J'] / ht['time']['energy_J']):.0f} % less for "
@@ -303,16 +303,16 @@ def readme_table() -> str:
                  _when(u, ep)))
     v = _load("value.json")
     tp, en, slow = _planning_times()
-    rows.append(("[planning time, one core](docs/status.md)",
+    rows.append(("[planning time, one core](docs/status.md#status-what-is-measured-against-which-goal)",
                  f"time plans {_range([x for k, x in tp.items() if k != slow])} s (`{slow}` {tp[slow]:.1f} s); "
-                 f"energy plans {min(en.values()):.2f}-{max(en.values()):.1f} s on the {len(en)} shipped maps, median "
+                 f"energy plans {min(en.values()):.2f}-{max(en.values()):.1f} s on the {len(en)} shipped maps with a path, median "
                  f"{s['planning_time_s_median']['energy_reported']:.1f} s on unseen ones", _when(v, u)))
     rows.append(("[plans that hold](docs/planner.md)",
                  "every reported plan is its drive at the vehicle's 1 kHz controller rate", "always"))
     c = _load("closed_loop.json")
     t = c["totals"]
     rows.append(("[a drawn vehicle, closed loop](docs/robustness.md#measured)",
-                 f"{t['runs']} runs on the shipped maps, the vehicle drawn at 10 %, the map 5 cm off, commands "
+                 f"{t['runs']} runs on the shipped maps, the vehicle's parameters drawn at random (10 % sd), the map 5 cm off, commands "
                  f"50 ms late: {_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn "
                  f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} "
                  f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map; "
@@ -328,7 +328,7 @@ def readme_table() -> str:
     real = [r for r in cal["real"] if r["robot"] == "warthog"]
     h = lambda key: _range([r["heldout"][key] for r in real], ".0f")
     rows.append(("[model error, real Warthog runs](docs/validation.md#calibration)",
-                 f"held-out wheel-speed error {h('nominal')} noise units as shipped, {h('calibrated')} calibrated "
+                 f"held-out wheel-speed error {h('nominal')} noise units (1: the sensor's noise) as shipped, {h('calibrated')} calibrated "
                  f"(`sbmpc calibrate`), {h('with_effect')} with the effect `diagnose` names "
                  f"({', '.join(r['terrain'] for r in real)})", _when(cal)))
     cl = _load("calibration_closed_loop.json")
@@ -338,7 +338,7 @@ def readme_table() -> str:
     fails = sum(x["status"] != "reached" for x in shipped)
     fails_c = sum(x["status"] != "reached" for x in calib)
     rows.append(("[calibrate your robot](docs/validation.md#calibration)",
-                 f"a P3-AT {100 * (cl['truth']['mass'] / prior['mass']['prior'] - 1):.0f} % heavier with its torque "
+                 f"a P3-AT (the default vehicle) {100 * (cl['truth']['mass'] / prior['mass']['prior'] - 1):.0f} % heavier with its torque "
                  f"constant {100 * (1 - cl['truth']['torque_constant'] / prior['torque_constant']['prior']):.0f} % "
                  f"low: planned with the shipped model it uses "
                  f"{_range([100 * x['energy_error'] for x in shipped if x['status'] == 'reached'], '.0f')} % more "
