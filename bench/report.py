@@ -229,8 +229,13 @@ def diagnose_speed() -> str:
     delay, tyre = runs["command_delay"], runs["wheel_radius"]
     side = min(tyre["hidden"], key=tyre["hidden"].get)
     return (f"`python bench/bench_diagnose.py` (results in `bench/results/diagnose.json`; {_when(d)}) diagnoses "
-            f"{d['minutes']:g}-minute runs at 100 Hz in {_range(times, '.0f')} s on one core (the bar: well under a "
-            f"minute; one run each). The delay and the tyre were named "
+            f"{d['minutes']:g}-minute runs at 100 Hz in {_range(times, '.0f')} s on one thread (the bar: well under a "
+            f"minute; one run each)"
+            + (f", {_range([r['diagnosis_time_threads_s'] for r in d['runs']], '.1f')} s with the candidates fitted "
+               f"side by side on {d['threads']} threads (the default; "
+               f"{_range([r['diagnosis_time_s'] / r['diagnosis_time_threads_s'] for r in d['runs']], '.2f')}x as fast, "
+               "the same diagnosis)" if "threads" in d else "")
+            + ". The delay and the tyre were named "
             + ("correctly" if delay["cause"] == "command_delay" and tyre["cause"] == "wheel_radius" else "WRONG")
             + f" ({delay['hidden']['delay_s']:.3f} -> {delay['fitted']['delay_s']:.3f} s; "
             f"{tyre['hidden'][side]:.4f} -> {tyre['fitted'][side]:.4f}, the tyre fitted to the pose) and a clean run "

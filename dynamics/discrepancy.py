@@ -897,6 +897,17 @@ def check_run_length(run: Run) -> None:
                        f"{len(segs)} segment(s) of at most {longest} (a 'segment' value per row, or gaps in t?)")
 
 
+def _checked_threads(threads) -> int:
+    """:func:`diagnose`'s ``threads``: a count >= 1 (None: one a CPU core)."""
+    import os
+    from .params import ParameterError
+    if threads is None:
+        return max(1, os.cpu_count() or 1)
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ParameterError(f"threads: expected a count of threads >= 1, found {threads!r:.30}")
+    return int(threads)
+
+
 def _checked_arguments(run, vehicle, terrain, pitch, effects):
     """:func:`diagnose`'s arguments checked (the command line checks the same before
     calling it); returns ``effects`` as a tuple or None."""
@@ -929,12 +940,16 @@ def _checked_arguments(run, vehicle, terrain, pitch, effects):
 
 
 def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
-             effects: tuple | None = None, progress=None) -> Diagnosis:
+             effects: tuple | None = None, progress=None, threads: int | None = None) -> Diagnosis:
     """Diagnose a measured run (module doc). ``progress(i, n, effect)`` is called before
-    each candidate's fit. ``pitch`` [rad] is the run's constant grade; ``effects`` the
-    names of the candidates to fit (default: every one of CANDIDATES). A run too short to
-    diagnose is a RunError, a bad argument a ParameterError, each naming it."""
+    each candidate's fit, from the thread that fits it. ``pitch`` [rad] is the run's
+    constant grade; ``effects`` the names of the candidates to fit (default: every one of
+    CANDIDATES). The candidates are fitted side by side on ``threads`` threads (default:
+    one a CPU core; the model's replay runs without the GIL), each fit as it is alone, so
+    the diagnosis is the same on any number. A run too short to diagnose is a RunError, a
+    bad argument a ParameterError, each naming it."""
     effects = _checked_arguments(run, vehicle, terrain, pitch, effects)
+    threads = _checked_threads(threads)
     chans = channels(run)
     scales = {c: noise_scale(run[c]) for c in chans}
     t = run.t
@@ -947,7 +962,6 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
     bic0 = _bic(r_base_train, 0)
     q0 = ljung_box(((run["wl"] - base["wl"]) / scales["wl"])[held])
     rmse = {c: float(np.sqrt(np.nanmean(((run[c] - base[c]))[held] ** 2))) for c in chans}
-    cands = []
     todo = effects or tuple(CANDIDATES)
 
     def fitted(key):
@@ -955,7 +969,7 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
                    pitch, base, chans, scales, train, held)
         return unseen_in_training(c, run, vehicle, terrain, pitch, base, chans, scales, train, held)
 
-    for i, eff in enumerate(todo):
+    def candidate(i, eff):
         if progress is not None:
             progress(i, len(todo), eff)
         c = fitted(eff)
@@ -964,7 +978,14 @@ def diagnose(run: Run, vehicle: Vehicle, terrain: Terrain, pitch: float = 0.0,
             # a plane fixed in the world; the form the training part supports better
             w = fitted(WORLD_GRADE)
             c = w if w.bic_delta < c.bic_delta else c
-        cands.append(c)
+        return c
+
+    if threads == 1 or len(todo) == 1:
+        cands = [candidate(i, eff) for i, eff in enumerate(todo)]
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+        with ThreadPoolExecutor(max_workers=min(threads, len(todo))) as pool:
+            cands = list(pool.map(candidate, range(len(todo)), todo))
     pe_base = pose_error(run, base, held)
     pose = None
     if pe_base is not None and "wheel_radius" in todo:

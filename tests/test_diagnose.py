@@ -356,7 +356,8 @@ def test_diagnose_in_python_names_a_bad_argument():
                           (dict(pitch=10.0), ParameterError, "within [-0.785, 0.785]"),
                           (dict(effects="grade"), ParameterError, "effects: expected a sequence of candidate names"),
                           (dict(effects=("bogus",)), ParameterError, "found 'bogus'"),
-                          (dict(terrain="vinyl"), ParameterError, "terrain: expected a Terrain")]:
+                          (dict(terrain="vinyl"), ParameterError, "terrain: expected a Terrain"),
+                          (dict(threads=0), ParameterError, "threads: expected a count of threads >= 1, found 0")]:
         with pytest.raises(err, match=says.replace("[", r"\[").replace("(", r"\(")):
             diagnose(run, v, kw.pop("terrain", t), **kw)
     empty = Run({k: a[:0] for k, a in run.columns.items()}, dict(run.meta), "empty.csv")
@@ -364,6 +365,21 @@ def test_diagnose_in_python_names_a_bad_argument():
         diagnose(empty, v, t)
     d = diagnose(run, v, t, effects=["grade"])                  # a list of names is fine
     assert [c.effect for c in d.candidates] == ["grade"]
+
+
+def test_the_candidates_fitted_side_by_side_are_those_fitted_one_after_another():
+    """diagnose fits its candidates on several threads (the replay runs without the GIL):
+    every fitted number, the verdict and the order are those of one thread; a run with a
+    logged pose, so the grade is also fitted as a plane fixed in the world; each
+    candidate's progress is reported once."""
+    run, _ = synth_run("grade", 17, duration=20.0)
+    assert "yaw" in run.columns
+    seen = []
+    one = diagnose(run, P3AT, VINYL, threads=1)
+    many = diagnose(run, P3AT, VINYL, threads=3, progress=lambda i, n, e: seen.append((i, n, e)))
+    assert json.dumps(many.to_json(), sort_keys=True) == json.dumps(one.to_json(), sort_keys=True)
+    assert [c.effect for c in many.candidates] == [c.effect for c in one.candidates]
+    assert sorted(seen) == [(i, len(CANDIDATES), e) for i, e in enumerate(CANDIDATES)]
 
 
 def test_the_report_says_what_the_terminal_says(tmp_path, capsys):
