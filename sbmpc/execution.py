@@ -475,6 +475,33 @@ def stalled_again(stalls: list, X: np.ndarray) -> bool:
     return any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
 
 
+GROW_MAX = 3.0      # the twin's margin grows after repeated turning stalls to at most this many times the file's
+
+
+def twin_grows(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> int:
+    """How many times a stall at X (the last of ``stalls`` [(x, y)]) in a turn
+    (:func:`turning_stall` of the sides' ``currents`` (il, ir) [A]) repeats earlier stalls
+    within MARK_NEAR: 0 for a first stall there or one not in a turn (a straight one marks
+    the slope ahead instead, :func:`marks_wall`). A vehicle that stalls again in a turn
+    where the twin's plans turned it is weaker in turns than that twin (on `steep_hill` two
+    drawn vehicles stalled four times in the same turn from rest, the twin's re-plans
+    starting with the same turn each time): :func:`grown`."""
+    if not turning_stall(currents, vehicle):
+        return 0
+    return sum(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
+
+
+def grown(base: WO.World, world: WO.World, repeats: int) -> WO.World:
+    """``base`` with the margin its twin is made with (:func:`twin_planner`) the file's
+    times 1 + ``repeats`` (at most GROW_MAX times): the twin after a turning stall that
+    repeats earlier ones (:func:`twin_grows`) heavier and gripping harder by that much
+    more, so that its plans turn more gently. ``base`` itself where ``repeats`` is 0."""
+    if repeats <= 0:
+        return base
+    m = world.scenario.planner.margin * min(1.0 + repeats, GROW_MAX)
+    return replace(base, scenario=replace(base.scenario, planner=replace(base.scenario.planner, margin=m)))
+
+
 def marks_wall(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> bool:
     """Whether a stall at X (the last of ``stalls`` [(x, y)]) makes the slope ahead a wall
     in the plans' map (:func:`marked`): stalled again within MARK_NEAR of an earlier stall
@@ -487,4 +514,4 @@ def marks_wall(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> bool:
 __all__ = ["FASTEST", "Executor", "HELD", "MOVING", "STANDING", "holder", "moving", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
            "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again",
-           "marks_wall"]
+           "marks_wall", "twin_grows", "grown", "GROW_MAX"]

@@ -184,21 +184,22 @@ def _aim(world: WO.World) -> WO.World:
 
 
 def _weaker_model(world: WO.World, cost: str, out: "RunResult", X: np.ndarray, fitted: dict | None = None,
-                  base: WO.World | None = None, key: tuple | None = None) -> tuple:
+                  base: WO.World | None = None, key: tuple | None = None, repeats: int = 0) -> tuple:
     """(planning world, its executor, the world it is the twin of) once the run has seen
     the vehicle weaker than the planning one (a stall where its plans drove it, or a
     fresh plan whose first period the twin's guard holds back): the margin's pessimistic
     twin (:func:`sbmpc.planning.world.pessimistic`, :func:`sbmpc.execution.twin_planner`) of the vehicle
     as the periods before a stall measured it (``fitted``: :func:`sbmpc.estimate.fit`;
     without, ``base``: the vehicle as last measured (its factors ``key``), or the planning
-    vehicle; with the file's margin, :func:`sbmpc.estimate.at_stall`) plans from the
-    measured state X on, and the run records when (``RunResult.weaker_from``) and as
-    what (``planned_as``)."""
+    vehicle; with the file's margin, :func:`sbmpc.estimate.at_stall`, grown where a turning
+    stall ``repeats`` earlier ones, :func:`sbmpc.execution.grown`) plans from the measured
+    state X on, and the run records when (``RunResult.weaker_from``) and as what
+    (``planned_as``)."""
     if out.weaker_from is None:
         out.weaker_from = float(X[K.S_T])
     if fitted is not None:
         base = ES.as_measured(world, ES.key(fitted))
-    base = ES.at_stall(world, base or world, key or (1.0,) * len(FIT))
+    base = EX.grown(ES.at_stall(world, base or world, key or (1.0,) * len(FIT)), world, repeats)
     tw = EX.twin_planner(base)
     out.planned_as = base.vehicle.name
     return tw, _Executor(tw, cost), base
@@ -214,7 +215,7 @@ def _named(world: WO.World, planner: WO.World, out: "RunResult", base: WO.World 
         return f"{world.vehicle.name}, then {planner.vehicle.name}"
     of = "" if base is None or base is world else f" of {base.vehicle.name}"
     return (f"{world.vehicle.name}, and from t = {out.weaker_from:.1f} s the margin's twin{of}, "
-            f"x{1.0 + world.scenario.planner.margin:g} mass and grip")
+            f"x{1.0 + (base or world).scenario.planner.margin:g} mass and grip")
 
 
 def _finish(out: RunResult, pieces: list, every: int, status: str, reason: str | None, end: str | None = None,
@@ -638,16 +639,18 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
             said = out.inferred[-1]["inferred"]
             fitted = fit_vehicle(evidence, world, cost) if ps.margin > 0.0 else None
             out.inferred[-1]["fit"] = fitted
-            if ps.margin > 0.0 and (fitted is not None or (not as_twin and said != "stronger")):
+            repeats = EX.twin_grows(stalls, X, (X[K.S_IL], X[K.S_IR]), world.vehicle) if ps.margin > 0.0 else 0
+            if ps.margin > 0.0 and (fitted is not None or repeats or (not as_twin and said != "stronger")):
                 # stalled where the plans drove it: from here on the margin's twin of the
                 # vehicle as the periods before the stall measured it (the online fit; a
                 # vehicle measured lighter or stronger gets a twin no heavier than it needs);
                 # without periods to fit (a stall in a fresh plan's first periods), of the
                 # planning vehicle, unless the run has already measured it
-                planner, model, base = _weaker_model(world, cost, out, X, fitted, base, base_key)
+                planner, model, base = _weaker_model(world, cost, out, X, fitted, base, base_key, repeats)
                 as_twin = True
                 if fitted is not None:
                     base_key = ES.key(fitted)
+            out.inferred[-1]["twin_margin"] = base.scenario.planner.margin if as_twin else None
             why = f"stalled at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
             if ps.margin > 0.0 and EX.marks_wall(stalls, X, (X[K.S_IL], X[K.S_IR]), world.vehicle):
                 # stalled again where it stalled before, with the plans of the vehicle as

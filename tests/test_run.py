@@ -387,6 +387,50 @@ def test_a_stall_in_a_pivot_is_a_turning_stall_and_one_going_straight_is_not(fla
     assert EX.marks_wall([here, here], S, currents, w.vehicle) is not turning
     assert not EX.marks_wall([here], S, currents, w.vehicle)
     assert not EX.marks_wall([(here[0] + 2 * EX.MARK_NEAR, here[1]), here], S, currents, w.vehicle)
+    # ... and the twin grows where a turning stall repeats earlier ones (execution.twin_grows)
+    assert EX.twin_grows([here, here, here], S, currents, w.vehicle) == (2 if turning else 0)
+    assert EX.twin_grows([here], S, currents, w.vehicle) == 0
+    assert EX.twin_grows([(here[0] + 2 * EX.MARK_NEAR, here[1]), here], S, currents, w.vehicle) == 0
+
+
+def test_a_grown_twin_is_the_files_margin_times_the_repeats_and_no_more(flat):
+    """execution.grown: the margin the twin is made with is the file's (0.1) times 1 + the
+    repeated turning stalls, at most GROW_MAX times; nothing else of the world changes."""
+    m = flat.scenario.planner.margin
+    assert EX.grown(flat, flat, 0) is flat
+    for n, want in ((1, 2 * m), (2, 3 * m), (5, EX.GROW_MAX * m)):
+        g = EX.grown(flat, flat, n)
+        assert g.scenario.planner.margin == pytest.approx(want)
+        assert g.vehicle is flat.vehicle and g.terrains is flat.terrains and g.emap is flat.emap
+        assert EX.twin_planner(g).vehicle.mass == pytest.approx(flat.vehicle.mass * (1 + want))
+
+
+# a truth the closed-loop sweep drew for steep_hill (time, sample 6 of closed_loop.json at
+# 3cc4967): 11 % heavier, its terrain's mu_sa 0.50 (0.60) and mu_op 0.40 (0.45)
+STEEP_SAMPLE_6 = {"seed": 2908947467, "vehicle": {"mass": 34.374978773728984, "inertia": 0.6434072677770711,
+                                                  "v_max": 12.405800777140021},
+                  "terrains": [{"mu_roll": 0.05985964021262577, "mu_sa": 0.501705133943624,
+                                "mu_op": 0.39762824066760555}],
+                  "map": {"noise_sd_m": 0.05, "corr_m": 2.0, "seed": 1090939270}, "delay_s": 0.05}
+
+
+@pytest.mark.parametrize("horizon_s", [0.0, 10.0])
+def test_a_vehicle_that_stalls_again_in_the_same_turn_is_planned_for_as_a_grown_twin(horizon_s):
+    """steep_hill's time plans start with a turn from rest, which this drawn vehicle cannot
+    make: it stalled there four times in both modes (the stalls say nothing of the vehicle,
+    no period was driven: the re-plans, all for the same twin x1.1, started with the same
+    turn) and the run failed. Now each turning stall where one was grows the twin (x1.2,
+    then x1.3), whose plans turn more gently, and the vehicle gets going and reaches the
+    goal, whole-route and horizon."""
+    from sbmpc import truth as TT
+    from sbmpc.api import load_world
+    w = load_world(str(SCN / "steep_hill.yaml"), horizon_s=horizon_s)
+    res = R.run(w, "time", TT.from_spec(w, STEEP_SAMPLE_6), wall_limit_s=120)
+    assert res.end == "reached", res.reason
+    inf = res.to_json()["stall_inference"]
+    assert 2 <= len(inf) <= w.scenario.run.max_stalls
+    assert all(math.hypot(i["x"] - 3.0, i["y"] - 13.0) < 0.1 for i in inf)    # all at the start, in the turn
+    assert [i["twin_margin"] for i in inf] == pytest.approx([0.1, 0.2, 0.3][:len(inf)])
 
 
 def test_a_vehicle_that_stalls_where_the_plans_drove_it_is_planned_for_as_the_margins_twin(runup, monkeypatch):

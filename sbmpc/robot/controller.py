@@ -539,6 +539,10 @@ class Controller:
             self._base_key = ES.key(fitted)
         elif not twin and inf["inferred"] != "stronger":
             twin = True
+        repeats = EX.twin_grows(self.stall_at, X, self._stall_currents, self.world.vehicle)
+        if repeats:             # stalled again in a turn where the twin's plans turned it
+            base, twin = EX.grown(base, self.world, repeats), True
+        inf["twin_margin"] = base.scenario.planner.margin if twin else None
         rebuilt = yield from self._replan_as(base, twin, marks)
         if twin and self.weaker_from is None:
             self.weaker_from = float(X[K.S_T])
