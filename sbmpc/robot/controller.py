@@ -39,7 +39,9 @@ default, and gets the same wheel speeds until the period ends):
    planning vehicle (it proved weaker there), and a second stall near an earlier one
    makes the slope ahead a wall in their map (:meth:`Controller._as_weaker`), unless it
    stalled in a turn (the sides' currents pulling against each other at the limit: the
-   ground ahead did not hold it). A stall reported again within the stall test's time,
+   ground ahead did not hold it); such a turning stall grows the twin instead
+   (:func:`sbmpc.execution.grown`: x1.2, then x1.3), whose plans turn more gently. A
+   stall reported again within the stall test's time,
    where the vehicle stood, is the same stall (:meth:`Controller._same_stall`).
 
 :meth:`Controller.step` never waits on a plan (``lockstep=False``, a robot): where the
