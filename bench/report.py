@@ -148,7 +148,8 @@ def _ab(a: dict, b: dict, caption: str) -> str:
 
     def ends(g):
         e = g["ends"]
-        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)}"
+        tipped = f" / **{e['tipped']} tipped**" if e.get("tipped") else ""
+        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)}{tipped}"
     for key, gb in b["groups"].items():
         ga = a["groups"][key]
         lines.append(f"| {key.replace('/', ', ')} | {ga['ends'].get('reached', 0)} → {gb['ends'].get('reached', 0)} | "
@@ -156,7 +157,7 @@ def _ab(a: dict, b: dict, caption: str) -> str:
                      f"{_ratio(ga['over_own_plan'])} → {_ratio(gb['over_own_plan'])} |")
     keys = list(b["groups"])
     ta = {"ends": {e: sum(a["groups"][k]["ends"].get(e, 0) for k in keys) for e in
-                   ("reached", "stopped", "no_path", "failed", "timeout")}}
+                   ("reached", "stopped", "no_path", "failed", "timeout", "tipped")}}
     tb = {"ends": {e: sum(b["groups"][k]["ends"].get(e, 0) for k in keys) for e in ta["ends"]}}
     lines.append(f"| **all {sum(b['groups'][k]['runs'] for k in keys)}** | {ta['ends']['reached']} → "
                  f"{tb['ends']['reached']} | {ends(ta)} → {ends(tb)} | "
@@ -184,6 +185,31 @@ def closed_loop_backoff() -> str:
     return _ab(a, b, f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
                      f"{' '.join(b['scenarios'])} --families --modes horizon --workers {b['workers']}` "
                      f"({_when(a, b)}; the same truths as the rows before, from closed_loop_grade0.json). "
+                     "Each cell: before → after.*")
+
+
+def _tips_since(c: dict) -> str:
+    """What the README's closed-loop row adds where the table's roll-overs were measured
+    again since, on the same truths (closed_loop_runon.json): how many of those rows'
+    runs tip over now, and from which commit."""
+    if not c["totals"]["ends"].get("tipped") or not (ROOT / "bench" / "results" / "closed_loop_runon.json").exists():
+        return ""
+    r = _load("closed_loop_runon.json")
+    if r["totals"]["ends"].get("tipped", 0) != 0:
+        return ""
+    before = sum(c["groups"][k]["ends"].get("tipped", 0) for k in r["groups"] if k in c["groups"])
+    if before != c["totals"]["ends"]["tipped"]:
+        return ""
+    return f" (none of them since {r['commit']}, on the same truths)"
+
+
+def closed_loop_runon() -> str:
+    """robustness.md: the rows of the guard's run-on rule, before (the whole table,
+    closed_loop.json) and after (closed_loop_runon.json), on the same truths."""
+    a, b = _load("closed_loop.json"), _load("closed_loop_runon.json")
+    return _ab(a, b, f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
+                     f"{' '.join(b['scenarios'])} --families --workers {b['workers']}` "
+                     f"({_when(a, b)}; the same truths as the whole table's rows, run from the same folder). "
                      "Each cell: before → after.*")
 
 
@@ -320,8 +346,8 @@ def readme_table() -> str:
                  f"{t['runs']} runs on the shipped maps, the vehicle's parameters drawn at random (10 % sd), the map 5 cm off, commands "
                  f"50 ms late: {_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn "
                  f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} "
-                 f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map; "
-                 "the others stop or fail and say why", _when(c)))
+                 f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map"
+                 + _tips_since(c) + "; the others stop or fail and say why", _when(c)))
     k = _load("controller.json")
     runs = k["runs"].values()
     rows.append(("[on a robot](docs/performance.md#the-controllers-step)",
@@ -986,7 +1012,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_l
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
           "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade,
-          "closed-loop-backoff": closed_loop_backoff, "hand-over-beside": hand_over_beside,
+          "closed-loop-backoff": closed_loop_backoff, "closed-loop-runon": closed_loop_runon, "hand-over-beside": hand_over_beside,
           "diagnose-speed": diagnose_speed, "warthog": warthog,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
