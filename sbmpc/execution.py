@@ -494,10 +494,16 @@ def back_along(guards: list, X: np.ndarray, way: list, tried: int, tilt: float =
     return None, tried
 
 
+def stalls_near(stalls: list, X: np.ndarray) -> int:
+    """How many earlier stalls of ``stalls`` [(x, y)] (the last of them is this one, the
+    vehicle stalled at X) lie within MARK_NEAR of X."""
+    return sum(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
+
+
 def stalled_again(stalls: list, X: np.ndarray) -> bool:
     """Whether the vehicle at X, stalled, is within MARK_NEAR of an earlier stall of
     ``stalls`` [(x, y)] (the last of them is this one): the slope ahead is to be marked."""
-    return any(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
+    return stalls_near(stalls, X) > 0
 
 
 GROW_MAX = 3.0      # the twin's margin grows after repeated turning stalls to at most this many times the file's
@@ -511,9 +517,7 @@ def twin_grows(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> int:
     where the twin's plans turned it is weaker in turns than that twin (on `steep_hill` two
     drawn vehicles stalled four times in the same turn from rest, the twin's re-plans
     starting with the same turn each time): :func:`grown`."""
-    if not turning_stall(currents, vehicle):
-        return 0
-    return sum(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
+    return stalls_near(stalls, X) if turning_stall(currents, vehicle) else 0
 
 
 def grown(base: WO.World, world: WO.World, repeats: int) -> WO.World:
@@ -538,5 +542,5 @@ def marks_wall(stalls: list, X: np.ndarray, currents: tuple, vehicle) -> bool:
 
 __all__ = ["FASTEST", "Executor", "HELD", "MOVING", "STANDING", "holder", "moving", "tilt_error", "HorizonStats", "Replan", "SETTLED", "STUCK_HORIZONS", "deviation", "guards",
            "held", "keeps_margin", "protected", "settles", "stopped", "weaker", "MARK_NEAR", "MARK_RADIUS", "ahead",
-           "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again",
+           "marked", "twin_planner", "turning_stall", "RETRACE_PERIODS", "retrace", "back_along", "stalled_again", "stalls_near",
            "marks_wall", "twin_grows", "grown", "GROW_MAX"]
