@@ -8,6 +8,7 @@ bench/results/diagnose.json.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -39,7 +40,8 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         dn = diagnose(run, v, t, threads=threads)
         el_n = time.perf_counter() - t0
-        if dn.to_json() != d.to_json():
+        same = json.dumps(dn.to_json(), sort_keys=True) == json.dumps(d.to_json(), sort_keys=True)   # (NaN != NaN)
+        if not same:
             raise SystemExit(f"{effect}: the diagnosis on {threads} threads differs from the one on one thread")
         res["runs"].append({"effect": effect, "hidden": hidden, "samples": len(run), "cause": d.cause,
                             "fitted": d.candidates[0].params, "diagnosis_time_s": round(el, 2),
