@@ -99,6 +99,13 @@ STANDING = math.radians(0.1)   # rad: how much steeper than where it stands a pe
 RUN_ON = 0.05       # m: how much further than a guard's prediction a truth may come to rest (holder, _runs_on)
 
 
+def guard_aside(world: WO.World) -> float:
+    """How far [m] to either side of a prediction's pose the guard judges its band: half
+    the planner's allowance (``planner.margin_aside_m``), as its band is half the
+    planner's tip-over margin."""
+    return 0.5 * world.scenario.planner.margin_aside_m
+
+
 class Executor:
     """Steps one world's closed-loop model through controls, period by period, at its
     vehicle's controller period (the paper's 1 kHz digital PID). ``delay_s``: the
@@ -117,6 +124,9 @@ class Executor:
             # its own fresh plans' periods 50 times)
             ps = world.scenario.planner
             self.Q[SS.Q_TIPM] = math.radians(ps.tip_over_deg - 0.5 * ps.margin_tip_deg)
+            # and half its allowance aside (planner.margin_aside_m): a truth that drifted
+            # off its plan's pose by less than the other half is not held back for it
+            self.Q[SS.Q_ASIDE] = guard_aside(world)
         self.world = world
         self.lag = int(round(delay_s / self.dt))
         self.pipe = None            # [[wl, wr, steps]]: commands issued, not yet applied
@@ -256,7 +266,7 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     optimistic one, 4: the fastest, which holds a period that leaves the map or closes in on
     its edge only), 0: none."""
     where = guards[0].world if guards else None
-    floor = PB.standing_tilt(where, X) + STANDING if where is not None else 0.0
+    floor = PB.standing_tilt(where, X, guard_aside(where)) + STANDING if where is not None else 0.0
     brake = (0.0, 0.0, control[2])
     for j, g in enumerate(guards):
         edge = j == 3           # the fastest twin: the map's edge alone (guards)
@@ -281,12 +291,13 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
 def _runs_on(g: "Executor", X: np.ndarray, S: np.ndarray, tilt_error: float, floor: float) -> bool:
     """Whether a prediction from X that comes to rest at S would be within half the
     tip-over margin (the guard's band, ``tilt_error`` lower, no lower than ``floor``) had
-    the vehicle come to rest RUN_ON further along the way it came: a truth a few
-    centimetres beyond every prediction is then still out of the band. At the foot of a
-    flank the map's tilt rises by degrees a centimetre (`narrow_pass`'s pass: 26 to 30 deg
-    in 5 cm); a drawn `narrow_pass` truth 24 % lighter, braking at full speed towards the
-    pass's flank, came to rest 4 cm beyond the optimistic twin's prediction and rolled
-    over (2026-12-07)."""
+    the vehicle come to rest RUN_ON further along the way it came, or there and
+    ``planner.margin_aside_m`` to either side (as the kernel judges every step: a truth
+    a few centimetres beyond or beside every prediction is then still out of the band).
+    At the foot of a flank the map's tilt rises by degrees a centimetre (`narrow_pass`'s
+    pass: 26 to 30 deg in 5 cm); a drawn `narrow_pass` truth 24 % lighter, braking at
+    full speed towards the pass's flank, came to rest 4 cm beyond the optimistic twin's
+    prediction and rolled over (2026-12-07)."""
     if g.world is None:
         return False
     d = np.array([S[K.S_X] - X[K.S_X], S[K.S_Y] - X[K.S_Y]])
@@ -297,7 +308,7 @@ def _runs_on(g: "Executor", X: np.ndarray, S: np.ndarray, tilt_error: float, flo
     S2[K.S_X] += RUN_ON * d[0] / n
     S2[K.S_Y] += RUN_ON * d[1] / n
     band = max(g.Q[SS.Q_TIPM] - tilt_error, floor)
-    return PB.standing_tilt(g.world, S2) > band
+    return PB.standing_tilt(g.world, S2, g.Q[SS.Q_ASIDE]) > band
 
 
 def _approaches_edge(world, X: np.ndarray, S: np.ndarray) -> bool:

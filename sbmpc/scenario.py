@@ -95,7 +95,9 @@ class PlannerSettings:
     far below tip_over_deg; margin_heading_deg: the twin meets the steeper of the grades
     along headings this far either side; margin_grade_deg: the twin meets every grade
     this much steeper in the direction it drives (the map's slopes that far off: about atan(sd / correlation
-    length) of its heights' error, 1.4 deg for 5 cm at 2 m); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
+    length) of its heights' error, 1.4 deg for 5 cm at 2 m); margin_aside_m: pitch and roll
+    are also kept within the margin with the vehicle this far [m] to either side of its
+    pose (beside a wall the map's roll rises by degrees a centimetre); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
     with ``--horizon``) plans receding-horizon, each plan a search this many seconds
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
     the period before (:mod:`sbmpc.planning.horizon`; 0: whole-route plans); horizon_budget_s,
@@ -150,6 +152,7 @@ class PlannerSettings:
     margin_tip_deg: float = 5.0
     margin_heading_deg: float = 0.0
     margin_grade_deg: float = 0.0
+    margin_aside_m: float = 0.1
     horizon_s: float = 0.0
     horizon_budget_s: float = 0.09
     horizon_first_budget_s: float = 0.5
@@ -261,6 +264,7 @@ _SETTING_RANGES = {
     "margin_tip_deg": (float, 0.0, 30.0),
     "margin_heading_deg": (float, 0.0, 45.0),
     "margin_grade_deg": (float, 0.0, 10.0),
+    "margin_aside_m": (float, 0.0, 1.0),
     "value_cell": (float, 0.05, 10.0),
     "value_w2": (float, 1.0, 100.0),
     "value_energy_w2": (float, 1.0, 100.0),

@@ -4,6 +4,7 @@ drive at 1 kHz, the tip-over margin, the fallback, the report and the run's guar
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from sbmpc.planning import world as WO
 from sbmpc.planning.margin import report, robustness
 from sbmpc.problems import skidsteer as SS
 
+ROOT = Path(__file__).resolve().parents[1]
 P3AT = dict(v_max=12.0, k=1.3825, ra=0.706, imax=3.62)
 
 
@@ -230,7 +232,9 @@ def test_a_search_from_inside_the_tip_margin_may_lead_out_of_it_and_none_steeper
     Q, data = PB.pack_world(w, "time", margin=True)
     assert math.degrees(Q[SS.Q_TIPM]) == pytest.approx(25.0)
     inside = PB.from_inside(Q, w, X)
-    assert math.degrees(inside[SS.Q_TIPM]) == pytest.approx(math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
+    # where it stands, its allowance aside included (planner.margin_aside_m: the flank steepens uphill)
+    assert math.degrees(inside[SS.Q_TIPM]) == pytest.approx(math.degrees(PB.standing_tilt(w, X, Q[SS.Q_ASIDE])), abs=1e-6)
+    assert PB.standing_tilt(w, X, Q[SS.Q_ASIDE]) > PB.standing_tilt(w, X)
     assert PB.from_inside(Q, w, _flank(20.0)[1]) is Q                 # flatter than the margin: as it was
     X0 = WO._start(w, X)
 
@@ -246,6 +250,43 @@ def test_a_search_from_inside_the_tip_margin_may_lead_out_of_it_and_none_steeper
     assert edge(inside, (-3.0, -3.0, 1.0)) > 0.0                     # backing down: out of it
 
 
+@given(grade=st.floats(-20.0, 20.0), roll=st.floats(-20.0, 20.0), yaw=st.floats(-180.0, 180.0),
+       aside=st.floats(0.0, 0.5))
+def test_on_a_plane_the_margins_aside_changes_no_tilt(grade, roll, yaw, aside):
+    """planner.margin_aside_m judges the tilt with the vehicle moved aside; on a plane the
+    tilt is the same everywhere (the map's bilinear heights are exact there), so it
+    changes nothing: the allowance bites only where the tilt changes with the place."""
+    w = _plane(grade, roll, size=(20.0, 20.0))
+    X = WO.start_state(w)
+    X[K.S_X], X[K.S_Y], X[K.S_YAW] = 10.0, 10.0, math.radians(yaw)
+    assert PB.standing_tilt(w, X, aside) == pytest.approx(PB.standing_tilt(w, X), abs=1e-9)
+
+
+def test_beside_narrow_pass_wall_the_margin_keeps_the_vehicle_its_aside_off_the_wall():
+    """narrow_pass's pass wall rises 1.6 m in one 0.25 m cell: a vehicle whose wheels
+    stand 2 cm short of its foot is level, 5 cm further aside (3 cm onto it) it rolls 25
+    deg or more (about 8 deg a centimetre; a drawn truth a centimetre off its prediction rolled over
+    there, 2026-12-07). An edge along the wall that close fails on the margin with the
+    default 10 cm aside, and passes with none; 10 cm further from the wall it passes."""
+    base = api.load_world(ROOT / "scenarios" / "narrow_pass.yaml")
+    aside = base.scenario.planner.margin_aside_m
+    assert aside == 0.1
+    X = WO.start_state(base)
+    X[K.S_X], X[K.S_Y], X[K.S_YAW] = 14.8, 10.28, 0.0        # left wheels at 10.48: the wall's foot at 10.5
+    assert PB.standing_tilt(base, X) == 0.0
+    assert math.degrees(PB.standing_tilt(base, X, 0.05)) > 25.0
+    X1 = X.copy()
+    X1[K.S_Y] = 10.18
+    assert math.degrees(PB.standing_tilt(base, X1, aside)) == 0.0
+
+    def edge(world, X):
+        Q, data = PB.pack_world(world, "time", margin=True)
+        return SS.propagate(Q, data, WO._start(world, X), np.array((4.0, 4.0, 1.0)), np.zeros(SS.NX))
+    assert edge(base, X) == -SS.MARGIN
+    assert edge(api.load_world(ROOT / "scenarios" / "narrow_pass.yaml", margin_aside_m=0.0), X) > 0.0
+    assert edge(base, X1) > 0.0
+
+
 def test_a_horizon_planner_whose_scenario_starts_inside_the_margin_raises_it_for_that_start_alone():
     """The horizon planner's problem is a template for plans from other starts: a
     scenario that starts on the 27 deg flank raises the margin's limit for a plan from
@@ -256,7 +297,7 @@ def test_a_horizon_planner_whose_scenario_starts_inside_the_margin_raises_it_for
     hp = HorizonPlanner.of(w, "time")
     assert math.degrees(hp.prob.params[SS.Q_TIPM]) == pytest.approx(25.0)
     assert math.degrees(hp._params(WO._start(w, X))[SS.Q_TIPM]) == pytest.approx(
-        math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
+        math.degrees(PB.standing_tilt(w, X, w.scenario.planner.margin_aside_m)), abs=1e-6)
     assert math.degrees(hp._params(WO._start(w, _flank(20.0)[1]))[SS.Q_TIPM]) == pytest.approx(25.0)
 
 

@@ -308,3 +308,23 @@ def test_specs_that_differ_only_in_how_they_run_meet_the_same_truths(tmp_path):
     for t in tb:
         if t["sample"] < 3:
             assert t["draw_key"] == key[(t["scenario"], t["sample"])]
+
+
+def test_a_scenario_meets_the_same_truths_from_any_folder(tmp_path):
+    """The draw takes a scenario by its file's content, not its path: the same file in
+    another folder (a clone, a worktree) meets the same truths; a changed one others."""
+    import shutil
+    for d in ("one", "two", "three"):
+        (tmp_path / d).mkdir()
+        shutil.copy(ROOT / "scenarios" / "flat.yaml", tmp_path / d / "flat.yaml")
+    text = (tmp_path / "three" / "flat.yaml").read_text()
+    (tmp_path / "three" / "flat.yaml").write_text(text.replace("radius: 0.5}", "radius: 0.6}", 1))
+    keys = {}
+    for d in ("one", "two", "three"):
+        spec = tmp_path / f"{d}.yaml"
+        spec.write_text(CLOSED.replace(f"[{ROOT}/scenarios/flat.yaml, {ROOT}/scenarios/unreachable.yaml]",
+                                       f"[{tmp_path / d / 'flat.yaml'}]"))
+        keys[d] = sorted((t["sample"], t["draw_key"]) for t in SW.tasks(SW.load_spec(spec)))
+    assert keys["one"] == keys["two"]
+    assert text != (tmp_path / "three" / "flat.yaml").read_text()
+    assert {k for _, k in keys["three"]}.isdisjoint({k for _, k in keys["one"]})

@@ -19,15 +19,22 @@ from .world import FIXED_CONTROLS, World, _start, control_set, hold_mode, pessim
 SETTLE_DEPTH = 3      # edges from the start within which a child may stay in its parent's grid cell
 
 
-def standing_tilt(world: World, X: np.ndarray) -> float:
+def standing_tilt(world: World, X: np.ndarray, aside: float = 0.0) -> float:
     """The larger of the pitch's and the roll's magnitudes [rad] of a vehicle at the
     planner state X on the world's map, as the edges judge the tip-over limit and its
-    margin (:func:`maps.grid.pitch_roll_at`; 0 off the map)."""
+    margin (:func:`maps.grid.pitch_roll_at`; 0 off the map); with ``aside`` [m] the
+    largest also over the vehicle moved that far to its left and right, as the edges
+    judge the margin (``planner.margin_aside_m``, :func:`sbmpc.problems.skidsteer.aside_tilts`)."""
     e = world.emap
-    if not e.contains(float(X[K.S_X]), float(X[K.S_Y])):
+    x, y, yaw = float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW])
+    if not e.contains(x, y):
         return 0.0
-    p, r = e.pitch_roll(float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW]), world.half_length, world.half_width)
-    return max(abs(p), abs(r))
+    p, r = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
+    tilt = max(abs(p), abs(r))
+    if aside > 0.0:
+        tilt = max(tilt, math.atan(SS.aside_tilts(e.heights, e.resolution, e.origin[0], e.origin[1], x, y, yaw,
+                                                  world.half_length, world.half_width, aside)))
+    return tilt
 
 
 def from_inside(Q: np.ndarray, world: World, X: np.ndarray) -> np.ndarray:
@@ -37,7 +44,7 @@ def from_inside(Q: np.ndarray, world: World, X: np.ndarray) -> np.ndarray:
     edges may lead out of it and none steeper (every edge from there failed on the margin
     at its first step, and the fallback without the margin rode the tip-over limit
     itself); Q itself elsewhere (a copy where changed)."""
-    tilt = standing_tilt(world, X)
+    tilt = standing_tilt(world, X, Q[SS.Q_ASIDE])
     if tilt <= Q[SS.Q_TIPM] or Q[SS.Q_TIPM] >= Q[SS.Q_TIP]:
         return Q
     Q = Q.copy()
@@ -90,6 +97,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     Q[SS.Q_OFFTW] = offw if twins else -1
     Q[SS.Q_TWHEAD] = math.radians(ps.margin_heading_deg)
     Q[SS.Q_TWGRADE] = math.radians(ps.margin_grade_deg)
+    Q[SS.Q_ASIDE] = ps.margin_aside_m
     Q[SS.Q_TWLAG] = scn.run.tol_xy     # the most the twin falls behind: a run re-plans beyond it
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny

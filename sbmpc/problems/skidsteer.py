@@ -90,13 +90,27 @@ NO_ROWS = np.int64(0)   # no record rows written yet, as an int64: a literal 0 m
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
  Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG,
- Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2, Q_TWGRADE) = range(43)
-NQ = 43
+ Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2, Q_TWGRADE, Q_ASIDE) = range(44)
+NQ = 44
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
 SQRT2 = math.sqrt(2.0)
 COST_TIME, COST_ENERGY = 0.0, 1.0
+
+
+@njit(cache=True, error_model="numpy")
+def aside_tilts(H, res, ox, oy, x, y, yaw, half_length, half_width, aside):
+    """The larger grade magnitude [m/m] (pitch's or roll's tangent,
+    :func:`maps.grid.slope_grades_at`) of the vehicle at (x, y) heading yaw moved
+    ``aside`` [m] to its left and to its right (``planner.margin_aside_m``): beside a
+    wall the map's roll rises by degrees a centimetre, and a vehicle a few centimetres
+    off its predicted pose meets it."""
+    lx = -aside * math.sin(yaw)
+    ly = aside * math.cos(yaw)
+    a1, c1 = slope_grades_at(H, res, ox, oy, x + lx, y + ly, yaw, half_length, half_width)
+    a2, c2 = slope_grades_at(H, res, ox, oy, x - lx, y - ly, yaw, half_length, half_width)
+    return max(abs(a1), abs(c1), abs(a2), abs(c2))
 
 
 @njit(cache=True, error_model="numpy")
@@ -124,6 +138,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     # the margin (module doc): the tip limit less its margin (= tip: none), the share of
     # the drive's reach kept in reserve while turning (0: none), the pessimistic twin
     tan_tipm = math.tan(min(params[Q_TIPM], tip))
+    aside = params[Q_ASIDE] if params[Q_TIPM] < tip else 0.0   # the margin also judges the vehicle this far aside [m]
     reserve = params[Q_RESERVE]
     full = 1.0 - reserve
     offw = int(params[Q_OFFTW])
@@ -167,6 +182,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
             end = -TIP
             break
         if abs(along) > tan_tipm or abs(across) > tan_tipm:
+            end = -MARGIN
+            break
+        if aside > 0.0 and aside_tilts(H, res, ox, oy, x, y, yaw_i, params[Q_HL], params[Q_HW], aside) > tan_tipm:
             end = -MARGIN
             break
         if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:

@@ -87,11 +87,23 @@ def expand(task: dict, rob: dict) -> list:
     the seed of its truth) hashes the task without what only the plans and runs read
     (the planner settings, the modes, their settings, the sample count): two specs, or
     two settings of one, that differ only there meet the same truths, sample for
-    sample."""
-    drawn = dict(task, settings={}, robustness={k: rob.get(k) for k in DRAWN_BY})
+    sample. The scenario enters by its file's content, not its path: the same
+    scenario met from another folder (a clone, a worktree) meets the same truths (by
+    its path, two tables of 2026-12-07 meant to be on the same truths were not)."""
+    drawn = dict(task, scenario=_content(task["scenario"]), settings={},
+                 robustness={k: rob.get(k) for k in DRAWN_BY})
     key = digest(drawn)
     return [dict(task, sample=k, run_mode=m, draw_key=key)
             for k in range(int(rob["samples"])) for m in rob.get("modes", ["whole_route"])]
+
+
+def _content(path) -> str:
+    """16 hex digits of a scenario file's bytes (its path where it cannot be read: the
+    loader says why, later)."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+    except OSError:
+        return str(path)
 
 
 def truth_seed(rob: dict, task: dict) -> int:
