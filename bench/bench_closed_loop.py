@@ -41,8 +41,9 @@ FAULTS = {"delay_s": 0.05, "map": {"noise_sd_m": 0.05, "corr_m": 2.0}}
 
 
 def spec_text(samples: int, modes: list, families: list, scenarios: list, adapt: int = 0, firm: bool = False,
-              planner: dict | None = None) -> str:
-    run = {**({"adapt_periods": adapt} if adapt else {}), **({"firm_margin": True} if firm else {})}
+              planner: dict | None = None, run_settings: dict | None = None) -> str:
+    run = {**({"adapt_periods": adapt} if adapt else {}), **({"firm_margin": True} if firm else {}),
+           **(run_settings or {})}
     return json.dumps({
         **({"planner": {k: [v] for k, v in planner.items()}} if planner else {}),
         "scenarios": [str(ROOT / "scenarios" / f"{s}.yaml") for s in scenarios],
@@ -113,6 +114,8 @@ def main() -> int:
     ap.add_argument("--firm-margin", dest="firm", action="store_true", help="run.firm_margin of every run")
     ap.add_argument("--planner", nargs="*", default=[], metavar="KEY=VALUE",
                     help="planner settings of every plan (numbers), e.g. margin_grade_deg=1.4 (the truths are the same)")
+    ap.add_argument("--run", nargs="*", default=[], metavar="KEY=VALUE", dest="run_settings",
+                    help="run settings of every run (numbers), e.g. max_stalls=12 (the truths are the same)")
     ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
     ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
@@ -120,11 +123,17 @@ def main() -> int:
         planner = {k: float(v) for k, v in (p.split("=", 1) for p in a.planner)}
     except ValueError:
         ap.error(f"--planner: expected KEY=NUMBER pairs, found {' '.join(a.planner)}")
+    try:
+        run_settings = {k: (int(v) if v.lstrip("-").isdigit() else float(v))
+                        for k, v in (p.split("=", 1) for p in a.run_settings)}
+    except ValueError:
+        ap.error(f"--run: expected KEY=NUMBER pairs, found {' '.join(a.run_settings)}")
     started = stamp.commit()    # the code this run loaded (a resumed sweep: the code it resumed with)
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
     spec = a.out / "spec.yaml"
-    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios, a.adapt, a.firm, planner))
+    spec.write_text(spec_text(a.samples, a.modes, a.families, a.scenarios, a.adapt, a.firm, planner,
+                                run_settings))
     tasks = SW.tasks(SW.load_spec(spec))
     t0 = time.perf_counter()
 
@@ -145,7 +154,7 @@ def main() -> int:
            "machine": platform.machine(),
            "samples": a.samples, "modes": a.modes, "vary": VARY, "faults": FAULTS, "families": a.families,
            "scenarios": a.scenarios, "adapt_periods": a.adapt, "firm_margin": a.firm,
-           "planner": planner,
+           "planner": planner, "run": run_settings,
            "engine": res["engine"], "workers": res["workers"], "wall_s": round(time.perf_counter() - t0, 1),
            "ran": res["ran"], "skipped": res["skipped"], **summarise(rows),
            "not_reached": [{"scenario": r["scenario"], "family_seed": r["family_seed"], "cost": r["cost"],

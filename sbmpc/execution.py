@@ -511,6 +511,13 @@ def stalls_near(stalls: list, X: np.ndarray) -> int:
     return sum(math.hypot(a - X[K.S_X], b - X[K.S_Y]) < MARK_NEAR for a, b in stalls[:-1])
 
 
+def past_stall_limit(stalls: list, X: np.ndarray, settings) -> bool:
+    """Whether a run whose vehicle stalled at X (the last of ``stalls`` [(x, y)]) has
+    stalled more than ``run.max_stalls`` times in all, or more than
+    ``run.max_stalls_near`` times within MARK_NEAR of X (stuck there)."""
+    return len(stalls) > settings.max_stalls or stalls_near(stalls, X) + 1 > settings.max_stalls_near
+
+
 def stalled_again(stalls: list, X: np.ndarray) -> bool:
     """Whether the vehicle at X, stalled, is within MARK_NEAR of an earlier stall of
     ``stalls`` [(x, y)] (the last of them is this one): the slope ahead is to be marked."""

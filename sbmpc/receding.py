@@ -247,7 +247,7 @@ def _stalled(out: RunResult, stalls: list, X: np.ndarray, Xt: np.ndarray, real: 
     stalls again."""
     out.stalls += 1
     stalls.append((float(X[K.S_X]), float(X[K.S_Y])))
-    if out.stalls > out.settings.max_stalls:
+    if EX.past_stall_limit(stalls, X, out.settings):
         return ES.stall_failure(stalls, name, inferred)
     _protected(Xt, real)
     return None

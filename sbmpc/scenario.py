@@ -188,6 +188,8 @@ class RunSettings:
     planner's); stall_replan_time_budget_s: that of a re-plan the vehicle waits for (it
     stalled, or the tip-over guard held its next period back); max_replans: the run fails beyond it; max_stalls: stalls of the vehicle
     (each followed by a re-plan from where it stopped) before the run fails;
+    max_stalls_near: stalls within ``execution.MARK_NEAR`` of one another (the vehicle
+    stuck at one place) before the run fails;
     max_time_factor: the run fails when it takes longer than this times the first
     plan's travel time (plus 30 s); control_period_s: how often a horizon run's controller
     is called (:class:`sbmpc.robot.Controller`, the robot's loop: 0.05-1 s);
@@ -211,6 +213,7 @@ class RunSettings:
     stall_replan_time_budget_s: float = 30.0
     max_replans: int = 50
     max_stalls: int = 3
+    max_stalls_near: int = 3
     max_time_factor: float = 3.0
     control_period_s: float = 0.1
     adapt_periods: int = 0
@@ -227,6 +230,7 @@ _RUN_RANGES = {
     "stall_replan_time_budget_s": (float, 0.01, 86400.0),
     "max_replans": (int, 0, 100000),
     "max_stalls": (int, 0, 1000),
+    "max_stalls_near": (int, 0, 1000),
     "max_time_factor": (float, 1.0, 1000.0),
     "control_period_s": (float, 0.05, 1.0),
     "adapt_periods": (int, 0, 1000),

@@ -873,3 +873,28 @@ def test_a_horizon_run_along_the_pass_wall_does_not_roll_over():
     res = R.run(w, "energy", TT.from_spec(w, NARROW_SAMPLE_9), wall_limit_s=300)
     assert res.end != "tipped", res.reason
     assert res.end == "reached", res.reason
+
+
+def test_the_stall_limit_counts_stalls_in_all_and_at_one_place():
+    """run.max_stalls bounds a run's stalls in all, run.max_stalls_near those within
+    MARK_NEAR of one another (stuck at one place): with 12 in all and 3 near, four stalls
+    at four places go on, a fourth within 1.5 m of three others ends the run, and so does
+    a thirteenth anywhere."""
+    from sbmpc import execution as EX
+    from sbmpc.scenario import RunSettings
+    rs = RunSettings(max_stalls=12, max_stalls_near=3)
+
+    def X(x, y):
+        S = np.zeros(K.NS)
+        S[K.S_X], S[K.S_Y] = x, y
+        return S
+    apart = [(10.0 * k, 0.0) for k in range(4)]
+    assert not EX.past_stall_limit(apart, X(*apart[-1]), rs)
+    here = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (0.5, 0.5)]
+    assert EX.past_stall_limit(here, X(*here[-1]), rs)
+    assert not EX.past_stall_limit(here[:3], X(*here[2]), rs)
+    many = [(10.0 * k, 0.0) for k in range(13)]
+    assert EX.past_stall_limit(many, X(*many[-1]), rs)
+    assert not EX.past_stall_limit(many[:12], X(*many[11]), rs)
+    default = RunSettings()                       # 3 in all, as before
+    assert EX.past_stall_limit(apart, X(*apart[-1]), default)

@@ -660,7 +660,7 @@ class Controller:
         row = self._samples[-1][1]
         self._stall_currents = ((row[K.R_IL], row[K.R_IR]) if not np.isnan(row[K.R_IL])
                                 else (float(X[K.S_IL]), float(X[K.S_IR])))
-        if self.stalls > self.settings.max_stalls:
+        if EX.past_stall_limit(self.stall_at, X, self.settings):
             inf = self.evidence.infer(X)
             self.inferred.append(inf)
             return ES.stall_failure(self.stall_at, self._base.vehicle.name, inf)
