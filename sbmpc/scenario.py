@@ -96,8 +96,8 @@ class PlannerSettings:
     along headings this far either side; margin_grade_deg: the twin meets every grade
     this much steeper in the direction it drives (the map's slopes that far off: about atan(sd / correlation
     length) of its heights' error, 1.4 deg for 5 cm at 2 m); margin_aside_m: pitch and roll
-    are also kept within the margin with the vehicle this far [m] to either side of its
-    pose (beside a wall the map's roll rises by degrees a centimetre); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
+    are also kept within the margin (within the tip-over limit in a plan made without
+    it) with the vehicle this far [m] to either side of its pose, on a search's edges (beside a wall the map's roll rises by degrees a centimetre); horizon_s: ``sbmpc run`` (and ``plan``/``compare``
     with ``--horizon``) plans receding-horizon, each plan a search this many seconds
     ahead with the cost-to-go grid as its terminal cost, made while the vehicle drives
     the period before (:mod:`sbmpc.planning.horizon`; 0: whole-route plans); horizon_budget_s,

@@ -232,9 +232,8 @@ def test_a_search_from_inside_the_tip_margin_may_lead_out_of_it_and_none_steeper
     Q, data = PB.pack_world(w, "time", margin=True)
     assert math.degrees(Q[SS.Q_TIPM]) == pytest.approx(25.0)
     inside = PB.from_inside(Q, w, X)
-    # where it stands, its allowance aside included (planner.margin_aside_m: the flank steepens uphill)
-    assert math.degrees(inside[SS.Q_TIPM]) == pytest.approx(math.degrees(PB.standing_tilt(w, X, Q[SS.Q_ASIDE])), abs=1e-6)
-    assert PB.standing_tilt(w, X, Q[SS.Q_ASIDE]) > PB.standing_tilt(w, X)
+    assert math.degrees(inside[SS.Q_TIPM]) == pytest.approx(math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
+    assert Q[SS.Q_ASIDE] == 0.1 and inside[SS.Q_ASIDE] == 0.0     # inside itself: no allowance aside left
     assert PB.from_inside(Q, w, _flank(20.0)[1]) is Q                 # flatter than the margin: as it was
     X0 = WO._start(w, X)
 
@@ -287,6 +286,36 @@ def test_beside_narrow_pass_wall_the_margin_keeps_the_vehicle_its_aside_off_the_
     assert edge(base, X1) > 0.0
 
 
+def test_beside_the_wall_a_search_keeps_the_clearance_it_has_and_a_drive_judges_the_pose():
+    """A vehicle that drifted to 0.25 m from narrow_pass's pass centre line, towards its
+    north wall, is level but has less clearance than the 10 cm allowance: a search from
+    there keeps the allowance it has (from_inside shrinks it, to the millimetre) rather
+    than raising the margin's limit to the tilt 10 cm aside (past the tip-over limit there,
+    which let plans drive along the wall's foot): straight on along the wall passes,
+    turning towards it fails. A plan made without the margin keeps the allowance against
+    the tip-over limit; a drive (the truth's, the 1 kHz check's) judges the pose alone."""
+    w = api.load_world(ROOT / "scenarios" / "narrow_pass.yaml")
+    X = WO.start_state(w)
+    X[K.S_X], X[K.S_Y], X[K.S_YAW] = 15.05, 10.25, 0.0       # just past the wall's crest
+    Q, data = PB.pack_world(w, "time", margin=True)
+    assert PB.standing_tilt(w, X) == 0.0 and PB.standing_tilt(w, X, 0.1) > Q[SS.Q_TIP]
+    inside = PB.from_inside(Q, w, X)
+    a = inside[SS.Q_ASIDE]
+    assert inside[SS.Q_TIPM] == Q[SS.Q_TIPM] and 0.0 < a < 0.1
+    assert PB.standing_tilt(w, X, a) <= Q[SS.Q_TIPM] < PB.standing_tilt(w, X, a + 0.002)
+
+    def edge(Qx, dataX, world, control):
+        return SS.propagate(Qx, dataX, WO._start(world, X), np.array(control, float), np.zeros(SS.NX))
+    assert edge(inside, data, w, (4.0, 4.0, 1.0)) > 0.0                  # along the wall (lower on)
+    assert edge(inside, data, w, (3.0, 4.0, 1.0)) == -SS.MARGIN          # turning towards it
+    bare = WO.without_margin(w)
+    Qb, datab = PB.pack_world(bare, "time", margin=True)                # the fallback's search
+    assert Qb[SS.Q_TIPM] == Qb[SS.Q_TIP] and Qb[SS.Q_ASIDE] == 0.1
+    assert edge(PB.from_inside(Qb, bare, X), datab, bare, (3.0, 4.0, 1.0)) == -SS.MARGIN
+    Qd, datad = PB.pack_world(w, "time")                                 # a drive's
+    assert Qd[SS.Q_ASIDE] == 0.0 and edge(Qd, datad, w, (3.0, 4.0, 1.0)) > 0.0
+
+
 def test_a_horizon_planner_whose_scenario_starts_inside_the_margin_raises_it_for_that_start_alone():
     """The horizon planner's problem is a template for plans from other starts: a
     scenario that starts on the 27 deg flank raises the margin's limit for a plan from
@@ -297,7 +326,7 @@ def test_a_horizon_planner_whose_scenario_starts_inside_the_margin_raises_it_for
     hp = HorizonPlanner.of(w, "time")
     assert math.degrees(hp.prob.params[SS.Q_TIPM]) == pytest.approx(25.0)
     assert math.degrees(hp._params(WO._start(w, X))[SS.Q_TIPM]) == pytest.approx(
-        math.degrees(PB.standing_tilt(w, X, w.scenario.planner.margin_aside_m)), abs=1e-6)
+        math.degrees(PB.standing_tilt(w, X)), abs=1e-6)
     assert math.degrees(hp._params(WO._start(w, _flank(20.0)[1]))[SS.Q_TIPM]) == pytest.approx(25.0)
 
 

@@ -43,13 +43,35 @@ def from_inside(Q: np.ndarray, world: World, X: np.ndarray) -> np.ndarray:
     onto a flank): its margin's limit raised to where X stands, so that the search's
     edges may lead out of it and none steeper (every edge from there failed on the margin
     at its first step, and the fallback without the margin rode the tip-over limit
-    itself); Q itself elsewhere (a copy where changed)."""
+    itself); Q itself elsewhere (a copy where changed). Where X stands outside the margin
+    but nearer the band than the allowance aside (``planner.margin_aside_m``: a vehicle
+    that drifted towards a wall), the allowance is shrunk to the clearance X has
+    (:func:`_clearance`), not the limit raised: the edges may then come no nearer the
+    wall than X stands (raising the limit to the tilt a full allowance aside, past the
+    tip-over limit beside `narrow_pass`'s wall, let the plans drive along the wall's foot
+    and the guard held every period there, 2026-12-07)."""
+    aside = Q[SS.Q_ASIDE]
+    if aside > 0.0 and standing_tilt(world, X, aside) > Q[SS.Q_TIPM]:
+        Q = Q.copy()
+        Q[SS.Q_ASIDE] = _clearance(world, X, aside, Q[SS.Q_TIPM])
     tilt = standing_tilt(world, X, Q[SS.Q_ASIDE])
     if tilt <= Q[SS.Q_TIPM] or Q[SS.Q_TIPM] >= Q[SS.Q_TIP]:
         return Q
     Q = Q.copy()
     Q[SS.Q_TIPM] = min(tilt + 1e-9, Q[SS.Q_TIP])
     return Q
+
+
+def _clearance(world: World, X: np.ndarray, aside: float, limit: float) -> float:
+    """The largest allowance aside [m], at most ``aside``, with which X's tilt stays
+    within ``limit`` [rad] (0 where X itself is beyond it): bisection to a millimetre."""
+    if standing_tilt(world, X) > limit:
+        return 0.0
+    lo, hi = 0.0, aside
+    while hi - lo > 1e-3:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if standing_tilt(world, X, mid) <= limit else (lo, mid)
+    return lo
 
 
 def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False,
@@ -97,7 +119,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     Q[SS.Q_OFFTW] = offw if twins else -1
     Q[SS.Q_TWHEAD] = math.radians(ps.margin_heading_deg)
     Q[SS.Q_TWGRADE] = math.radians(ps.margin_grade_deg)
-    Q[SS.Q_ASIDE] = ps.margin_aside_m
+    Q[SS.Q_ASIDE] = ps.margin_aside_m if margin else 0.0     # searches only: a drive judges the pose itself
     Q[SS.Q_TWLAG] = scn.run.tol_xy     # the most the twin falls behind: a run re-plans beyond it
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny

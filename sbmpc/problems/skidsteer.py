@@ -138,7 +138,7 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     # the margin (module doc): the tip limit less its margin (= tip: none), the share of
     # the drive's reach kept in reserve while turning (0: none), the pessimistic twin
     tan_tipm = math.tan(min(params[Q_TIPM], tip))
-    aside = params[Q_ASIDE] if params[Q_TIPM] < tip else 0.0   # the margin also judges the vehicle this far aside [m]
+    aside = params[Q_ASIDE]         # the margin (or the limit, without one) also judged this far aside [m]
     reserve = params[Q_RESERVE]
     full = 1.0 - reserve
     offw = int(params[Q_OFFTW])
