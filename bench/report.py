@@ -205,12 +205,35 @@ def _tips_since(c: dict) -> str:
 
 def closed_loop_runon() -> str:
     """robustness.md: the rows of the guard's run-on rule, before (the whole table,
-    closed_loop.json) and after (closed_loop_runon.json), on the same truths."""
-    a, b = _load("closed_loop.json"), _load("closed_loop_runon.json")
+    closed_loop_grow.json, 1e1c9f6's) and after (closed_loop_runon.json), on the same truths."""
+    a, b = _load("closed_loop_grow.json"), _load("closed_loop_runon.json")
     return _ab(a, b, f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios "
                      f"{' '.join(b['scenarios'])} --families --workers {b['workers']}` "
                      f"({_when(a, b)}; the same truths as the whole table's rows, run from the same folder). "
                      "Each cell: before → after.*")
+
+
+def closed_loop_aside() -> str:
+    """robustness.md: narrow_pass and steep_hill without the margin's allowance aside
+    (closed_loop_aside0.json, narrow_pass only) and with it as landed (closed_loop_wall.json),
+    on the whole table's truths (closed_loop.json: with the first allowance)."""
+    a, m, b = _load("closed_loop_aside0.json"), _load("closed_loop.json"), _load("closed_loop_wall.json")
+    lines = [f"*`python bench/bench_closed_loop.py --samples {b['samples']} --scenarios {' '.join(b['scenarios'])} "
+             f"--families --workers {b['workers']} [--planner margin_aside_m=0]` ({_when(a, m, b)}; the same truths "
+             "in all three: the draw takes the scenario's content). Each cell: no allowance → the allowance "
+             "(closed_loop.json's rows) → the allowance kept as the clearance the vehicle has.*", "",
+             "| scenario, cost, mode | reached of 10 | stopped / no way on / failed / tipped | stalls |",
+             "|---|---|---|---|"]
+
+    def ends(g):
+        e = g["ends"]
+        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)} / {e.get('tipped', 0)}"
+    for key, gb in b["groups"].items():
+        ga, gm = a["groups"].get(key), m["groups"][key]
+        cells = [(ga["ends"].get("reached", 0) if ga else "-", gm["ends"].get("reached", 0), gb["ends"].get("reached", 0)),
+                 (ends(ga) if ga else "-", ends(gm), ends(gb)), (ga["stalls"] if ga else "-", gm["stalls"], gb["stalls"])]
+        lines.append(f"| {key.replace('/', ', ')} | " + " | ".join(" → ".join(map(str, c)) for c in cells) + " |")
+    return "\n".join(lines)
 
 
 def warthog() -> str:
@@ -1007,7 +1030,7 @@ def status_other() -> str:
                    _route_length(), _sbmpo()])
 
 
-BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-totals": closed_loop_totals,
+BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-aside": closed_loop_aside, "closed-loop-totals": closed_loop_totals,
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
