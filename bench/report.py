@@ -188,21 +188,6 @@ def closed_loop_backoff() -> str:
                      "Each cell: before → after.*")
 
 
-def _tips_since(c: dict) -> str:
-    """What the README's closed-loop row adds where the table's roll-overs were measured
-    again since, on the same truths (closed_loop_runon.json): how many of those rows'
-    runs tip over now, and from which commit."""
-    if not c["totals"]["ends"].get("tipped") or not (ROOT / "bench" / "results" / "closed_loop_runon.json").exists():
-        return ""
-    r = _load("closed_loop_runon.json")
-    if r["totals"]["ends"].get("tipped", 0) != 0:
-        return ""
-    before = sum(c["groups"][k]["ends"].get("tipped", 0) for k in r["groups"] if k in c["groups"])
-    if before != c["totals"]["ends"]["tipped"]:
-        return ""
-    return f" (none of them since {r['commit']}, on the same truths)"
-
-
 def closed_loop_runon() -> str:
     """robustness.md: the rows of the guard's run-on rule, before (the whole table,
     closed_loop_grow.json, 1e1c9f6's) and after (closed_loop_runon.json), on the same truths."""
@@ -369,8 +354,8 @@ def readme_table() -> str:
                  f"{t['runs']} runs on the shipped maps, the vehicle's parameters drawn at random (10 % sd), the map 5 cm off, commands "
                  f"50 ms late: {_pct(t['p_reach_crossable'])} reach the goal where a way exists for the drawn "
                  f"vehicle, {t['ends'].get('tipped', 0)} tip over, {t['ends'].get('off_map', 0)} "
-                 f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map"
-                 + _tips_since(c) + "; the others stop or fail and say why", _when(c)))
+                 f"{'leaves' if t['ends'].get('off_map', 0) == 1 else 'leave'} the map; "
+                 "the others stop or fail and say why", _when(c)))
     k = _load("controller.json")
     runs = k["runs"].values()
     rows.append(("[on a robot](docs/performance.md#the-controllers-step)",

@@ -291,9 +291,10 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
 def _runs_on(g: "Executor", X: np.ndarray, S: np.ndarray, tilt_error: float, floor: float) -> bool:
     """Whether a prediction from X that comes to rest at S would be within half the
     tip-over margin (the guard's band, ``tilt_error`` lower, no lower than ``floor``) had
-    the vehicle come to rest RUN_ON further along the way it came, or there and
-    ``planner.margin_aside_m`` to either side (as the kernel judges every step: a truth
-    a few centimetres beyond or beside every prediction is then still out of the band).
+    the vehicle come to rest RUN_ON further along the way it came, or there and the
+    guard's allowance aside (:func:`guard_aside`) to either side, as the kernel judges
+    every step: a truth a few centimetres beyond or beside every prediction is then
+    still out of the band.
     At the foot of a flank the map's tilt rises by degrees a centimetre (`narrow_pass`'s
     pass: 26 to 30 deg in 5 cm); a drawn `narrow_pass` truth 24 % lighter, braking at
     full speed towards the pass's flank, came to rest 4 cm beyond the optimistic twin's
