@@ -82,6 +82,20 @@ def slope_grades_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
 
 
 @njit(cache=True, error_model="numpy")
+def aside_tilts(H, res, ox, oy, x, y, yaw, half_length, half_width, aside):
+    """The larger grade magnitude [m/m] (pitch's or roll's tangent,
+    :func:`maps.grid.slope_grades_at`) of the vehicle at (x, y) heading yaw moved
+    ``aside`` [m] to its left and to its right (``planner.margin_aside_m``): beside a
+    wall the map's roll rises by degrees a centimetre, and a vehicle a few centimetres
+    off its predicted pose meets it."""
+    lx = -aside * math.sin(yaw)
+    ly = aside * math.cos(yaw)
+    a1, c1 = slope_grades_at(H, res, ox, oy, x + lx, y + ly, yaw, half_length, half_width)
+    a2, c2 = slope_grades_at(H, res, ox, oy, x - lx, y - ly, yaw, half_length, half_width)
+    return max(abs(a1), abs(c1), abs(a2), abs(c2))
+
+
+@njit(cache=True, error_model="numpy")
 def pitch_roll_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
     """Pitch and roll [rad] of a vehicle centred at (x, y) heading yaw
     (:func:`slope_grades_at`). Pitch is positive nose up, roll positive when the left

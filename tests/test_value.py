@@ -250,3 +250,36 @@ def _with_turn_cost(Q, k):
     Q = Q.copy()
     Q[SS.Q_TURNCOST] = k
     return Q
+
+
+def test_a_state_beside_a_wall_is_closed_by_the_margins_allowance_aside():
+    """The value closes a lattice state as the search's edges judge the margin, with
+    the vehicle ``margin_aside_m`` to either side (maps.grid.aside_tilts): heading along
+    a wall that climbs 1 m in one 0.25 m cell, with its left wheels 5 cm short of the
+    foot, the footprint stands level but 10 cm to its left it rolls 27 deg (past 30 - 5):
+    closed with the allowance, open without; heading at the wall (the allowance moves it
+    along the foot) open either way. On a plane the allowance closes nothing."""
+    w = _world(np.zeros((41, 81)))
+    hl, hw = w.half_length, w.half_width
+    res = 0.25
+    y = np.arange(41) * res
+    wall = np.clip((y - 5.0) / res, 0.0, 1.0)[:, None] * np.ones((1, 81))
+    tan_tip = math.tan(math.radians(25.0))
+    y0 = 5.0 - hw - 0.05
+
+    def grades(H, aside, y_at=y0):
+        G, _, _ = VA._states(H, res, 0.0, 0.0, hl, hw, tan_tip, aside, 0.5, 4.0, y_at, 1, 1, 0.5, np.zeros(0, np.int64))
+        return G[0, 0]
+
+    along = int(np.argmin(np.abs(np.array(VA.ANGLES_T)))), int(np.argmin(np.abs(np.array(VA.ANGLES_T) - math.pi)))
+    across = int(np.argmin(np.abs(np.array(VA.ANGLES_T) - math.pi / 2)))
+    without, with_ = grades(wall, 0.0), grades(wall, 0.1)
+    for k in along:
+        assert np.isfinite(without[k]) and np.isnan(with_[k])
+    assert np.isfinite(without[across]) and np.isfinite(with_[across])
+    plane = (np.arange(81) * res * math.tan(math.radians(12.0)))[None, :] + 0.02 * y[:, None]
+    np.testing.assert_array_equal(grades(plane, 0.0, 5.0), grades(plane, 0.1, 5.0))
+    assert np.isfinite(grades(plane, 0.1, 5.0)).all()
+    # the value is kept by content: another allowance is another value
+    keys = {VA._content_key(_world(np.zeros((41, 81)), margin_aside_m=a), "time", 0.5) for a in (0.0, 0.1)}
+    assert len(keys) == 2

@@ -9,6 +9,7 @@ import numpy as np
 
 from dynamics import kernels as K
 from dynamics.resistance import friction_table
+from maps.grid import aside_tilts
 
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
 from .value import value
@@ -24,7 +25,7 @@ def standing_tilt(world: World, X: np.ndarray, aside: float = 0.0) -> float:
     planner state X on the world's map, as the edges judge the tip-over limit and its
     margin (:func:`maps.grid.pitch_roll_at`; 0 off the map); with ``aside`` [m] the
     largest also over the vehicle moved that far to its left and right, as the edges
-    judge the margin (``planner.margin_aside_m``, :func:`sbmpc.problems.skidsteer.aside_tilts`)."""
+    judge the margin (``planner.margin_aside_m``, :func:`maps.grid.aside_tilts`)."""
     e = world.emap
     x, y, yaw = float(X[K.S_X]), float(X[K.S_Y]), float(X[K.S_YAW])
     if not e.contains(x, y):
@@ -32,8 +33,8 @@ def standing_tilt(world: World, X: np.ndarray, aside: float = 0.0) -> float:
     p, r = e.pitch_roll(x, y, yaw, world.half_length, world.half_width)
     tilt = max(abs(p), abs(r))
     if aside > 0.0:
-        tilt = max(tilt, math.atan(SS.aside_tilts(e.heights, e.resolution, e.origin[0], e.origin[1], x, y, yaw,
-                                                  world.half_length, world.half_width, aside)))
+        tilt = max(tilt, math.atan(aside_tilts(e.heights, e.resolution, e.origin[0], e.origin[1], x, y, yaw,
+                                               world.half_length, world.half_width, aside)))
     return tilt
 
 

@@ -20,7 +20,8 @@ and the grade along its heading (the tables' grade axis, linear between its node
 is closed where neither the vehicle nor the margin's twin holds it there. A state is
 closed where the vehicle's footprint, at that heading, pitches or rolls beyond the
 tip-over limit less its margin (``planner.margin_tip_deg``, as the search's edges), or
-lies closer to the map's edge than the footprint's half-diagonal.
+does so with the vehicle ``planner.margin_aside_m`` to its left or right (as the edges
+judge the margin: :func:`maps.grid.aside_tilts`), or lies closer to the map's edge than the footprint's half-diagonal.
 
 One backward Dijkstra from the goal disc's lattice states (value 0) over the reversed
 motions (compiled, :func:`_dijkstra`) gives V up to REACH times the start's value;
@@ -51,7 +52,7 @@ import numpy as np
 from numba import njit
 
 from dynamics.resistance import _cache_dir
-from maps.grid import height_at, slope_grades_at
+from maps.grid import aside_tilts, height_at, slope_grades_at
 
 from ..problems import lattice as LA
 from . import motions as MO
@@ -105,12 +106,13 @@ class Value:
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _states(H, res, ox, oy, hl, hw, tan_tip, margin, lox, loy, nxv, nyv, cell, terrain):
+def _states(H, res, ox, oy, hl, hw, tan_tip, aside, margin, lox, loy, nxv, nyv, cell, terrain):
     """Per lattice state (j, i, k), the lattice point (lox + i cell, loy + j cell) on the
     map H (origin (ox, oy), resolution res): the grade along heading k (tan; nan where
-    closed: tip-over at that heading or too near the map's edge), the height [m] of each
-    lattice point and its terrain index (terrain: the map's layer, flat, or empty for
-    one terrain)."""
+    closed: tip-over at that heading, also with the vehicle ``aside`` [m] to its left or
+    right as the edges judge the margin, or too near the map's edge), the height [m] of
+    each lattice point and its terrain index (terrain: the map's layer, flat, or empty
+    for one terrain)."""
     ny, nx = H.shape
     x_hi = ox + (nx - 1) * res - margin
     y_hi = oy + (ny - 1) * res - margin
@@ -130,7 +132,8 @@ def _states(H, res, ox, oy, hl, hw, tan_tip, margin, lox, loy, nxv, nyv, cell, t
                 Tr[j, i] = terrain[tj * nx + ti]
             for k in range(16):
                 along, across = slope_grades_at(H, res, ox, oy, x, y, ANGLES_T[k], hl, hw)
-                if abs(along) <= tan_tip and abs(across) <= tan_tip:
+                if abs(along) <= tan_tip and abs(across) <= tan_tip and (
+                        aside <= 0.0 or aside_tilts(H, res, ox, oy, x, y, ANGLES_T[k], hl, hw, aside) <= tan_tip):
                     G[j, i, k] = along
     return G, Z, Tr
 
@@ -416,7 +419,7 @@ def _content_key(world: World, cost: str, cell: float) -> str:
     if e.terrain_layer is not None:
         h.update(np.ascontiguousarray(e.terrain_layer).tobytes())
     h.update(repr((e.resolution, tuple(e.origin), world.vehicle, world.terrains, ps.margin, ps.margin_turn,
-                   ps.margin_grade_deg, ps.margin_tip_deg, ps.tip_over_deg, ps.dt, wheel_speed_range(world), cost, cell,
+                   ps.margin_grade_deg, ps.margin_tip_deg, ps.margin_aside_m, ps.tip_over_deg, ps.dt, wheel_speed_range(world), cost, cell,
                    (scn.goal["x"], scn.goal["y"], scn.goal["radius"]), (scn.start["x"], scn.start["y"]),
                    ctg_window(world), REACH,
                    _code_hash())).encode())
@@ -440,7 +443,7 @@ def build(world: World, cost: str, cell: float | None = None) -> Value:
     layer = (e.terrain_layer.astype(np.int64).ravel() if e.terrain_layer is not None and len(world.terrains) > 1
              else np.zeros(0, np.int64))
     G, Z, Tr = _states(e.heights, e.resolution, e.origin[0], e.origin[1], world.half_length, world.half_width,
-                    tan_tip, world.margin, ox, oy, nxv, nyv, cell, layer)
+                    tan_tip, float(ps.margin_aside_m), world.margin, ox, oy, nxv, nyv, cell, layer)
     mc = MO.motion_costs(world, cost, arc_chords(cell), TURNS)
     g = MO.grades()
     goal = _goal_states(world, ox, oy, nxv, nyv, cell, G)

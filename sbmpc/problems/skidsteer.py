@@ -65,7 +65,7 @@ from numba import njit, prange
 
 from dynamics import kernels as K
 from dynamics.drive import window_share
-from maps.grid import cell_value, height_at, pitch_roll_at, slope_grades_at
+from maps.grid import aside_tilts, cell_value, height_at, pitch_roll_at, slope_grades_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
 from . import lattice as LA
@@ -97,20 +97,6 @@ MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach 
                       # change of command saturates the PID for a moment by design
 SQRT2 = math.sqrt(2.0)
 COST_TIME, COST_ENERGY = 0.0, 1.0
-
-
-@njit(cache=True, error_model="numpy")
-def aside_tilts(H, res, ox, oy, x, y, yaw, half_length, half_width, aside):
-    """The larger grade magnitude [m/m] (pitch's or roll's tangent,
-    :func:`maps.grid.slope_grades_at`) of the vehicle at (x, y) heading yaw moved
-    ``aside`` [m] to its left and to its right (``planner.margin_aside_m``): beside a
-    wall the map's roll rises by degrees a centimetre, and a vehicle a few centimetres
-    off its predicted pose meets it."""
-    lx = -aside * math.sin(yaw)
-    ly = aside * math.cos(yaw)
-    a1, c1 = slope_grades_at(H, res, ox, oy, x + lx, y + ly, yaw, half_length, half_width)
-    a2, c2 = slope_grades_at(H, res, ox, oy, x - lx, y - ly, yaw, half_length, half_width)
-    return max(abs(a1), abs(c1), abs(a2), abs(c2))
 
 
 @njit(cache=True, error_model="numpy")
