@@ -115,7 +115,7 @@ def main() -> int:
     ap.add_argument("--planner", nargs="*", default=[], metavar="KEY=VALUE",
                     help="planner settings of every plan (numbers), e.g. margin_grade_deg=1.4 (the truths are the same)")
     ap.add_argument("--run", nargs="*", default=[], metavar="KEY=VALUE", dest="run_settings",
-                    help="run settings of every run (numbers), e.g. max_stalls=12 (the truths are the same)")
+                    help="run settings of every run (numbers, true/false), e.g. max_stalls=12 (the truths are the same)")
     ap.add_argument("--results", default="closed_loop.json", help="the results file's name in bench/results")
     ap.add_argument("--figure", default="closed_loop.png", help="the figure's name in docs/ ('' for none)")
     a = ap.parse_args()
@@ -124,10 +124,10 @@ def main() -> int:
     except ValueError:
         ap.error(f"--planner: expected KEY=NUMBER pairs, found {' '.join(a.planner)}")
     try:
-        run_settings = {k: (int(v) if v.lstrip("-").isdigit() else float(v))
+        run_settings = {k: (v == "true" if v in ("true", "false") else int(v) if v.lstrip("-").isdigit() else float(v))
                         for k, v in (p.split("=", 1) for p in a.run_settings)}
     except ValueError:
-        ap.error(f"--run: expected KEY=NUMBER pairs, found {' '.join(a.run_settings)}")
+        ap.error(f"--run: expected KEY=NUMBER or KEY=true|false pairs, found {' '.join(a.run_settings)}")
     started = stamp.commit()    # the code this run loaded (a resumed sweep: the code it resumed with)
     from sbmpc import sweep as SW
     a.out.mkdir(parents=True, exist_ok=True)
