@@ -201,9 +201,7 @@ class RunSettings:
     default: docs/planner.md says what it measured); firm_margin: an adaptation also
     firms the margin to two standard errors of the fitted mass and grip
     (:func:`sbmpc.estimate.firmed_margin`; off by default: docs/robustness.md says what it
-    measured); stall_hand_over: a horizon run's controller hands over to a whole-route
-    plan where the vehicle stalls (as where its horizon plans find no way on), instead of
-    planning the horizon again from the stall.
+    measured).
     """
 
     trigger: str = "tolerance"
@@ -221,7 +219,6 @@ class RunSettings:
     adapt_periods: int = 0
     beside: bool = False
     firm_margin: bool = False
-    stall_hand_over: bool = False
 
 
 _RUN_RANGES = {
@@ -519,7 +516,7 @@ def _run(spec, probs: _Problems) -> RunSettings:
             probs.add("run.trigger", "'tolerance' or 'every'", spec["trigger"])
         else:
             kw["trigger"] = spec["trigger"]
-    for key in ("beside", "firm_margin", "stall_hand_over"):
+    for key in ("beside", "firm_margin"):
         if key in spec:
             if not isinstance(spec[key], bool):
                 probs.add(f"run.{key}", "true or false", spec[key])
@@ -759,7 +756,6 @@ def json_schema() -> dict:
     run["trigger"] = {"enum": list(TRIGGERS)}
     run["beside"] = {"type": "boolean"}
     run["firm_margin"] = {"type": "boolean"}
-    run["stall_hand_over"] = {"type": "boolean"}
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "$id": "sbmpc.scenario/1", "title": "sbmpc scenario (YAML, as data)",

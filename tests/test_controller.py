@@ -319,36 +319,6 @@ def test_one_stall_reported_twice_counts_once_and_a_later_one_counts_again(flat)
     assert not ctrl._marks          # no second stall near the first: nothing marked a wall
 
 
-@pytest.mark.parametrize("hand_over", [False, True])
-def test_with_stall_hand_over_a_stall_hands_over_to_a_whole_route_plan(flat, hand_over):
-    """``run.stall_hand_over``: where the vehicle stalls, the controller plans the whole
-    route from there and follows it (as where its horizon plans find no way on), not
-    another horizon plan from the stall; the run still reaches the goal. Without it the
-    next plan is a horizon plan from the stall and nothing is planned whole."""
-    scn = flat.scenario
-    world = replace(flat, scenario=replace(scn, run=replace(scn.run, stall_hand_over=hand_over)))
-    ctrl = Controller(world, "time", period_s=0.1, lockstep=True)
-    real = R._Executor(world, "time")
-    X = WO.start_state(world)
-    statuses = []
-    for k in range(400):
-        cmd = ctrl.step(float(X[K.S_T]), R.measured(X, world.vehicle, k == 30))
-        statuses.append(cmd.status)
-        if cmd.done:
-            break
-        _, end, X = real.step(X, (cmd.wl, cmd.wr, ctrl.period_s), record=False)
-        if k + 1 == 30:
-            R._protected(X, real)
-    ctrl.close()
-    assert cmd.done and ctrl.status == "reached", ctrl.reason
-    assert ctrl.stalls == 1
-    after = [p.why for p in ctrl.plans if p.why != "next period"]
-    assert after[1].startswith("stalled") and ("whole-route plan" in after[1]) is hand_over, after
-    assert (ctrl.horizon.fallbacks >= 1) is hand_over
-    assert ("whole-route" in statuses[31:]) is hand_over
-    assert set(statuses[:30]) <= {"planning", "horizon"}
-
-
 @pytest.mark.parametrize("currents, wall", [((3.0, -3.0), False), ((3.0, 3.0), True)])
 def test_a_second_stall_near_the_first_marks_a_wall_ahead_unless_it_was_in_a_turn(flat, currents, wall):
     """A second stall within MARK_NEAR of the first makes the slope ahead a wall in the

@@ -683,7 +683,6 @@ class Controller:
         held = False               # the last period was held back by the guard, nothing driven since
         settled = False            # the last period driven held the wheels at rest
         tracking = None            # the whole-route plan made beside that the horizon plans lead onto
-        stalled_over = ""          # why a stall hands over to a whole-route plan (run.stall_hand_over)
         self._start_beside(X)
         # the first plan has its own budget: the set-up (the value, the turn cost) came with
         # the controller, before the robot's first call (it is recorded with the first plan)
@@ -697,11 +696,9 @@ class Controller:
         while True:
             X = self._X
             settle = guide is None and not h.found and not settled and EX.settles(X)
-            if not settle and guide is None and (stalled_over or not h.found
-                                                 or (len(togo) > window and togo[-1] >= togo[-1 - window])):
-                why = (stalled_over or ("the horizon plan found no way on" if not h.found else
-                       f"no progress in {window} periods (the terminal cost at the vehicle did not fall)"))
-                stalled_over = ""
+            if not settle and guide is None and (not h.found or (len(togo) > window and togo[-1] >= togo[-1 - window])):
+                why = ("the horizon plan found no way on" if not h.found else
+                       f"no progress in {window} periods (the terminal cost at the vehicle did not fall)")
                 got = self._rejoin(X, why, tracking)
                 if got is not None:
                     # the hand-over without waiting: horizon plans that lead onto the plan
@@ -805,9 +802,6 @@ class Controller:
                         if not p.found:
                             return "stopped", (f"no way on from ({Xb[K.S_X]:.2f}, {Xb[K.S_Y]:.2f}) at "
                                                f"t = {Xb[K.S_T]:.1f} s, after backing off: {p.reason}")
-                continue
-            if stalled and rs.stall_hand_over:
-                stalled_over = "stalled" + now_as   # the horizon's look-ahead stalled here: the whole route (above)
                 continue
             togo.append(self.planner.to_go(X))
             if off:
