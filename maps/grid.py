@@ -81,6 +81,38 @@ def slope_grades_at(H, res, ox, oy, x, y, yaw, half_length, half_width):
     return along, across
 
 
+def steepest_near(H: np.ndarray, res: float, reach: float) -> np.ndarray:
+    """Per cell (j, i) of the map H (the square from node (j, i) to (j + 1, i + 1);
+    shape (ny - 1, nx - 1)): an upper bound [m/m] of the slope of the bilinear surface
+    (:func:`height_at`) at every point within ``reach`` [m] of any point of the cell.
+
+    Within a cell the surface's gradient is affine in the position, and its magnitude
+    is largest at a corner: the hypotenuse of the larger of the cell's two differences
+    along x and the larger of its two along y, over ``res``. The bound is the largest of
+    those over the cells within ``reach`` (a square of cells: more than the disc, never
+    less; beyond the map's border :func:`height_at` clamps to it, which steepens
+    nothing). A grade measured between two points of that region (a vehicle's pitch or
+    roll, :func:`slope_grades_at`: a mean of the slope along segments) is at most the
+    bound: where it lies within a limit, no footprint there can pass it."""
+    from scipy.ndimage import maximum_filter
+    H = np.asarray(H, float)
+    dx = np.abs(np.diff(H, axis=1))            # (ny, nx - 1)
+    dy = np.abs(np.diff(H, axis=0))            # (ny - 1, nx)
+    cell = np.hypot(np.maximum(dx[:-1], dx[1:]), np.maximum(dy[:, :-1], dy[:, 1:])) / res
+    k = int(math.ceil(reach / res)) + 1
+    return np.ascontiguousarray(maximum_filter(cell, size=2 * k + 1, mode="nearest"))
+
+
+@njit(cache=True, error_model="numpy")
+def steepest_at(S, res, ox, oy, x, y):
+    """The bound [m/m] of :func:`steepest_near`'s layer S (shape (ny - 1, nx - 1)) for
+    the cell holding (x, y) (the nearest cell off the map)."""
+    nyc, nxc = S.shape
+    i = min(max(int(math.floor((x - ox) / res)), 0), nxc - 1)
+    j = min(max(int(math.floor((y - oy) / res)), 0), nyc - 1)
+    return S[j, i]
+
+
 @njit(cache=True, error_model="numpy")
 def aside_tilts(H, res, ox, oy, x, y, yaw, half_length, half_width, aside):
     """The larger grade magnitude [m/m] (pitch's or roll's tangent,

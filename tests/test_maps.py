@@ -237,3 +237,32 @@ def test_an_elevation_map_from_python_is_checked_and_numpy_numbers_pass():
     m = load_map({"heights": H, "resolution": np.float32(0.5), "origin": np.array([1.0, 2.0])}, None)
     assert m.origin == (1.0, 2.0) and m.resolution == 0.5
     assert load_map({"generate": {"size": [10, 10], "resolution": 0.5, "seed": np.int64(3)}}).shape == (21, 21)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 10_000), rough=st.floats(0.005, 0.4), reach=st.floats(0.05, 1.0))
+def test_no_footprint_within_reach_is_steeper_than_the_steepest_near_bound(seed, rough, reach):
+    """maps.grid.steepest_near bounds every grade a footprint within its reach can
+    measure (the edges skip the margin's check aside where the bound is within the
+    limit): on random rough maps, at random poses, the pitch and roll (tangents) of a
+    footprint whose corners and allowance aside lie within ``reach`` of its centre are
+    at most the bound of the centre's cell; and the bound is not loose by orders (on a
+    plane it is the plane's slope)."""
+    from maps.grid import aside_tilts, slope_grades_at, steepest_at, steepest_near
+    rng = np.random.default_rng(seed)
+    H = rng.normal(0.0, rough, (24, 31)).cumsum(axis=1)
+    res = 0.25
+    S = steepest_near(H, res, reach)
+    assert S.shape == (23, 30)
+    hl, hw = 0.3 * reach, 0.4 * reach
+    aside = math.sqrt(reach ** 2 - hl ** 2) - hw
+    for _ in range(200):
+        x, y = rng.uniform(-0.5, 30 * res + 0.5), rng.uniform(-0.5, 23 * res + 0.5)
+        yaw = rng.uniform(-math.pi, math.pi)
+        b = steepest_at(S, res, 0.0, 0.0, x, y)
+        a, c = slope_grades_at(H, res, 0.0, 0.0, x, y, yaw, hl, hw)
+        assert max(abs(a), abs(c)) <= b + 1e-12
+        assert aside_tilts(H, res, 0.0, 0.0, x, y, yaw, hl, hw, aside) <= b + 1e-12
+    gx, gy = 0.12, -0.05
+    plane = gx * np.arange(31)[None, :] * res + gy * np.arange(24)[:, None] * res
+    np.testing.assert_allclose(steepest_near(plane, res, reach), math.hypot(gx, gy), rtol=1e-12)

@@ -9,7 +9,7 @@ import numpy as np
 
 from dynamics import kernels as K
 from dynamics.resistance import friction_table
-from maps.grid import aside_tilts
+from maps.grid import aside_tilts, steepest_near
 
 from .heuristics import _bounds, _lowest_in_disc, copper_coefficient, cost_to_go
 from .value import value
@@ -95,6 +95,13 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     if e.terrain_layer is not None and len(world.terrains) > 1:
         offl = nx * ny
         parts.append(e.terrain_layer.astype(float).ravel())
+    offs = -1
+    if margin and ps.margin_aside_m > 0.0 and nx > 1 and ny > 1:
+        # the steepest slope near each cell within the footprint and its allowance aside:
+        # the edges skip the allowance's check where no slope there passes the limit
+        offs = sum(p.size for p in parts)
+        parts.append(steepest_near(e.heights, e.resolution,
+                                   math.hypot(world.half_length, world.half_width + ps.margin_aside_m)).ravel())
     offt = sum(p.size for p in parts)
     ctg, frmax, kegrid, gap = cost_to_go(world, cost) if grid else (np.full((1, 1), np.inf), 0.0, 0.0, 0.0)
     twins = []
@@ -121,6 +128,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
     Q[SS.Q_TWHEAD] = math.radians(ps.margin_heading_deg)
     Q[SS.Q_TWGRADE] = math.radians(ps.margin_grade_deg)
     Q[SS.Q_ASIDE] = ps.margin_aside_m if margin else 0.0     # searches only: a drive judges the pose itself
+    Q[SS.Q_OFFS] = offs
     Q[SS.Q_TWLAG] = scn.run.tol_xy     # the most the twin falls behind: a run re-plans beyond it
     Q[SS.Q_RES], (Q[SS.Q_OX], Q[SS.Q_OY]) = e.resolution, e.origin
     Q[SS.Q_NX], Q[SS.Q_NY] = nx, ny

@@ -65,7 +65,7 @@ from numba import njit, prange
 
 from dynamics import kernels as K
 from dynamics.drive import window_share
-from maps.grid import aside_tilts, cell_value, height_at, pitch_roll_at, slope_grades_at
+from maps.grid import aside_tilts, cell_value, height_at, pitch_roll_at, slope_grades_at, steepest_at
 
 from ..search.astar import EXPAND, GOAL, HEURISTIC
 from . import lattice as LA
@@ -90,8 +90,8 @@ NO_ROWS = np.int64(0)   # no record rows written yet, as an int64: a literal 0 m
 (Q_DT, Q_NSTEP, Q_GX, Q_GY, Q_GR, Q_HL, Q_HW, Q_TIP, Q_RES, Q_OX, Q_OY, Q_NX, Q_NY,
  Q_COST, Q_VBOUND, Q_FROLL, Q_MG, Q_MKE, Q_ZG, Q_MARGIN, Q_OFFL, Q_OFFT, Q_BLOCK, Q_OFFD,
  Q_FRMAX, Q_KEGRID, Q_COPPER, Q_GOALGAP, Q_RESERVE, Q_TIPM, Q_OFFTW, Q_TWHEAD, Q_TWLAG,
- Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2, Q_TWGRADE, Q_ASIDE) = range(44)
-NQ = 44
+ Q_HORIZON, Q_TURNCOST, Q_OFFV, Q_VNX, Q_VNY, Q_VCELL, Q_VOX, Q_VOY, Q_VW2, Q_TWGRADE, Q_ASIDE, Q_OFFS) = range(45)
+NQ = 45
 MARGIN_TIME = 0.5     # s: the drive may use more than 1 - reserve of its reach this long (the
                       # margin timer leaks at the rate it fills): a start from rest or a
                       # change of command saturates the PID for a moment by design
@@ -125,6 +125,8 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
     # the drive's reach kept in reserve while turning (0: none), the pessimistic twin
     tan_tipm = math.tan(min(params[Q_TIPM], tip))
     aside = params[Q_ASIDE]         # the margin (or the limit, without one) also judged this far aside [m]
+    offs = int(params[Q_OFFS])      # the map's steepest slope near each cell (maps.grid.steepest_near; -1: none)
+    Sn = data[max(offs, 0):max(offs, 0) + (nx - 1) * (ny - 1)].reshape((ny - 1, nx - 1))
     reserve = params[Q_RESERVE]
     full = 1.0 - reserve
     offw = int(params[Q_OFFTW])
@@ -170,7 +172,9 @@ def edge(params, data, S, cmd_l, cmd_r, nsteps, rec, rows, O):
         if abs(along) > tan_tipm or abs(across) > tan_tipm:
             end = -MARGIN
             break
-        if aside > 0.0 and aside_tilts(H, res, ox, oy, x, y, yaw_i, params[Q_HL], params[Q_HW], aside) > tan_tipm:
+        if (aside > 0.0 and (offs < 0 or steepest_at(Sn, res, ox, oy, x, y) > tan_tipm)
+                and aside_tilts(H, res, ox, oy, x, y, yaw_i, params[Q_HL], params[Q_HW], aside) > tan_tipm):
+            # (where no slope near the vehicle passes the limit, no footprint aside can)
             end = -MARGIN
             break
         if i > 0 and (x - gx) * (x - gx) + (y - gy) * (y - gy) <= gr2:
