@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
 PAGES = [ROOT / "README.md", ROOT / "docs" / "status.md", ROOT / "docs" / "validation.md", ROOT / "docs" / "planner.md",
-         ROOT / "docs" / "robustness.md", ROOT / "scenarios" / "README.md"]
+         ROOT / "docs" / "robustness.md", ROOT / "docs" / "performance.md", ROOT / "scenarios" / "README.md"]
 MARK = re.compile(r"(<!-- report:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /report:(?P=name) -->)", re.S)
 
 
@@ -218,6 +218,22 @@ def closed_loop_aside() -> str:
         cells = [(ga["ends"].get("reached", 0) if ga else "-", gm["ends"].get("reached", 0), gb["ends"].get("reached", 0)),
                  (ends(ga) if ga else "-", ends(gm), ends(gb)), (ga["stalls"] if ga else "-", gm["stalls"], gb["stalls"])]
         lines.append(f"| {key.replace('/', ', ')} | " + " | ".join(" → ".join(map(str, c)) for c in cells) + " |")
+    return "\n".join(lines)
+
+
+def slope_layer() -> str:
+    """performance.md: the allowance aside's check with and without the steepest-slope
+    layer (slope_layer.json, bench/bench_slope_layer.py)."""
+    d = _load("slope_layer.json")
+    lines = [f"*`taskset -c 0 python bench/bench_slope_layer.py` ({_when(d)}; the whole-route search alone, one "
+             f"core, {d['rounds']} rounds each way, medians; without the value where marked: a longer search)*", "",
+             "| scenario, cost | expansions | search with the layer [s] | without [s] | ratio |", "|---|---|---|---|---|"]
+    for r in d["rows"]:
+        lines.append(f"| `{r['scenario']}` {r['cost']}{'' if r['value'] else ' (no value)'} | {r['expansions']:,} | "
+                     f"{r['median_with_s']:.3g} | {r['median_without_s']:.3g} | {r['ratio']:.2f}x |")
+    rs = [r["ratio"] for r in d["rows"]]
+    lines += ["", f"The search takes {min(rs):.2f}-{max(rs):.2f}x its time without the layer (median "
+                  f"{sorted(rs)[len(rs) // 2]:.2f}x)."]
     return "\n".join(lines)
 
 
@@ -1021,7 +1037,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-aside": closed_lo
           "closed-loop-adapt": closed_loop_adapt,
           "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade,
           "closed-loop-backoff": closed_loop_backoff, "closed-loop-runon": closed_loop_runon, "hand-over-beside": hand_over_beside,
-          "diagnose-speed": diagnose_speed, "warthog": warthog,
+          "diagnose-speed": diagnose_speed, "warthog": warthog, "slope-layer": slope_layer,
           "husky-no-load": husky_no_load,
           "readme-caption": readme_caption, "readme-table": readme_table,
           "shipped-scenarios": shipped_scenarios, "calibration-generated": calibration_generated,
