@@ -94,13 +94,21 @@ def steepest_near(H: np.ndarray, res: float, reach: float) -> np.ndarray:
     nothing). A grade measured between two points of that region (a vehicle's pitch or
     roll, :func:`slope_grades_at`: a mean of the slope along segments) is at most the
     bound: where it lies within a limit, no footprint there can pass it."""
-    from scipy.ndimage import maximum_filter
     H = np.asarray(H, float)
     dx = np.abs(np.diff(H, axis=1))            # (ny, nx - 1)
     dy = np.abs(np.diff(H, axis=0))            # (ny - 1, nx)
     cell = np.hypot(np.maximum(dx[:-1], dx[1:]), np.maximum(dy[:, :-1], dy[:, 1:])) / res
     k = int(math.ceil(reach / res)) + 1
-    return np.ascontiguousarray(maximum_filter(cell, size=2 * k + 1, mode="nearest"))
+    # the largest over a (2k + 1)-square of cells, the border's cells repeated beyond it:
+    # along x, then along y (numpy alone: this file imports nothing but numba's and numpy)
+    for axis in (1, 0):
+        n = cell.shape[axis]
+        pad = np.pad(cell, [(0, 0), (k, k)] if axis == 1 else [(k, k), (0, 0)], mode="edge")
+        out = cell.copy()
+        for d in range(2 * k + 1):
+            np.maximum(out, pad[:, d:d + n] if axis == 1 else pad[d:d + n], out=out)
+        cell = out
+    return np.ascontiguousarray(cell)
 
 
 @njit(cache=True, error_model="numpy")
