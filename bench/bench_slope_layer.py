@@ -6,7 +6,7 @@ must match), interleaved rounds.
     taskset -c 0 python bench/bench_slope_layer.py            # writes bench/results/slope_layer.json
 
 Per scenario and cost: the search alone (``Search.run``, one thread, no batch; not the
-polish or the 1 kHz check), ``--rounds`` times each way, the median and the ratio of the
+polish or the 1 kHz check), ``--rounds`` times each way (the order alternating round by round), the median and the ratio of the
 medians (with the layer over without).
 """
 from __future__ import annotations
@@ -44,8 +44,8 @@ def measure(name: str, cost: str, value: bool, rounds: int) -> dict:
     got = {True: [], False: []}
     exp = set()
     Search(prob).run(200000, 300.0, batch=1, threads=1)      # compiled and warm
-    for _ in range(rounds):
-        for on in (True, False):
+    for k in range(rounds):
+        for on in ((True, False) if k % 2 == 0 else (False, True)):     # the order alternates
             prob.params[SS.Q_OFFS] = offs if on else -1
             t = time.perf_counter()
             r = Search(prob).run(200000, 300.0, batch=1, threads=1)

@@ -233,7 +233,7 @@ def slope_layer() -> str:
                      f"{r['median_with_s']:.3g} | {r['median_without_s']:.3g} | {r['ratio']:.2f}x |")
     rs = [r["ratio"] for r in d["rows"]]
     lines += ["", f"The search takes {min(rs):.2f}-{max(rs):.2f}x its time without the layer (median "
-                  f"{sorted(rs)[len(rs) // 2]:.2f}x)."]
+                  f"{statistics.median(rs):.2f}x)."]
     return "\n".join(lines)
 
 
