@@ -36,9 +36,14 @@ def plans():
     return _Plans()
 
 
+SLOW_PLANS = ("narrow_pass",)   # its two plans take about 30 s on one core (the margin's allowance
+                                # aside keeps them off the pass's walls): CI's whole suite only
+
+
 def _each(names):
-    """``names`` as parameters, each in its scenario's xdist group."""
-    return [pytest.param(n, marks=pytest.mark.xdist_group(n)) for n in names]
+    """``names`` as parameters, each in its scenario's xdist group (SLOW_PLANS marked slow)."""
+    return [pytest.param(n, marks=[pytest.mark.xdist_group(n)] + ([pytest.mark.slow] if n in SLOW_PLANS else []))
+            for n in names]
 
 
 @pytest.mark.parametrize("name", _each(SOLVABLE))
@@ -232,6 +237,7 @@ def test_steep_hill_every_plan_goes_around(plans):
     assert ps["time"].invalid_edges.get(SS.CODES[SS.STALL - 1], 0) > 0     # the flanks were tried
 
 
+@pytest.mark.slow
 @pytest.mark.xdist_group("narrow_pass")
 def test_narrow_pass_is_the_only_way_and_every_plan_takes_it(plans):
     """Outside the 1.5 m pass (y 9.25-10.75 m) the ridge's flanks are steeper, straight
