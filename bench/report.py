@@ -141,26 +141,32 @@ def closed_loop_adapt() -> str:
 GRADE = (("0 (the default)", "closed_loop_grade0.json"), ("1.4", "closed_loop_grade.json"))
 
 
+def _ends(g: dict, tipped_column: bool = False) -> str:
+    """A closed-loop group's ends other than reached: 'stopped / no way on / failed'
+    (timeouts counted as failed), then the roll-overs: as a fourth column, or only where
+    there are any, in bold."""
+    e = g["ends"]
+    tipped = (f" / {e.get('tipped', 0)}" if tipped_column else
+              f" / **{e['tipped']} tipped**" if e.get("tipped") else "")
+    return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)}{tipped}"
+
+
 def _ab(a: dict, b: dict, caption: str) -> str:
     """Two closed-loop results on the same truths, row by row (b's groups): each cell 'a → b'."""
     lines = [caption, "", "| scenario, cost, mode | reached of 10 | stopped / no way on / failed | stalls | "
              "executed / own plan, median (p90) |", "|---|---|---|---|---|"]
 
-    def ends(g):
-        e = g["ends"]
-        tipped = f" / **{e['tipped']} tipped**" if e.get("tipped") else ""
-        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)}{tipped}"
     for key, gb in b["groups"].items():
         ga = a["groups"][key]
         lines.append(f"| {key.replace('/', ', ')} | {ga['ends'].get('reached', 0)} → {gb['ends'].get('reached', 0)} | "
-                     f"{ends(ga)} → {ends(gb)} | {ga['stalls']} → {gb['stalls']} | "
+                     f"{_ends(ga)} → {_ends(gb)} | {ga['stalls']} → {gb['stalls']} | "
                      f"{_ratio(ga['over_own_plan'])} → {_ratio(gb['over_own_plan'])} |")
     keys = list(b["groups"])
     ta = {"ends": {e: sum(a["groups"][k]["ends"].get(e, 0) for k in keys) for e in
                    ("reached", "stopped", "no_path", "failed", "timeout", "tipped")}}
     tb = {"ends": {e: sum(b["groups"][k]["ends"].get(e, 0) for k in keys) for e in ta["ends"]}}
     lines.append(f"| **all {sum(b['groups'][k]['runs'] for k in keys)}** | {ta['ends']['reached']} → "
-                 f"{tb['ends']['reached']} | {ends(ta)} → {ends(tb)} | "
+                 f"{tb['ends']['reached']} | {_ends(ta)} → {_ends(tb)} | "
                  f"{sum(a['groups'][k]['stalls'] for k in keys)} → {sum(b['groups'][k]['stalls'] for k in keys)} | "
                  f"{_ratio(a['totals']['over_own_plan']) if len(keys) == len(a['groups']) else '-'} → "
                  f"{_ratio(b['totals']['over_own_plan'])} |")
@@ -210,13 +216,10 @@ def closed_loop_aside() -> str:
              "| scenario, cost, mode | reached of 10 | stopped / no way on / failed / tipped | stalls |",
              "|---|---|---|---|"]
 
-    def ends(g):
-        e = g["ends"]
-        return f"{e.get('stopped', 0)} / {e.get('no_path', 0)} / {e.get('failed', 0) + e.get('timeout', 0)} / {e.get('tipped', 0)}"
     for key, gb in b["groups"].items():
         ga, gm = a["groups"].get(key), m["groups"][key]
         cells = [(ga["ends"].get("reached", 0) if ga else "-", gm["ends"].get("reached", 0), gb["ends"].get("reached", 0)),
-                 (ends(ga) if ga else "-", ends(gm), ends(gb)), (ga["stalls"] if ga else "-", gm["stalls"], gb["stalls"])]
+                 (_ends(ga, True) if ga else "-", _ends(gm, True), _ends(gb, True)), (ga["stalls"] if ga else "-", gm["stalls"], gb["stalls"])]
         lines.append(f"| {key.replace('/', ', ')} | " + " | ".join(" → ".join(map(str, c)) for c in cells) + " |")
     return "\n".join(lines)
 
