@@ -3,6 +3,7 @@
 its edges run on (the CPU's cores or a GPU)."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -75,6 +76,19 @@ def _clearance(world: World, X: np.ndarray, aside: float, limit: float) -> float
     return lo
 
 
+@functools.lru_cache(maxsize=8)
+def slope_layer(world: World) -> np.ndarray:
+    """The map's steepest slope near each cell (:func:`maps.grid.steepest_near`, flat),
+    within the vehicle's footprint and its allowance aside (``planner.margin_aside_m``):
+    made once per world (every re-plan and repair packs the world again; on a 360 m
+    field at 0.25 m it takes about 0.1 s)."""
+    ps = world.scenario.planner
+    layer = steepest_near(world.emap.heights, world.emap.resolution,
+                          math.hypot(world.half_length, world.half_width + ps.margin_aside_m)).ravel()
+    layer.setflags(write=False)        # cached and shared
+    return layer
+
+
 def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = False,
                grid: bool = True) -> tuple:
     """(params, data) flat arrays of :mod:`sbmpc.problems.skidsteer` for a world and cost, with
@@ -100,8 +114,7 @@ def pack_world(world: World, cost: str, dt: float | None = None, margin: bool = 
         # the steepest slope near each cell within the footprint and its allowance aside:
         # the edges skip the allowance's check where no slope there passes the limit
         offs = sum(p.size for p in parts)
-        parts.append(steepest_near(e.heights, e.resolution,
-                                   math.hypot(world.half_length, world.half_width + ps.margin_aside_m)).ravel())
+        parts.append(slope_layer(world))
     offt = sum(p.size for p in parts)
     ctg, frmax, kegrid, gap = cost_to_go(world, cost) if grid else (np.full((1, 1), np.inf), 0.0, 0.0, 0.0)
     twins = []
