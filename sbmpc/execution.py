@@ -225,8 +225,60 @@ def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0
 
 
 def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> int:
+    """Which of the guards holds back the period ``control`` from the measured state X
+    (:func:`_holder`, the rules), 1-based, 0: none; and where the vehicle is moving and
+    braking to rest is held back too (a descent steeper than its drive holds: braking
+    with the wheels commanded to rest, the drive at its current limit, the vehicle still
+    gathers speed), the lesser evil: the period is driven where every prediction of it
+    stays out of the band that braking's predictions need (:func:`braking_floor`): it
+    goes no steeper than braking would. Holding such a period back brakes the vehicle
+    into the steeper ground: a drawn `hills_field` horizon truth, its plan's period held
+    on an 18 deg descent the map made 1.6-2.6 deg too gentle, braked with its wheels
+    at rest commanded from 7.6 to 10.9 rad/s and the run stopped it rolling at 1.2 m/s,
+    on 27 deg (2026-12-07). A hold the brake's own floor does not lift stays a hold."""
+    who = _holder(guards, X, control, kept, tilt_error)
+    if who == 0 or X is None or not moving(X) or (control[0] == 0.0 and control[1] == 0.0):
+        return who
+    floor = braking_floor(guards, X, tilt_error)
+    if floor is None or _holder(guards, X, control, kept, tilt_error, floor) > 0:
+        return who
+    return 0
+
+
+BRAKING_TOL = math.radians(0.05)    # rad: how closely braking_floor finds the limit braking needs
+
+
+def braking_floor(guards: list, X: np.ndarray, tilt_error: float = 0.0) -> float | None:
+    """Where the guards hold back braking itself from X (the wheels commanded to rest for
+    a period, a moving vehicle's only other choice: :func:`holder`): the lowest limit
+    [rad] of the guard's band under which every prediction of braking stays (bisection to
+    BRAKING_TOL, up to the tip-over limit less ``tilt_error``); None where braking is not
+    held back, or would tip over or leave the map whatever the band."""
+    world = guards[0].world if guards else None
+    if world is None:
+        return None
+    ps = world.scenario.planner
+    brake = (0.0, 0.0, ps.period_s)
+    if _holder(guards, X, brake, True, tilt_error) == 0:
+        return None
+    lo = math.radians(ps.tip_over_deg - 0.5 * ps.margin_tip_deg) - tilt_error     # the band (Executor)
+    hi = math.radians(ps.tip_over_deg) - tilt_error - BRAKING_TOL
+    if _holder(guards, X, brake, True, tilt_error, hi) > 0:
+        return None
+    while hi - lo > BRAKING_TOL:
+        mid = 0.5 * (lo + hi)
+        if _holder(guards, X, brake, True, tilt_error, mid) > 0:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def _holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0,
+            floor: float = 0.0) -> int:
     """Which of the guards (:func:`guards`: the world's vehicle, then its twins) holds back
-    the period ``control`` from the measured state X. The world's vehicle's prediction holds it back where it tips over, or, for a plan
+    the period ``control`` from the measured state X, the band's limit taken no lower than
+    ``floor`` [rad] (:func:`braking_floor`). The world's vehicle's prediction holds it back where it tips over, or, for a plan
     that keeps the margin (``kept``), where it comes within half the tip-over margin; a
     plan made without the margin (none kept it: it says so) rides within the margin by
     design, and its drive would be held back at every period. The pessimistic twin's
@@ -266,7 +318,7 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     optimistic one, 4: the fastest, which holds a period that leaves the map or closes in on
     its edge only), 0: none."""
     where = guards[0].world if guards else None
-    floor = PB.standing_tilt(where, X, guard_aside(where)) + STANDING if where is not None else 0.0
+    floor = max(floor, PB.standing_tilt(where, X, guard_aside(where)) + STANDING if where is not None else 0.0)
     brake = (0.0, 0.0, control[2])
     for j, g in enumerate(guards):
         edge = j == 3           # the fastest twin: the map's edge alone (guards)

@@ -747,6 +747,18 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
             return finish("failed", f"wall-clock limit reached at t = {X[K.S_T]:.1f} s, "
                                     f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", "timeout")
         cmd = ctrl.step(float(X[K.S_T]), _attitude(measured(odo.observe(X), twin.vehicle, stalled), truth, X))
+        if cmd.done and cmd.status != "reached" and EX.moving(X):
+            # the controller stopped a vehicle still moving (it could not brake to rest: a
+            # descent steeper than its drive holds): the run goes on at the controller's
+            # command, the wheels at rest, until the truth comes to rest, and ends there,
+            # or where it tips over or leaves the map on the way
+            X0, X, end = X, *_to_rest(real, X, drop, ctrl.period_s, pieces)
+            odo.advance(X)
+            if end < 0 and end != -SS.STALL:
+                return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                                        f"t = {X[K.S_T]:.1f} s, braking after the controller ended: {cmd.reason}",
+                              {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end))
+            return finish("failed", f"{cmd.reason}{_rolled(X0, X)}")
         if cmd.done:
             return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
         rec, end, X = real.step(X, drop.applied(X, (cmd.wl, cmd.wr, ctrl.period_s)))
@@ -762,6 +774,32 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                                     f"t = {X[K.S_T]:.1f} s", {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end))
+
+
+REST_LIMIT_S = 60.0   # s: how long a vehicle the controller stopped is followed braking to rest (_to_rest)
+
+
+def _to_rest(real: "_Executor", X: np.ndarray, drop, period_s: float, pieces: list) -> tuple:
+    """The truth at X driven with its wheels commanded to rest (what a stopped
+    controller commands), period by period, until it comes to rest (no wheel faster than
+    ``execution.MOVING``), tips over, leaves the map or REST_LIMIT_S has passed; the
+    recorded rows appended to ``pieces``. Returns (state, end code of the last period)."""
+    end, t_end = 0, X[K.S_T] + REST_LIMIT_S
+    while EX.moving(X) and X[K.S_T] < t_end:
+        rec, end, X = real.step(X, drop.applied(X, (0.0, 0.0, period_s)))
+        pieces.append(rec if not pieces else rec[1:])
+        if end == -SS.STALL:
+            _protected(X, real)
+        elif end != 0:
+            break
+    return X, end
+
+
+def _rolled(X0: np.ndarray, X: np.ndarray) -> str:
+    """What a reason adds where a stopped vehicle rolled on from X0 to its rest at X."""
+    d = math.hypot(X[K.S_X] - X0[K.S_X], X[K.S_Y] - X0[K.S_Y])
+    return (f"; the vehicle, moving when it stopped, came to rest {d:.2f} m on, at ({X[K.S_X]:.2f}, "
+            f"{X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s" if d > 0.01 else "")
 
 
 def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:

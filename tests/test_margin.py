@@ -559,3 +559,74 @@ def test_where_the_time_plan_does_not_hold_at_1_khz_the_energy_search_searches_a
     assert calls == [("time", 0.1), ("energy", 0.1), ("energy", 0.0)]
     assert p.found and p.cost == "energy" and p.found_by == "" and p.margin["kept"] is False
     assert "the test's" in p.margin["note"] and p.rival["status"] == "no_path"
+
+
+def _descent(at_deg, speed=0.8):
+    """A world on a descent that steepens downhill (heights -c y^2: heading +y the grade
+    grows), and a state heading down it at ``speed`` x the top wheel speed where its
+    grade is ``at_deg``."""
+    res, c = 0.25, 0.0255
+    x, y = np.arange(0.0, 30.0 + res / 2, res), np.arange(0.0, 20.0 + res / 2, res)
+    H = np.repeat((-c * y * y)[:, None], x.size, axis=1)
+    scn = {"name": "descent", "map": {"heights": [[0.0, 0.0], [0.0, 0.0]], "resolution": 1.0},
+           "terrain": "grass", "vehicle": "p3at", "start": {"x": 15.0, "y": 2.0, "yaw_deg": 90.0, "v": 0.0},
+           "goal": {"x": 15.0, "y": 19.0, "radius": 1.0}, "cost": "time"}
+    w = api.load_world(scn, heights=H, resolution=res, margin=0.0, margin_turn=0.0, margin_tip_deg=5.0)
+    y0 = math.tan(math.radians(at_deg)) / (2.0 * c)
+    X = WO._start(w, WO.start_state(replace(w, scenario=replace(w.scenario, start=dict(w.scenario.start, y=y0)))))
+    top = w.vehicle.v_max / w.vehicle.torque_constant
+    X[K.S_WL] = X[K.S_WR] = X[K.S_REFL] = X[K.S_REFR] = speed * top
+    return w, X, top
+
+
+def test_a_vehicle_that_cannot_brake_out_of_the_band_drives_a_period_no_steeper_than_braking():
+    """Heading down a descent 0.5 deg past the steepest grade its drive brakes on grass
+    (22.5 deg), at speed, where it steepens: braking to rest (the wheels commanded to
+    rest, the drive at its current limit) runs on into the guard's band, so holding a
+    period back is no safer than driving one. A period that goes no steeper than braking
+    (slowing to 2 rad/s, or to half speed: the same saturated drive) is driven; full speed
+    down, or a turn, goes steeper and is held back. Before, every period was held, the
+    vehicle braked into the steeper ground and the run stopped it rolling (a drawn
+    `hills_field` horizon truth, 2026-12-07)."""
+    from dynamics.limits import steepest_braked_grade
+    w, X, top = _descent(23.0)
+    assert math.degrees(steepest_braked_grade(w.vehicle, w.terrains[0], 0.8 * top)) == pytest.approx(-22.5, abs=0.1)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    brake = (0.0, 0.0, 1.0)
+    assert EX.holder(g, X, brake, True) == 1                     # braking itself comes into the band
+    floor = EX.braking_floor(g, X)
+    assert 27.5 < math.degrees(floor) < 30.0
+    for slower in ((2.0, 2.0, 1.0), (0.5 * top, 0.5 * top, 1.0)):
+        assert EX._holder(g, X, slower, True) == 1 and EX.holder(g, X, slower, True) == 0
+    for steeper in ((top, top, 1.0), (0.3 * top, 0.8 * top, 1.0)):
+        assert EX.holder(g, X, steeper, True) == 1
+    # 1.5 deg gentler the drive brakes it: nothing changes there
+    w, X, top = _descent(21.0)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    assert EX.braking_floor(g, X) is None and EX.holder(g, X, brake, True) == 0
+    # and a vehicle at rest has no brake to compare with: the band alone
+    w, X, top = _descent(24.0, speed=0.0)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    assert EX.holder(g, X, (0.5 * top, 0.5 * top, 1.0), True) == EX._holder(g, X, (0.5 * top, 0.5 * top, 1.0), True)
+
+
+def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
+    """The simulated truth of a stopped controller (its command: the wheels at rest) is
+    followed until it comes to rest: on a 15 deg descent, which its drive brakes, from
+    speed it stops within half a metre and the recorded rows end at rest; past the
+    steepest braked grade, steepening, it runs away and the follow ends where it tips
+    over, never with the vehicle still moving under a 'stopped' end."""
+    from sbmpc import receding, truth as TT
+    w = _plane(15.0, size=(40.0, 12.0))
+    X = WO._start(w, WO.start_state(replace(w, scenario=replace(
+        w.scenario, start=dict(w.scenario.start, x=30.0, yaw_deg=180.0)))))
+    X[K.S_WL] = X[K.S_WR] = X[K.S_REFL] = X[K.S_REFR] = 8.0
+    real = EX.Executor(w, "time", 0.05)
+    pieces = []
+    S, end = receding._to_rest(real, X, TT.Dropper(0.0, np.random.default_rng(0)), 0.1, pieces)
+    assert end == 0 and not EX.moving(S) and pieces and 0.1 < X[K.S_X] - S[K.S_X] < 5.0
+    assert "came to rest" in receding._rolled(X, S)
+    w, X, top = _descent(26.0)
+    pieces = []
+    S, end = receding._to_rest(EX.Executor(w, "time"), X, TT.Dropper(0.0, np.random.default_rng(0)), 0.1, pieces)
+    assert end == -SS.TIP and S[K.S_Y] > X[K.S_Y] + 0.5
