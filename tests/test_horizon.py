@@ -304,6 +304,32 @@ def test_a_horizon_run_brakes_through_a_held_period_and_stops_only_at_rest(flat,
     assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING
 
 
+class _HoldsForwardAfter(_HoldsAfter):
+    """As _HoldsAfter, but periods driven backwards pass too."""
+
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
+        if control[0] + control[1] < 0.0:
+            return None, 0, X
+        return super().step(X, control, record, tilt_error, floor)
+
+
+def test_where_the_whole_route_plans_first_period_is_held_too_the_run_backs_off_before_it_stops(flat, monkeypatch):
+    """Three periods driven, then every period forward held back (backing passes): after
+    the brake, the horizon plan's and the whole-route plan's first periods held, the
+    vehicle drives back along the way it came (a stop, then its last two periods
+    reversed, each guarded) and plans again from there; held there too, with too few
+    periods left to retrace, it stops, at rest. Before, it stopped where the whole-route
+    plan's first period was held (a map-family `hills_field` horizon truth stopped so on
+    a 25 deg flank, and reaches the goal backing off, 2026-12-07)."""
+    monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _HoldsForwardAfter(3)])
+    res = R.run(flat, "time")
+    assert res.status == "failed" and "the run stops rather than tip over" in res.reason
+    assert [r.why for r in res.plans if r.why.startswith("backed off")]
+    back = [c for c in res.driven if c[0] + c[1] < 0.0]
+    assert len(back) == 2 and res.periods >= 3 + 1 + 3
+    assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING
+
+
 # A pivot braked on a slope of hills_field: the vehicle at 0.25 m/s, full speed for a
 # second, then the left wheel stopped and the right one reversed. It stops on a 5 deg
 # slope with its right drive saturated and its stall timer running, short of a stall

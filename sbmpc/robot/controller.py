@@ -33,8 +33,11 @@ default, and gets the same wheel speeds until the period ends):
    the run's tolerances, stalled the nominal vehicle on ``hills_field`` in 3 of 3 energy
    runs: its plans ride the drive's limit, and a join 0.25 m/s slow loses the run-up);
 5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
-   then whole-route); where that too is held back, the controller stops for good and
-   says why;
+   then whole-route); where that too is held back, back along the way it came, each
+   period guarded (:meth:`Controller._back_off`, twice a run at most), and horizon plans
+   from there; where it cannot back off, the controller stops for good and says why
+   (the guard lets a vehicle that cannot brake out of its band drive a period no
+   steeper than braking: :func:`sbmpc.execution.holder`);
 6. after a **stall**, the plans are made for the margin's pessimistic twin of the
    planning vehicle (it proved weaker there), and a second stall near an earlier one
    makes the slope ahead a wall in their map (:meth:`Controller._as_weaker`), unless it
@@ -738,7 +741,17 @@ class Controller:
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 X = yield from self._brake(X)
                 if held and guide is not None:
-                    return "stopped", EX.stopped(X, ps)
+                    # the whole-route plan's first period held back too: back along the way
+                    # it came where the guards let it, and horizon plans from there (as
+                    # after a whole-route plan that found no way on); else it stops
+                    Xb = yield from self._back_off(X)
+                    if Xb is None:
+                        return "stopped", EX.stopped(X, ps)
+                    guide, kept, held = None, True, False
+                    togo.clear()
+                    h = self._made((yield from self._await_horizon(Xb)), f"backed off: {where}, and the "
+                                   "whole-route plan's first period from there too", Xb)
+                    continue
                 if held or guide is not None:
                     p, guide, kept = yield from route(X, f"{where}: whole-route plan")
                     if not p.found:
