@@ -219,12 +219,35 @@ def guards(world: WO.World, cost: str) -> list:
     return out
 
 
-def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> bool:
+def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0,
+         brake_s: float | None = None) -> bool:
     """Whether the guards hold back the period (:func:`holder`)."""
-    return holder(guards, X, control, kept, tilt_error) > 0
+    return holder(guards, X, control, kept, tilt_error, brake_s) > 0
 
 
-def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0) -> int:
+SHORTER = (0.5, 0.25)   # the parts of a held period tried before it is braked through (shortened)
+
+
+def shortened(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float, tick: float) -> tuple | None:
+    """The longest first part of a held period ``control`` (wl, wr, d) of SHORTER (a
+    whole number of the robot's control periods ``tick`` [s], at least one, shorter than
+    d) that the guards let through with braking for the whole of d after it: the
+    command driven for less time, the vehicle slower and nearer where it can still brake.
+    None where none is. A 1 s period at speed and the second of braking after it commit
+    the vehicle to about 2 m; near `hills_field`'s goal, on its 21-27 deg flank, the
+    optimistic twin's prediction of every such period ran 0.7 m on into ground steeper
+    than the guard's band while the plan's next periods turned along the slope, and the
+    runs stopped 0.6-1.3 m outside the goal disc (2026-12-07)."""
+    wl, wr, d = control
+    for f in SHORTER:
+        part = max(tick, round(d * f / tick) * tick)
+        if part < d - 1e-9 and not held(guards, X, (wl, wr, part), kept, tilt_error, brake_s=d):
+            return (wl, wr, part)
+    return None
+
+
+def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0,
+           brake_s: float | None = None) -> int:
     """Which of the guards holds back the period ``control`` from the measured state X
     (:func:`_holder`, the rules), 1-based, 0: none; and where the vehicle is moving and
     braking to rest is held back too (a descent steeper than its drive holds: braking
@@ -235,12 +258,14 @@ def holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float =
     into the steeper ground: a drawn `hills_field` horizon truth, its plan's period held
     on an 18 deg descent the map made 1.6-2.6 deg too gentle, braked with its wheels
     at rest commanded from 7.6 to 10.9 rad/s and the run stopped it rolling at 1.2 m/s,
-    on 27 deg (2026-12-07). A hold the brake's own floor does not lift stays a hold."""
-    who = _holder(guards, X, control, kept, tilt_error)
+    on 27 deg (2026-12-07). A hold the brake's own floor does not lift stays a hold.
+    ``brake_s`` [s]: how long the predictions brake after the period (default: the
+    period's own length)."""
+    who = _holder(guards, X, control, kept, tilt_error, brake_s=brake_s)
     if who == 0 or X is None or not moving(X) or (control[0] == 0.0 and control[1] == 0.0):
         return who
     floor = braking_floor(guards, X, tilt_error)
-    if floor is None or _holder(guards, X, control, kept, tilt_error, floor) > 0:
+    if floor is None or _holder(guards, X, control, kept, tilt_error, floor, brake_s) > 0:
         return who
     return 0
 
@@ -275,7 +300,7 @@ def braking_floor(guards: list, X: np.ndarray, tilt_error: float = 0.0) -> float
 
 
 def _holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0.0,
-            floor: float = 0.0) -> int:
+            floor: float = 0.0, brake_s: float | None = None) -> int:
     """Which of the guards (:func:`guards`: the world's vehicle, then its twins) holds back
     the period ``control`` from the measured state X, the band's limit taken no lower than
     ``floor`` [rad] (:func:`braking_floor`). The world's vehicle's prediction holds it back where it tips over, or, for a plan
@@ -319,7 +344,7 @@ def _holder(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float 
     its edge only), 0: none."""
     where = guards[0].world if guards else None
     floor = max(floor, PB.standing_tilt(where, X, guard_aside(where)) + STANDING if where is not None else 0.0)
-    brake = (0.0, 0.0, control[2])
+    brake = (0.0, 0.0, control[2] if brake_s is None else brake_s)
     for j, g in enumerate(guards):
         edge = j == 3           # the fastest twin: the map's edge alone (guards)
         limits = {} if edge else {"tilt_error": tilt_error, "floor": floor}

@@ -330,6 +330,29 @@ def test_where_the_whole_route_plans_first_period_is_held_too_the_run_backs_off_
     assert max(abs(res.trajectory["wl"][-1]), abs(res.trajectory["wr"][-1])) < EX.MOVING
 
 
+class _HoldsLong(_Predicts):
+    """A guard that holds back every period longer than half a second (braking passes)."""
+
+    def __init__(self):
+        super().__init__(0)
+
+    def step(self, X, control, record=False, tilt_error=0.0, floor=0.0):
+        moving = control[0] != 0.0 or control[1] != 0.0
+        return None, (-SS.MARGIN if moving and control[2] > 0.5 + 1e-9 else 0), X
+
+
+def test_a_horizon_run_drives_the_part_of_a_held_period_the_guard_lets_through(flat, monkeypatch):
+    """Every 1 s period held back, its first half let through: the run creeps to the goal
+    in half periods, each planned again from where it ended, with no whole-route plan
+    and nothing braked through."""
+    monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _HoldsLong()])
+    res = R.run(flat, "time")
+    assert res.status == "reached", res.reason
+    assert res.guarded == 0 and res.horizon.fallbacks == 0
+    moving = [c for c in res.driven if c[0] != 0.0 or c[1] != 0.0]
+    assert moving and max(c[2] for c in moving) <= 0.5 + 1e-9
+
+
 # A pivot braked on a slope of hills_field: the vehicle at 0.25 m/s, full speed for a
 # second, then the left wheel stopped and the right one reversed. It stops on a 5 deg
 # slope with its right drive saturated and its stall timer running, short of a stall

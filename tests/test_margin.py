@@ -630,3 +630,26 @@ def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
     pieces = []
     S, end = receding._to_rest(EX.Executor(w, "time"), X, TT.Dropper(0.0, np.random.default_rng(0)), 0.1, pieces)
     assert end == -SS.TIP and S[K.S_Y] > X[K.S_Y] + 0.5
+
+
+def test_a_held_period_is_driven_in_part_where_braking_a_whole_period_after_the_part_is_safe():
+    """From rest at the top of a descent that steepens (24 and 26 deg where it stands, 27.5
+    deg 1-3 m on): a full-speed period of 1 s and braking after it run into the guard's
+    band; half of it, or a fifth, with a whole second of braking after it, does not:
+    the controller drives that part and plans again from where it is (it creeps up to
+    the band instead of stopping short of it). The brake judged is the whole period's:
+    half a period braked for half a period passes where braking to rest does not. Where
+    the robot's control period is half the plan's, or the map is 1.5 deg steeper than
+    it says, nothing shorter passes."""
+    w, X, top = _descent(24.0, speed=0.0)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    full = (top, top, 1.0)
+    assert EX.holder(g, X, full, True) == 1
+    assert EX.shortened(g, X, full, True, 0.0, 0.1) == (top, top, 0.5)
+    w, X, top = _descent(26.0, speed=0.0)
+    g = [EX.Executor(w, "time", tip_guard=True)]
+    assert EX.holder(g, X, (top, top, 0.5), True) == 0 and EX.holder(g, X, (top, top, 0.5), True, brake_s=1.0) == 1
+    part = EX.shortened(g, X, full, True, 0.0, 0.1)
+    assert part[:2] == (top, top) and part[2] == pytest.approx(0.2)
+    assert EX.shortened(g, X, full, True, 0.0, 0.5) is None
+    assert EX.shortened(g, X, full, True, math.radians(1.5), 0.1) is None

@@ -167,6 +167,7 @@ class Controller:
         self.plans: list = []
         self.horizon = EX.HorizonStats(ps.horizon_s)
         self.guarded = 0
+        self.shortened = 0            # held periods driven in part (execution.shortened)
         self.stalls = 0
         self.stall_at: list = []
         self._stall_t = None          # robot time of the last stall counted [s]
@@ -734,32 +735,46 @@ class Controller:
                 control, status = step[0], "horizon" if tracking is None else "tracking"
                 if h.goal and len(step) == 1:
                     control = (control[0], control[1], max(control[2], ps.period_s))
-            if self.guards and EX.held(self.guards, X, control, kept, self._tilt):
-                # the guard: the period is not driven; a plan from where the vehicle
-                # stands: a horizon plan, then a whole-route one, then it stops
+            stop = bool(self.guards) and EX.held(self.guards, X, control, kept, self._tilt)
+            short = None
+            if stop:
+                # the guard: the period is not driven, but a first part of a horizon
+                # plan's period may be (execution.shortened), and a plan made from there;
+                # else a plan from where the vehicle stands: a horizon plan, then a
+                # whole-route one, then back along the way it came, then it stops
+                if guide is None and not settle:
+                    short = EX.shortened(self.guards, X, control, kept, self._tilt, self.period_s)
+            if short is not None:
+                control = short
+                self.shortened += 1
+            elif stop:
                 self.guarded += 1
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 X = yield from self._brake(X)
-                if held and guide is not None:
-                    # the whole-route plan's first period held back too: back along the way
-                    # it came where the guards let it, and horizon plans from there (as
-                    # after a whole-route plan that found no way on); else it stops
-                    Xb = yield from self._back_off(X)
-                    if Xb is None:
-                        return "stopped", EX.stopped(X, ps)
-                    guide, kept, held = None, True, False
-                    togo.clear()
-                    h = self._made((yield from self._await_horizon(Xb)), f"backed off: {where}, and the "
-                                   "whole-route plan's first period from there too", Xb)
-                    continue
-                if held or guide is not None:
+                failed = None
+                if not (held and guide is not None):
+                    if not (held or guide is not None):
+                        st.from_measured += 1
+                        h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
+                        held = True
+                        continue
                     p, guide, kept = yield from route(X, f"{where}: whole-route plan")
-                    if not p.found:
-                        return "stopped", EX.stopped(X, ps, ("whole-route plan", p.reason))
-                else:
-                    st.from_measured += 1
-                    h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
-                held = True
+                    if p.found:
+                        held = True
+                        continue
+                    failed = ("whole-route plan", p.reason)
+                # the whole-route plan's first period held back too, or no whole-route plan
+                # from there: back along the way it came where the guards let it, and
+                # horizon plans from there (as after a whole-route plan that found no way
+                # on); else it stops
+                Xb = yield from self._back_off(X)
+                if Xb is None:
+                    return "stopped", EX.stopped(X, ps, failed)
+                guide, kept, held = None, True, False
+                togo.clear()
+                h = self._made((yield from self._await_horizon(Xb)), f"backed off: {where}, and " + (
+                    "no whole-route plan from there" if failed else "the whole-route plan's first period from "
+                    "there too"), Xb)
                 continue
             held = False
             settled = settle
@@ -768,7 +783,7 @@ class Controller:
                 guide.pop(0)
             control = self._on_ticks(control)
             _, _, P = self.model.step(X, control, record=False)
-            nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h, None)
+            nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h if short is None else None, None)
                    if guide is None else None)           # made while the period is driven
             if guide is None:
                 self._refresh_beside(X, h)
