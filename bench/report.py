@@ -116,6 +116,34 @@ def closed_loop_hills() -> str:
     return "\n".join(lines)
 
 
+GUARD_SERIES = (        # (results file, which rows, what the code had)
+    ("closed_loop.json", "hills_field", "the table (531da84)"),
+    ("closed_loop_guarded.json", "hills_field", "the lesser evil on descents; backing off after a held whole-route plan"),
+    ("closed_loop_shortened.json", "hills_field", "and a held period driven in part"),
+    ("closed_loop_maps_before.json", "hills_field maps", "today's code before the three (42edd47)"),
+    ("closed_loop_maps_lesser.json", "hills_field maps", "the lesser evil on descents"),
+    ("closed_loop_maps_guarded.json", "hills_field maps", "and backing off after a held whole-route plan"),
+    ("closed_loop_maps_shortened.json", "hills_field maps", "and a held period driven in part"))
+
+
+def closed_loop_guard() -> str:
+    """robustness.md: the horizon rows of hills_field and of its generator's maps (seeds
+    100-102) after each change to what the guard does with a held period (GUARD_SERIES;
+    the same truths in every file of a scenario: the draw hashes the scenario's content)."""
+    lines = ["| results | date, commit | rows | what the code had | runs | reached | stopped | no way on | failed | "
+             "stalls |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, rows, what in GUARD_SERIES:
+        d = _load(name)
+        gs = [g for k, g in d["groups"].items() if k.split("/")[0] == rows and k.endswith("/horizon")]
+        n = sum(g["runs"] for g in gs)
+
+        def ends(e):
+            return sum(g["ends"].get(e, 0) for g in gs)
+        lines.append(f"| {name} | {d['date']}, {d['commit']} | {rows}, horizon | {what} | {n} | {ends('reached')} | "
+                     f"{ends('stopped')} | {ends('no_path')} | {ends('failed')} | {sum(g['stalls'] for g in gs)} |")
+    return "\n".join(lines)
+
+
 def closed_loop_adapt() -> str:
     """Adaptation off, on with the file's margin, and on with the margin firmed by the
     estimate, on the same truths (closed_loop_adapt_off/on/firm.json)."""
@@ -1038,7 +1066,7 @@ BLOCKS = {"closed-loop-table": closed_loop_table, "closed-loop-aside": closed_lo
           "closed-loop-before": lambda: closed_loop_totals("closed_loop_before.json"),
           "closed-loop-maps": lambda: closed_loop_totals("closed_loop_maps.json"),
           "closed-loop-adapt": closed_loop_adapt,
-          "closed-loop-hills": closed_loop_hills, "closed-loop-grade": closed_loop_grade,
+          "closed-loop-hills": closed_loop_hills, "closed-loop-guard": closed_loop_guard, "closed-loop-grade": closed_loop_grade,
           "closed-loop-backoff": closed_loop_backoff, "closed-loop-runon": closed_loop_runon, "hand-over-beside": hand_over_beside,
           "diagnose-speed": diagnose_speed, "warthog": warthog, "slope-layer": slope_layer,
           "husky-no-load": husky_no_load,

@@ -237,7 +237,8 @@ def shortened(guards: list, X: np.ndarray, control, kept: bool, tilt_error: floa
     the vehicle to about 2 m; near `hills_field`'s goal, on its 21-27 deg flank, the
     optimistic twin's prediction of every such period ran 0.7 m on into ground steeper
     than the guard's band while the plan's next periods turned along the slope, and the
-    runs stopped 0.6-1.3 m outside the goal disc (2026-12-07)."""
+    runs stopped 0.6-1.3 m outside the goal disc (2026-12-07). The controller asks this
+    of a vehicle at rest only (:class:`sbmpc.robot.Controller`)."""
     wl, wr, d = control
     for f in SHORTER:
         part = max(tick, round(d * f / tick) * tick)

@@ -342,13 +342,15 @@ class _HoldsLong(_Predicts):
 
 
 def test_a_horizon_run_drives_the_part_of_a_held_period_the_guard_lets_through(flat, monkeypatch):
-    """Every 1 s period held back, its first half let through: the run creeps to the goal
-    in half periods, each planned again from where it ended, with no whole-route plan
-    and nothing braked through."""
+    """Every 1 s period held back, its first half let through: from rest the run drives
+    that half, planned again from where it ended; moving, a held period is braked
+    through (a part driven at speed adds speed), and from rest again the next half is
+    driven: the run creeps to the goal in half periods, never a whole one, without a
+    whole-route plan."""
     monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _HoldsLong()])
     res = R.run(flat, "time")
     assert res.status == "reached", res.reason
-    assert res.guarded == 0 and res.horizon.fallbacks == 0
+    assert res.horizon.fallbacks == 0 and res.guarded > 0
     moving = [c for c in res.driven if c[0] != 0.0 or c[1] != 0.0]
     assert moving and max(c[2] for c in moving) <= 0.5 + 1e-9
 

@@ -742,7 +742,10 @@ class Controller:
                 # plan's period may be (execution.shortened), and a plan made from there;
                 # else a plan from where the vehicle stands: a horizon plan, then a
                 # whole-route one, then back along the way it came, then it stops
-                if guide is None and not settle:
+                if guide is None and not settle and not EX.moving(X):
+                    # (from rest only: a part driven at speed down a descent added the speed
+                    # that braking then could not take off, and a map-family truth whose
+                    # predictions braked in time rolled over, 2026-12-07)
                     short = EX.shortened(self.guards, X, control, kept, self._tilt, self.period_s)
             if short is not None:
                 control = short
