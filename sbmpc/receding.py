@@ -398,7 +398,10 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     misses = 0                         # re-plans in a row that found no way on while the vehicle drove on
 
     def finish(status, reason, end=None):
+        nonlocal Xt
         out.dropped = drop.count
+        if status != "reached" and end not in ("tipped", "off_map"):
+            Xt, status, reason, end = _at_rest(real, Xt, drop, ps.period_s, pieces, status, reason, end)
         return _finish(out, pieces, every, status, reason, end, Xt)
 
     def drive(control, predicted=None) -> int:
@@ -747,18 +750,11 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
             return finish("failed", f"wall-clock limit reached at t = {X[K.S_T]:.1f} s, "
                                     f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", "timeout")
         cmd = ctrl.step(float(X[K.S_T]), _attitude(measured(odo.observe(X), twin.vehicle, stalled), truth, X))
-        if cmd.done and cmd.status != "reached" and EX.moving(X):
-            # the controller stopped a vehicle still moving (it could not brake to rest: a
-            # descent steeper than its drive holds): the run goes on at the controller's
-            # command, the wheels at rest, until the truth comes to rest, and ends there,
-            # or where it tips over or leaves the map on the way
-            X0, X, end = X, *_to_rest(real, X, drop, ctrl.period_s, pieces)
-            odo.advance(X)
-            if end < 0 and end != -SS.STALL:
-                return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                        f"t = {X[K.S_T]:.1f} s, braking after the controller ended: {cmd.reason}",
-                              {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end))
-            return finish("failed", f"{cmd.reason}{_rolled(X0, X)}")
+        if cmd.done and cmd.status != "reached":
+            # (the controller stopped a vehicle still moving: the run goes on at its command,
+            # the wheels at rest, until the truth comes to rest: _at_rest)
+            X, status, reason, end = _at_rest(real, X, drop, ctrl.period_s, pieces, "failed", cmd.reason, None)
+            return finish(status, reason, end)
         if cmd.done:
             return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
         rec, end, X = real.step(X, drop.applied(X, (cmd.wl, cmd.wr, ctrl.period_s)))
@@ -793,6 +789,23 @@ def _to_rest(real: "_Executor", X: np.ndarray, drop, period_s: float, pieces: li
         elif end != 0:
             break
     return X, end
+
+
+def _at_rest(real: "_Executor", X: np.ndarray, drop, period_s: float, pieces: list, status: str,
+             reason: str | None, end: str | None) -> tuple:
+    """A run that ends short of the goal with the truth still moving (the controller
+    stopped a vehicle it could not brake to rest, a descent steeper than its drive holds;
+    a last stall rolling back) ends where the truth comes to rest at the command it is
+    left with, the wheels at rest (:func:`_to_rest`), or where it tips over or leaves the
+    map on the way: (state, status, reason, end) for the run's finish."""
+    if not EX.moving(X):
+        return X, status, reason, end
+    X0, (X, code) = X, _to_rest(real, X, drop, period_s, pieces)
+    if code < 0 and code != -SS.STALL:
+        return X, "failed", (f"the vehicle {SS.CODES[-code - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
+                             f"t = {X[K.S_T]:.1f} s, braking after the run ended: {reason}"), \
+            {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(code)
+    return X, status, f"{reason}{_rolled(X0, X)}", end
 
 
 def _rolled(X0: np.ndarray, X: np.ndarray) -> str:

@@ -614,8 +614,9 @@ def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
     """The simulated truth of a stopped controller (its command: the wheels at rest) is
     followed until it comes to rest: on a 15 deg descent, which its drive brakes, from
     speed it stops within half a metre and the recorded rows end at rest; past the
-    steepest braked grade, steepening, it runs away and the follow ends where it tips
-    over, never with the vehicle still moving under a 'stopped' end."""
+    steepest braked grade, steepening, it runs away and the run's end is that it tipped
+    over, never a 'stopped' with the vehicle still moving (whole-route runs and
+    horizon runs alike: receding._at_rest)."""
     from sbmpc import receding, truth as TT
     w = _plane(15.0, size=(40.0, 12.0))
     X = WO._start(w, WO.start_state(replace(w, scenario=replace(
@@ -628,8 +629,10 @@ def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
     assert "came to rest" in receding._rolled(X, S)
     w, X, top = _descent(26.0)
     pieces = []
-    S, end = receding._to_rest(EX.Executor(w, "time"), X, TT.Dropper(0.0, np.random.default_rng(0)), 0.1, pieces)
-    assert end == -SS.TIP and S[K.S_Y] > X[K.S_Y] + 0.5
+    S, status, reason, end = receding._at_rest(EX.Executor(w, "time"), X, TT.Dropper(0.0, np.random.default_rng(0)),
+                                               0.1, pieces, "failed", "stopped at (15.00, 9.56): ...", "stopped")
+    assert (status, end) == ("failed", "tipped") and S[K.S_Y] > X[K.S_Y] + 0.5
+    assert reason.startswith("the vehicle tipped over") and reason.endswith("after the run ended: stopped at (15.00, 9.56): ...")
 
 
 def test_a_held_period_is_driven_in_part_where_braking_a_whole_period_after_the_part_is_safe():
