@@ -125,7 +125,11 @@ GUARD_SERIES = (        # (results file, which rows, what the code had)
     ("closed_loop_maps_lesser.json", "hills_field maps", "the lesser evil on descents"),
     ("closed_loop_maps_guarded.json", "hills_field maps", "and backing off after a held whole-route plan"),
     ("closed_loop_maps_part_moving.json", "hills_field maps", "and a held period driven in part, moving too (not kept)"),
-    ("closed_loop_maps_shortened.json", "hills_field maps", "and a held period driven in part from rest"))
+    ("closed_loop_maps_shortened.json", "hills_field maps", "and a held period driven in part from rest"),
+    ("closed_loop_wall.json", "narrow_pass", "before the three (4646b54)"),
+    ("closed_loop_guard_others.json", "narrow_pass", "the three as landed: a check for harm"),
+    ("closed_loop_wall.json", "steep_hill", "before the three (4646b54)"),
+    ("closed_loop_guard_others.json", "steep_hill", "the three as landed: a check for harm"))
 
 
 def closed_loop_guard() -> str:

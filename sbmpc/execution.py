@@ -62,6 +62,7 @@ class HorizonStats:
     fallback_s: list = field(default_factory=list)
     settled: int = 0
     rejoined: int = 0        # hand-overs onto the whole-route plan made beside (planning.rejoin)
+    shortened: int = 0       # held periods driven in part from rest (shortened)
     beside_s: list = field(default_factory=list)    # per plan made beside taken up: robot time [s] from asking to taking it up
 
     def to_json(self) -> dict:
@@ -73,7 +74,8 @@ class HorizonStats:
                 "expansions_median": float(np.median(self.expansions)) if self.expansions else 0.0,
                 "kept_previous": self.kept_previous, "from_measured": self.from_measured,
                 "fallbacks": self.fallbacks, "fallback_s": [round(x, 4) for x in self.fallback_s],
-                "settled": self.settled, "rejoined": self.rejoined, "beside_made": len(self.beside_s),
+                "settled": self.settled, "rejoined": self.rejoined, "shortened": self.shortened,
+                "beside_made": len(self.beside_s),
                 "beside_median_s": float(np.median(self.beside_s)) if self.beside_s else 0.0}
 
 
@@ -225,13 +227,13 @@ def held(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float = 0
     return holder(guards, X, control, kept, tilt_error, brake_s) > 0
 
 
-SHORTER = (0.5, 0.25)   # the parts of a held period tried before it is braked through (shortened)
+SHORTER = (0.5, 0.25)   # the parts of a held period tried before it is braked through (shortened), rounded down to whole control periods
 
 
 def shortened(guards: list, X: np.ndarray, control, kept: bool, tilt_error: float, tick: float) -> tuple | None:
-    """The longest first part of a held period ``control`` (wl, wr, d) of SHORTER (a
-    whole number of the robot's control periods ``tick`` [s], at least one, shorter than
-    d) that the guards let through with braking for the whole of d after it: the
+    """The longest first part of a held period ``control`` (wl, wr, d) of SHORTER (rounded
+    down to a whole number of the robot's control periods ``tick`` [s], at least one,
+    shorter than d: half and a quarter of 1 s at 0.1 s are 0.5 and 0.2 s) that the guards let through with braking for the whole of d after it: the
     command driven for less time, the vehicle slower and nearer where it can still brake.
     None where none is. A 1 s period at speed and the second of braking after it commit
     the vehicle to about 2 m; near `hills_field`'s goal, on its 21-27 deg flank, the
@@ -241,7 +243,7 @@ def shortened(guards: list, X: np.ndarray, control, kept: bool, tilt_error: floa
     of a vehicle at rest only (:class:`sbmpc.robot.Controller`)."""
     wl, wr, d = control
     for f in SHORTER:
-        part = max(tick, round(d * f / tick) * tick)
+        part = max(tick, math.floor(d * f / tick + 1e-9) * tick)
         if part < d - 1e-9 and not held(guards, X, (wl, wr, part), kept, tilt_error, brake_s=d):
             return (wl, wr, part)
     return None

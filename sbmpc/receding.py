@@ -798,21 +798,26 @@ def _at_rest(real: "_Executor", X: np.ndarray, drop, period_s: float, pieces: li
     a last stall rolling back) ends where the truth comes to rest at the command it is
     left with, the wheels at rest (:func:`_to_rest`), or where it tips over or leaves the
     map on the way: (state, status, reason, end) for the run's finish."""
-    if not EX.moving(X):
-        return X, status, reason, end
+    if not EX.moving(X) or end == "timeout" or (reason or "").startswith("the controller stopped:"):
+        return X, status, reason, end       # (a run out of its wall clock, or an error: as it ended)
     X0, (X, code) = X, _to_rest(real, X, drop, period_s, pieces)
     if code < 0 and code != -SS.STALL:
         return X, "failed", (f"the vehicle {SS.CODES[-code - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                              f"t = {X[K.S_T]:.1f} s, braking after the run ended: {reason}"), \
             {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(code)
-    return X, status, f"{reason}{_rolled(X0, X)}", end
+    return X, status, f"{reason}{_rolled(X0, X, code)}", end
 
 
-def _rolled(X0: np.ndarray, X: np.ndarray) -> str:
-    """What a reason adds where a stopped vehicle rolled on from X0 to its rest at X."""
+def _rolled(X0: np.ndarray, X: np.ndarray, code: int = 0) -> str:
+    """What a reason adds where a stopped vehicle rolled on from X0 to X (:func:`_to_rest`,
+    whose last end ``code`` says whether it rolled into the goal disc)."""
     d = math.hypot(X[K.S_X] - X0[K.S_X], X[K.S_Y] - X0[K.S_Y])
-    return (f"; the vehicle, moving when it stopped, came to rest {d:.2f} m on, at ({X[K.S_X]:.2f}, "
-            f"{X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s" if d > 0.01 else "")
+    at = f"{d:.2f} m on, at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), t = {X[K.S_T]:.1f} s"
+    if code == SS.IN_GOAL:
+        return f"; the vehicle, moving when it stopped, rolled on into the goal disc {at}"
+    if EX.moving(X):
+        return f"; the vehicle, moving when it stopped, was still moving {REST_LIMIT_S:g} s later, {at}"
+    return f"; the vehicle, moving when it stopped, came to rest {at}" if d > 0.01 else ""
 
 
 def horizon_plan(world: WO.World, cost: str | None = None) -> PL.Plan:

@@ -350,7 +350,8 @@ def test_a_horizon_run_drives_the_part_of_a_held_period_the_guard_lets_through(f
     monkeypatch.setattr(EX, "guards", lambda world, cost: [_Predicts(0), _HoldsLong()])
     res = R.run(flat, "time")
     assert res.status == "reached", res.reason
-    assert res.horizon.fallbacks == 0 and res.guarded > 0
+    assert res.horizon.fallbacks == 0 and res.guarded > 0 and res.horizon.shortened > 0
+    assert res.to_json()["horizon"]["shortened"] == res.horizon.shortened
     moving = [c for c in res.driven if c[0] != 0.0 or c[1] != 0.0]
     assert moving and max(c[2] for c in moving) <= 0.5 + 1e-9
 

@@ -615,8 +615,9 @@ def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
     followed until it comes to rest: on a 15 deg descent, which its drive brakes, from
     speed it stops within half a metre and the recorded rows end at rest; past the
     steepest braked grade, steepening, it runs away and the run's end is that it tipped
-    over, never a 'stopped' with the vehicle still moving (whole-route runs and
-    horizon runs alike: receding._at_rest)."""
+    over, never a 'stopped' with the vehicle still moving (receding._at_rest, which the
+    finish of whole-route and horizon runs calls); a run out of its wall clock ends as it
+    was."""
     from sbmpc import receding, truth as TT
     w = _plane(15.0, size=(40.0, 12.0))
     X = WO._start(w, WO.start_state(replace(w, scenario=replace(
@@ -633,12 +634,15 @@ def test_a_run_that_stops_a_moving_vehicle_follows_it_braking_to_rest():
                                                0.1, pieces, "failed", "stopped at (15.00, 9.56): ...", "stopped")
     assert (status, end) == ("failed", "tipped") and S[K.S_Y] > X[K.S_Y] + 0.5
     assert reason.startswith("the vehicle tipped over") and reason.endswith("after the run ended: stopped at (15.00, 9.56): ...")
+    same = receding._at_rest(EX.Executor(w, "time"), X, TT.Dropper(0.0, np.random.default_rng(0)), 0.1, [],
+                             "failed", "wall-clock limit reached", "timeout")
+    assert same[1:] == ("failed", "wall-clock limit reached", "timeout") and same[0] is X
 
 
 def test_a_held_period_is_driven_in_part_where_braking_a_whole_period_after_the_part_is_safe():
     """From rest at the top of a descent that steepens (24 and 26 deg where it stands, 27.5
     deg 1-3 m on): a full-speed period of 1 s and braking after it run into the guard's
-    band; half of it, or a fifth, with a whole second of braking after it, does not:
+    band; half of it, or a quarter rounded down to 0.2 s, with a whole second of braking after it, does not:
     the controller drives that part and plans again from where it is (it creeps up to
     the band instead of stopping short of it). The brake judged is the whole period's:
     half a period braked for half a period passes where braking to rest does not. Where

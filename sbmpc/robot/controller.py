@@ -32,8 +32,10 @@ default, and gets the same wheel speeds until the period ends):
    that plan). (Following an offer's controls from where the vehicle joined it, within
    the run's tolerances, stalled the nominal vehicle on ``hills_field`` in 3 of 3 energy
    runs: its plans ride the drive's limit, and a join 0.25 m/s slow loses the run-up);
-5. where the guard holds a period back, a plan from where the vehicle stands (horizon,
-   then whole-route); where that too is held back, back along the way it came, each
+5. where the guard holds a period back, from rest its first half or quarter where the
+   guard lets that through (:func:`sbmpc.execution.shortened`), else a plan from where the
+   vehicle stands (horizon, then whole-route); where that too is held back or finds no
+   way, back along the way it came, each
    period guarded (:meth:`Controller._back_off`, twice a run at most), and horizon plans
    from there; where it cannot back off, the controller stops for good and says why
    (the guard lets a vehicle that cannot brake out of its band drive a period no
@@ -167,7 +169,6 @@ class Controller:
         self.plans: list = []
         self.horizon = EX.HorizonStats(ps.horizon_s)
         self.guarded = 0
-        self.shortened = 0            # held periods driven in part (execution.shortened)
         self.stalls = 0
         self.stall_at: list = []
         self._stall_t = None          # robot time of the last stall counted [s]
@@ -749,7 +750,7 @@ class Controller:
                     short = EX.shortened(self.guards, X, control, kept, self._tilt, self.period_s)
             if short is not None:
                 control = short
-                self.shortened += 1
+                st.shortened += 1
             elif stop:
                 self.guarded += 1
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
@@ -788,7 +789,7 @@ class Controller:
             _, _, P = self.model.step(X, control, record=False)
             nxt = (self._horizon_pool.submit(self.planner.plan, P.copy(), h if short is None else None, None)
                    if guide is None else None)           # made while the period is driven
-            if guide is None:
+            if guide is None and short is None:     # (h's first period was not driven whole)
                 self._refresh_beside(X, h)
             X, stalled = yield from self._drive(control, status)
             dxy, dyaw, dv = EX.deviation(X, P)
