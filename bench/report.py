@@ -116,37 +116,42 @@ def closed_loop_hills() -> str:
     return "\n".join(lines)
 
 
-GUARD_SERIES = (        # (results file, which rows, what the code had)
-    ("closed_loop.json", "hills_field", "the table (531da84)"),
-    ("closed_loop_guarded.json", "hills_field", "the lesser evil on descents; backing off after a held whole-route plan"),
-    ("closed_loop_part_moving.json", "hills_field", "and a held period driven in part, moving too (not kept)"),
-    ("closed_loop_shortened.json", "hills_field", "and a held period driven in part from rest"),
-    ("closed_loop_maps_before.json", "hills_field maps", "today's code before the three (42edd47)"),
-    ("closed_loop_maps_lesser.json", "hills_field maps", "the lesser evil on descents"),
-    ("closed_loop_maps_guarded.json", "hills_field maps", "and backing off after a held whole-route plan"),
-    ("closed_loop_maps_part_moving.json", "hills_field maps", "and a held period driven in part, moving too (not kept)"),
-    ("closed_loop_maps_shortened.json", "hills_field maps", "and a held period driven in part from rest"),
-    ("closed_loop_wall.json", "narrow_pass", "before the three (4646b54)"),
-    ("closed_loop_guard_others.json", "narrow_pass", "the three as landed: a check for harm"),
-    ("closed_loop_wall.json", "steep_hill", "before the three (4646b54)"),
-    ("closed_loop_guard_others.json", "steep_hill", "the three as landed: a check for harm"))
+GUARD_SERIES = (        # (results file, scenario, mode, what the code had)
+    ("closed_loop.json", "hills_field", "horizon", "the table (531da84)"),
+    ("closed_loop_guarded.json", "hills_field", "horizon",
+     "the lesser evil on descents; backing off after a held whole-route plan"),
+    ("closed_loop_part_moving.json", "hills_field", "horizon", "and a held period driven in part, moving too (not kept)"),
+    ("closed_loop_shortened.json", "hills_field", "horizon", "and a held period driven in part from rest"),
+    ("closed_loop_maps_before.json", "hills_field maps", "horizon", "today's code before the three (42edd47)"),
+    ("closed_loop_maps_lesser.json", "hills_field maps", "horizon", "the lesser evil on descents"),
+    ("closed_loop_maps_guarded.json", "hills_field maps", "horizon", "and backing off after a held whole-route plan"),
+    ("closed_loop_maps_part_moving.json", "hills_field maps", "horizon",
+     "and a held period driven in part, moving too (not kept)"),
+    ("closed_loop_maps_shortened.json", "hills_field maps", "horizon", "and a held period driven in part from rest"),
+    ("closed_loop_wall.json", "narrow_pass", "horizon", "before the three (4646b54)"),
+    ("closed_loop_guard_others.json", "narrow_pass", "horizon", "the three as landed: a check for harm"),
+    ("closed_loop_wall.json", "steep_hill", "horizon", "before the three (4646b54)"),
+    ("closed_loop_guard_others.json", "steep_hill", "horizon", "the three as landed: a check for harm"),
+    ("closed_loop_guard_whole_before.json", "hills_field", "whole_route", "before the three (42edd47)"),
+    ("closed_loop_guard_whole.json", "hills_field", "whole_route", "the three as landed: a check for harm"))
 
 
 def closed_loop_guard() -> str:
-    """robustness.md: the horizon rows of hills_field and of its generator's maps (seeds
-    100-102) after each change to what the guard does with a held period (GUARD_SERIES;
-    the same truths in every file of a scenario: the draw hashes the scenario's content)."""
+    """robustness.md: the rows of hills_field, of its generator's maps (seeds 100-102) and
+    of narrow_pass and steep_hill after each change to what the guard does with a held
+    period (GUARD_SERIES; the same truths in every file of a scenario: the draw hashes the
+    scenario's content)."""
     lines = ["| results | date, commit | rows | what the code had | runs | reached | stopped | no way on | failed | "
              "tipped over | stalls |", "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, rows, what in GUARD_SERIES:
+    for name, rows, mode, what in GUARD_SERIES:
         d = _load(name)
-        gs = [g for k, g in d["groups"].items() if k.split("/")[0] == rows and k.endswith("/horizon")]
+        gs = [g for k, g in d["groups"].items() if k.split("/")[0] == rows and k.endswith("/" + mode)]
         n = sum(g["runs"] for g in gs)
 
         def ends(e, gs=gs):
             return sum(g["ends"].get(e, 0) for g in gs)
-        lines.append(f"| {name} | {d['date']}, {d['commit']} | {rows}, horizon | {what} | {n} | {ends('reached')} | "
-                     f"{ends('stopped')} | {ends('no_path')} | {ends('failed')} | {ends('tipped')} | "
+        lines.append(f"| {name} | {d['date']}, {d['commit']} | {rows}, {mode.replace('_', '-')} | {what} | {n} | "
+                     f"{ends('reached')} | {ends('stopped')} | {ends('no_path')} | {ends('failed')} | {ends('tipped')} | "
                      f"{sum(g['stalls'] for g in gs)} |")
     return "\n".join(lines)
 
