@@ -161,6 +161,7 @@ class RunResult:
 
 AIM_MARGIN = 0.1   # m (at most a quarter of the goal radius): a run's re-plans aim this far inside the goal disc
 MISSES = 3         # re-plans in a row that find no way on while the vehicle drives on: then it brakes to rest
+LOST = {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}   # end codes that end a run where the vehicle was lost: its end
 MISSED = f"{MISSES} re-plans in a row found no way on from the moving vehicle"    # the re-plan's why, from rest
 
 
@@ -400,8 +401,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
     def finish(status, reason, end=None):
         nonlocal Xt
         out.dropped = drop.count
-        if status != "reached" and end not in ("tipped", "off_map"):
-            Xt, status, reason, end = _at_rest(real, Xt, drop, ps.period_s, pieces, status, reason, end)
+        Xt, status, reason, end = _at_rest(real, Xt, drop, ps.period_s, pieces, status, reason, end)
         return _finish(out, pieces, every, status, reason, end, Xt)
 
     def drive(control, predicted=None) -> int:
@@ -437,7 +437,7 @@ def run(world: WO.World, cost: str | None = None, truth: "Vehicle | TT.Truth | N
         if end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({Xt[K.S_X]:.2f}, {Xt[K.S_Y]:.2f}), "
                                     f"t = {Xt[K.S_T]:.1f} s{doing} ({_ground(truth, Xt)})",
-                          {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end, "failed"))
+                          LOST.get(end, "failed"))
         return None
 
     def brake(after: str = "the guard held its period back"):
@@ -733,6 +733,8 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
     stalled = False
 
     def finish(status, reason, end=None):
+        nonlocal X
+        X, status, reason, end = _at_rest(real, X, drop, ctrl.period_s, pieces, status, reason, end)
         ctrl.ended_at(float(X[K.S_T]))
         ctrl.close()
         out.plans, out.guarded, out.stalls = ctrl.plans, ctrl.guarded, ctrl.stalls
@@ -750,11 +752,6 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
             return finish("failed", f"wall-clock limit reached at t = {X[K.S_T]:.1f} s, "
                                     f"({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})", "timeout")
         cmd = ctrl.step(float(X[K.S_T]), _attitude(measured(odo.observe(X), twin.vehicle, stalled), truth, X))
-        if cmd.done and cmd.status != "reached":
-            # (the controller stopped a vehicle still moving: the run goes on at its command,
-            # the wheels at rest, until the truth comes to rest: _at_rest)
-            X, status, reason, end = _at_rest(real, X, drop, ctrl.period_s, pieces, "failed", cmd.reason, None)
-            return finish(status, reason, end)
         if cmd.done:
             return finish("reached" if cmd.status == "reached" else "failed", cmd.reason)
         rec, end, X = real.step(X, drop.applied(X, (cmd.wl, cmd.wr, ctrl.period_s)))
@@ -769,7 +766,7 @@ def _run_horizon(world: WO.World, cost: str, truth: TT.Truth, out: RunResult, de
             _protected(X, real)
         elif end < 0:
             return finish("failed", f"the vehicle {SS.CODES[-end - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
-                                    f"t = {X[K.S_T]:.1f} s", {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(end))
+                                    f"t = {X[K.S_T]:.1f} s", LOST.get(end))
 
 
 REST_LIMIT_S = 60.0   # s: how long a vehicle the controller stopped is followed braking to rest (_to_rest)
@@ -797,14 +794,16 @@ def _at_rest(real: "_Executor", X: np.ndarray, drop, period_s: float, pieces: li
     stopped a vehicle it could not brake to rest, a descent steeper than its drive holds;
     a last stall rolling back) ends where the truth comes to rest at the command it is
     left with, the wheels at rest (:func:`_to_rest`), or where it tips over or leaves the
-    map on the way: (state, status, reason, end) for the run's finish."""
-    if not EX.moving(X) or end == "timeout" or (reason or "").startswith("the controller stopped:"):
+    map on the way: (state, status, reason, end) for the run's finish (both kinds of run
+    call it); as they are where the run reached the goal, tipped over or left the map."""
+    if (status == "reached" or end in LOST.values() or not EX.moving(X) or end == "timeout"
+            or (reason or "").startswith("the controller stopped:")):
         return X, status, reason, end       # (a run out of its wall clock, or an error: as it ended)
     X0, (X, code) = X, _to_rest(real, X, drop, period_s, pieces)
     if code < 0 and code != -SS.STALL:
         return X, "failed", (f"the vehicle {SS.CODES[-code - 1]} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f}), "
                              f"t = {X[K.S_T]:.1f} s, braking after the run ended: {reason}"), \
-            {-SS.TIP: "tipped", -SS.OFF_MAP: "off_map"}.get(code)
+            LOST.get(code)
     return X, status, f"{reason}{_rolled(X0, X, code)}", end
 
 

@@ -755,13 +755,13 @@ class Controller:
                 self.guarded += 1
                 where = f"{EX.HELD} at ({X[K.S_X]:.2f}, {X[K.S_Y]:.2f})"
                 X = yield from self._brake(X)
+                if not held and guide is None:
+                    st.from_measured += 1
+                    h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
+                    held = True
+                    continue
                 failed = None
                 if not (held and guide is not None):
-                    if not (held or guide is not None):
-                        st.from_measured += 1
-                        h = self._made((yield from self._await_horizon(X, None, None, "held")), where, X)
-                        held = True
-                        continue
                     p, guide, kept = yield from route(X, f"{where}: whole-route plan")
                     if p.found:
                         held = True
